@@ -1,0 +1,11 @@
+#pragma once
+// Every `manikin` subcommand registers itself through one of these functions, called from
+// main.cpp. Each lives in its own cmd_<name>.cpp.
+#include <CLI/CLI.hpp>
+
+namespace manikind::cli {
+
+void add_physics_commands(CLI::App& app);    // cmd_physics.cpp: `manikin physics ...`
+void add_selfcheck_command(CLI::App& app);   // cmd_selfcheck.cpp: `manikin selfcheck`
+
+}  // namespace manikind::cli
