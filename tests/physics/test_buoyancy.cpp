@@ -75,7 +75,7 @@ TEST_CASE("Introduction: 41 C air at 10 % RH is near-neutral for a 35 C wet skin
     CHECK(std::abs(b.b_net_n_m3) < 0.1 * std::abs(b.b_dt_n_m3));
 }
 
-TEST_CASE("Results: stagnation moves toward the skin temperature as RH rises; none at 100 %", "[physics][buoyancy]") {
+TEST_CASE("Results: stagnation moves toward the skin temperature as RH rises, none at 100 %", "[physics][buoyancy]") {
     const double t10 = *stagnation_air_temp_c(10.0);
     const double t50 = *stagnation_air_temp_c(50.0);
     const double t90 = *stagnation_air_temp_c(90.0);

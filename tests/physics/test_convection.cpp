@@ -50,7 +50,7 @@ TEST_CASE("Eq. S8 reproduces the table's h_dT-only column (exponent 0.29 when ai
     CHECK(hot_rows_off_eq_s8 > 30);
 }
 
-TEST_CASE("Results: h_sim is 56 % below h_dT-only at 41 C / 10 % RH; Eq. 8 sees the dip", "[physics][convection]") {
+TEST_CASE("Results: h_sim is 56 % below h_dT-only at 41 C / 10 % RH, Eq. 8 sees the dip", "[physics][convection]") {
     int found = 0;
     for (const auto& c : paper_cfd_cases()) {
         if (c.case_id != 8) continue;  // 41 C, 10 %
@@ -116,7 +116,7 @@ TEST_CASE("Table 1 in code equals the paper's CSV", "[physics][convection]") {
     }
 }
 
-TEST_CASE("Table 1: sign of N = dT + 146 dC picks B; h0 is continuous at N = 0", "[physics][convection]") {
+TEST_CASE("Table 1: sign of N = dT + 146 dC picks B, h0 is continuous at N = 0", "[physics][convection]") {
     // Thigh: B+ = 1.166, B- = 0.654 (Table 1).
     CHECK(h_segment_w_m2k(Segment::thigh, 16.0, 0.0) == Approx(0.538 + 1.166 * 2.0));
     CHECK(h_segment_w_m2k(Segment::thigh, -16.0, 0.0) == Approx(0.538 + 0.654 * 2.0));
@@ -144,7 +144,7 @@ TEST_CASE("Table 2 in code equals the paper's CSV (printed and MATLAB B values)"
     (void)names;
 }
 
-TEST_CASE("Text S6.2: seated and supine whole-body h; standing is Eq. 8 with dC = 0", "[physics][convection]") {
+TEST_CASE("Text S6.2: seated and supine whole-body h, standing is Eq. 8 with dC = 0", "[physics][convection]") {
     CHECK(h_posture_w_m2k(Posture::seated, 16.0) == Approx(0.48 + 1.19 * 2.0));
     CHECK(h_posture_w_m2k(Posture::supine, -16.0) == Approx(0.34 + 1.46 * 2.0));
     CHECK(h_posture_w_m2k(Posture::standing, 16.0) == Approx(0.3 + 1.25 * 2.0));
@@ -171,7 +171,7 @@ TEST_CASE("Fig. 3C: minimum threshold speed near the neutral-buoyancy line is ~0
     CHECK(minimum_threshold_on_grid(grid).speed_m_s < coarse.speed_m_s);
 }
 
-TEST_CASE("Fig. 3C / S21: most thresholds lie below 0.3 m/s; with 1.1 the top drops to 0.225 m/s", "[physics][convection]") {
+TEST_CASE("Fig. 3C / S21: most thresholds lie below 0.3 m/s, with 1.1 the top drops to 0.225 m/s", "[physics][convection]") {
     // The figure's axis is not printed; 0.225 m/s is the 1.1-criterion top when the grid starts at
     // 15 C air (it is 0.205 m/s from 20 C). Inference documented in docs/physics.md.
     double top_11 = 0.0;

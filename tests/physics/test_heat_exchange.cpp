@@ -19,7 +19,7 @@ TEST_CASE("Eq. S9: Q_dT-only = 16.5 h_dT-only dp reproduces the CFD table within
     }
 }
 
-TEST_CASE("Eq. 1: evaporation scales with wettedness; condensation is negative", "[physics][evaporation]") {
+TEST_CASE("Eq. 1: evaporation scales with wettedness, condensation is negative", "[physics][evaporation]") {
     CHECK(evaporative_heat_flux_w_m2(2.0, 5000.0, 1000.0, 1.0) == Approx(16.5 * 2.0 * 4.0));
     CHECK(evaporative_heat_flux_w_m2(2.0, 5000.0, 1000.0, 0.25) == Approx(0.25 * 16.5 * 2.0 * 4.0));
     CHECK(evaporative_heat_flux_w_m2(2.0, 1000.0, 2000.0, 1.0) < 0.0);

@@ -36,7 +36,7 @@ TEST_CASE("Seed p_sat formula stays within 0.5 % of IAPWS-95 from 0 to 100 C", "
     }
 }
 
-TEST_CASE("p_sat refuses temperatures outside -40..200 C; RH outside 0..100 % is refused", "[physics][psychro]") {
+TEST_CASE("p_sat refuses temperatures outside -40..200 C, RH outside 0..100 % is refused", "[physics][psychro]") {
     CHECK_THROWS_AS(saturation_vapour_pressure_pa(-60.0), std::domain_error);
     CHECK_THROWS_AS(saturation_vapour_pressure_pa(250.0), std::domain_error);
     CHECK_THROWS_AS(vapour_pressure_pa(35.0, -1.0), std::domain_error);
