@@ -18,8 +18,10 @@ BuoyancyResult buoyancy(const SkinAirState& s) {
     const double p_skin_pa =
         p_air_pa + s.skin_wettedness * (saturation_vapour_pressure_pa(s.skin_temp_c) - p_air_pa);
     r.dt_c = s.skin_temp_c - s.air_temp_c;
-    r.dc_kg_m3 = vapour_concentration_kg_m3(p_skin_pa, s.skin_temp_c) -
-                 vapour_concentration_kg_m3(p_air_pa, s.air_temp_c);
+    // Limitations: partial wettedness scales the humidity term linearly, dT + 146 omega dC,
+    // with dC = C_sk,sat - C_air; a dry skin has no compositional buoyancy at all.
+    r.dc_kg_m3 = s.skin_wettedness * (saturation_concentration_kg_m3(s.skin_temp_c) -
+                                      vapour_concentration_kg_m3(p_air_pa, s.air_temp_c));
     r.film_temp_c = 0.5 * (s.skin_temp_c + s.air_temp_c);
     r.film_density_kg_m3 =
         moist_air_density_kg_m3(r.film_temp_c, 0.5 * (p_skin_pa + p_air_pa), s.total_pressure_pa);

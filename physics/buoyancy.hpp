@@ -19,7 +19,7 @@ struct SkinAirState {
 
 struct BuoyancyResult {
     double dt_c = 0.0;                 // T_sk - T_air
-    double dc_kg_m3 = 0.0;             // omega (C_sk,sat - C_air), Limitations: dC scales with omega
+    double dc_kg_m3 = 0.0;             // omega (C_sk,sat - C_air) (Limitations: dC scales with omega)
     double film_temp_c = 0.0;          // (T_sk + T_air)/2
     double film_density_kg_m3 = 0.0;   // moist air at film temperature and mean vapour pressure
     double beta_t_1_k = 0.0;           // 1 / T_film

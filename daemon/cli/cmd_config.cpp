@@ -1,0 +1,58 @@
+// `manikin config check|show`: validate a configuration file before a lab relies on it.
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "daemon/cli/commands.hpp"
+#include "daemon/core/config.hpp"
+
+namespace manikind::cli {
+namespace {
+
+nlohmann::json to_json(const config::Config& c) {
+    nlohmann::json instruments = nlohmann::json::object();
+    for (const auto& [channel, s] : c.instruments)
+        instruments[channel] = {{"accuracy", s.accuracy}, {"accuracy_of_reading", s.accuracy_of_reading},
+                                {"distribution", s.distribution}};
+    const auto& l = c.safety;
+    return {{"lab", {{"name", c.lab_name}, {"mode", c.mode}, {"database", c.database.string()}}},
+            {"logging", {{"level", c.log_level}}},
+            {"safety", {{"max_skin_temp_c", l.max_skin_temp_c}, {"min_skin_temp_c", l.min_skin_temp_c},
+                        {"max_heater_temp_c", l.max_heater_temp_c}, {"max_heater_power_w_m2", l.max_heater_power_w_m2},
+                        {"min_chamber_temp_c", l.min_chamber_temp_c}, {"max_chamber_temp_c", l.max_chamber_temp_c},
+                        {"min_chamber_rh_pct", l.min_chamber_rh_pct}, {"max_chamber_rh_pct", l.max_chamber_rh_pct},
+                        {"watchdog_timeout_s", l.watchdog_timeout_s}}},
+            {"steady_state", {{"window_min", c.steady_state.window_s / 60.0},
+                              {"max_skin_fluctuation_c", c.steady_state.max_skin_fluctuation_c}}},
+            {"instruments", instruments},
+            {"warnings", c.warnings}};
+}
+
+}  // namespace
+
+void add_config_command(CLI::App& app) {
+    auto* cmd = app.add_subcommand("config", "Validate or show a manikind configuration file (TOML)");
+    cmd->require_subcommand(1);
+    auto file = std::make_shared<std::string>();
+    auto json = std::make_shared<bool>(false);
+    auto* check = cmd->add_subcommand("check", "Parse a file; errors name file:line:column and the key");
+    check->add_option("file", *file, "Configuration file")->required();
+    check->add_flag("--json", *json, "Print the effective configuration as JSON");
+    check->callback([file, json] {
+        const auto c = config::load_config(*file);
+        if (*json) {
+            std::printf("%s\n", to_json(c).dump(2).c_str());
+            return;
+        }
+        for (const auto& w : c.warnings) spdlog::warn("{}", w);
+        std::printf("%s: ok (%s lab '%s', %zu instrument specs, %zu warnings)\n", file->c_str(), c.mode.c_str(),
+                    c.lab_name.c_str(), c.instruments.size(), c.warnings.size());
+    });
+    auto* show = cmd->add_subcommand("show", "Print the built-in default configuration (the simulated lab)");
+    show->callback([] { std::printf("%s", config::default_config_toml()); });
+}
+
+}  // namespace manikind::cli

@@ -1,0 +1,177 @@
+#include "daemon/core/config.hpp"
+
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include <fmt/core.h>
+#include <toml++/toml.h>
+
+#include "daemon/core/user_error.hpp"
+
+namespace manikind::config {
+namespace {
+
+std::string where(const std::string& source, const toml::source_region& region) {
+    return fmt::format("{}:{}:{}", source, region.begin.line, region.begin.column);
+}
+
+std::string type_name(const toml::node& node) {
+    switch (node.type()) {
+        case toml::node_type::string: return "a string";
+        case toml::node_type::integer: return "an integer";
+        case toml::node_type::floating_point: return "a number";
+        case toml::node_type::boolean: return "a boolean";
+        case toml::node_type::table: return "a table";
+        case toml::node_type::array: return "an array";
+        default: return "a date or time";
+    }
+}
+
+class Reader {
+public:
+    Reader(const toml::table& root, std::string source, Config& out) : root_(root), source_(std::move(source)), out_(out) {}
+
+    void number(const toml::table& table, const std::string& path, const char* key, double& value, double lo, double hi,
+                const char* unit) {
+        mark(path, key);
+        const toml::node* node = table.get(key);
+        if (!node) return;
+        const std::string full = path.empty() ? key : path + "." + key;
+        if (!node->is_number())
+            throw UserError(fmt::format("{}: {}: expected a number ({}), found {}", where(source_, node->source()), full,
+                                        unit, type_name(*node)));
+        const double v = node->is_integer() ? static_cast<double>(node->as_integer()->get()) : node->as_floating_point()->get();
+        if (!(v >= lo && v <= hi))
+            throw UserError(fmt::format("{}: {}: {} {} is outside {}..{} {}", where(source_, node->source()), full, v, unit,
+                                        lo, hi, unit));
+        value = v;
+    }
+
+    void text(const toml::table& table, const std::string& path, const char* key, std::string& value,
+              const std::set<std::string>& allowed = {}) {
+        mark(path, key);
+        const toml::node* node = table.get(key);
+        if (!node) return;
+        const std::string full = path.empty() ? key : path + "." + key;
+        if (!node->is_string())
+            throw UserError(fmt::format("{}: {}: expected a string, found {}", where(source_, node->source()), full,
+                                        type_name(*node)));
+        std::string v = node->as_string()->get();
+        if (!allowed.empty() && !allowed.count(v)) {
+            std::string list;
+            for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+            throw UserError(fmt::format("{}: {}: '{}' is not one of {}", where(source_, node->source()), full, v, list));
+        }
+        value = std::move(v);
+    }
+
+    const toml::table* table(const toml::table& parent, const std::string& path, const char* key) {
+        mark(path, key);
+        const toml::node* node = parent.get(key);
+        if (!node) return nullptr;
+        if (!node->is_table())
+            throw UserError(fmt::format("{}: {}: expected a table, found {}", where(source_, node->source()),
+                                        path.empty() ? key : path + "." + key, type_name(*node)));
+        return node->as_table();
+    }
+
+    void mark(const std::string& path, const std::string& key) { known_.insert(path.empty() ? key : path + "." + key); }
+
+    // Anything present in the file that no reader asked for.
+    void warn_unknown(const toml::table& table, const std::string& path) {
+        for (const auto& [key, node] : table) {
+            const std::string full = path.empty() ? std::string(key.str()) : path + "." + std::string(key.str());
+            if (!known_.count(full)) {
+                out_.warnings.push_back(fmt::format("{}: {}: unknown key, ignored", where(source_, node.source()), full));
+            } else if (node.is_table() && path != "instruments") {
+                warn_unknown(*node.as_table(), full);
+            }
+        }
+    }
+
+private:
+    const toml::table& root_;
+    std::string source_;
+    Config& out_;
+    std::set<std::string> known_;
+};
+
+}  // namespace
+
+Config default_config() {
+    static const Config parsed = parse_config(default_config_toml(), "config/manikind.toml (built in)", Config{});
+    return parsed;
+}
+
+Config parse_config(const std::string& toml_text, const std::string& source_name) {
+    return parse_config(toml_text, source_name, default_config());
+}
+
+Config parse_config(const std::string& toml_text, const std::string& source_name, const Config& base) {
+    toml::table root;
+    try {
+        root = toml::parse(toml_text, source_name);
+    } catch (const toml::parse_error& e) {
+        throw UserError(fmt::format("{}:{}:{}: {}", source_name, e.source().begin.line, e.source().begin.column,
+                                    e.description()));
+    }
+    Config c = base;
+    c.warnings.clear();
+    Reader r(root, source_name, c);
+    if (const auto* lab = r.table(root, "", "lab")) {
+        r.text(*lab, "lab", "name", c.lab_name);
+        r.text(*lab, "lab", "mode", c.mode, {"simulated", "real"});
+        std::string db = c.database.string();
+        r.text(*lab, "lab", "database", db);
+        c.database = db;
+    }
+    if (const auto* log = r.table(root, "", "logging"))
+        r.text(*log, "logging", "level", c.log_level, {"trace", "debug", "info", "warn", "error"});
+    if (const auto* s = r.table(root, "", "safety")) {
+        SafetyLimits& l = c.safety;
+        r.number(*s, "safety", "max_skin_temp_c", l.max_skin_temp_c, 0.0, 60.0, "°C");
+        r.number(*s, "safety", "min_skin_temp_c", l.min_skin_temp_c, 0.0, 60.0, "°C");
+        r.number(*s, "safety", "max_heater_temp_c", l.max_heater_temp_c, 0.0, 80.0, "°C");
+        r.number(*s, "safety", "max_heater_power_w_m2", l.max_heater_power_w_m2, 0.0, 2000.0, "W/m²");
+        r.number(*s, "safety", "min_chamber_temp_c", l.min_chamber_temp_c, -40.0, 80.0, "°C");
+        r.number(*s, "safety", "max_chamber_temp_c", l.max_chamber_temp_c, -40.0, 80.0, "°C");
+        r.number(*s, "safety", "min_chamber_rh_pct", l.min_chamber_rh_pct, 0.0, 100.0, "%");
+        r.number(*s, "safety", "max_chamber_rh_pct", l.max_chamber_rh_pct, 0.0, 100.0, "%");
+        r.number(*s, "safety", "watchdog_timeout_s", l.watchdog_timeout_s, 0.1, 3600.0, "s");
+        if (l.min_skin_temp_c >= l.max_skin_temp_c || l.min_chamber_temp_c >= l.max_chamber_temp_c ||
+            l.min_chamber_rh_pct >= l.max_chamber_rh_pct)
+            throw UserError(fmt::format("{}: [safety]: every min_* must be below its max_*", source_name));
+    }
+    if (const auto* s = r.table(root, "", "steady_state")) {
+        double window_min = c.steady_state.window_s / 60.0;
+        r.number(*s, "steady_state", "window_min", window_min, 1.0, 600.0, "min");
+        c.steady_state.window_s = window_min * 60.0;
+        r.number(*s, "steady_state", "max_skin_fluctuation_c", c.steady_state.max_skin_fluctuation_c, 0.001, 5.0, "°C");
+    }
+    if (const auto* inst = r.table(root, "", "instruments")) {
+        for (const auto& [key, node] : *inst) {
+            const std::string channel(key.str());
+            const auto* t = r.table(*inst, "instruments", channel.c_str());
+            InstrumentSpec spec;
+            const std::string path = "instruments." + channel;
+            r.number(*t, path, "accuracy", spec.accuracy, 0.0, 1e6, "channel unit");
+            r.number(*t, path, "accuracy_of_reading", spec.accuracy_of_reading, 0.0, 1.0, "fraction");
+            r.text(*t, path, "distribution", spec.distribution, {"rectangular", "normal"});
+            r.warn_unknown(*t, path);
+            c.instruments[channel] = spec;
+        }
+    }
+    r.warn_unknown(root, "");
+    return c;
+}
+
+Config load_config(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw UserError(fmt::format("{}: cannot open the configuration file", path.string()));
+    std::ostringstream text;
+    text << in.rdbuf();
+    return parse_config(text.str(), path.string());
+}
+
+}  // namespace manikind::config
