@@ -1,0 +1,179 @@
+#include "physics/twin/twin.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "physics/constants.hpp"
+#include "physics/convection.hpp"
+#include "physics/heat_exchange.hpp"
+#include "physics/psychrometrics.hpp"
+
+namespace manikind::physics::twin {
+namespace {
+
+// Parameters each term takes, with the value that leaves the baseline unchanged.
+struct TermSpec {
+    const char* name;
+    std::vector<std::pair<const char*, double>> parameters;
+};
+
+const std::vector<TermSpec>& term_specs() {
+    static const std::vector<TermSpec> specs = {
+        {"humidity_buoyancy", {{"gamma", 0.0}}},          // dT -> dT + gamma w dC (Eq. 7)
+        {"diffusion_floor", {{"h0", 0.0}}},               // h_c -> h0 + A |.|^(1/4) (Eq. 5/7)
+        {"mixed_convection", {{"scale", 0.0}}},           // Eq. 9 with scale x 10.4 v^0.56
+        {"wall_offset", {{"delta_c", 0.0}}},              // walls radiate at T_w + delta
+        {"air_temp_bias", {{"bias_c", 0.0}}},             // probe reads T_true + bias
+        {"textile_resistance", {{"r_m2k_w", 0.0}}},       // surface at T_s - R q (Text S2.4)
+        {"partial_wettedness", {{"fraction", 1.0}}},      // w -> fraction w in one region
+        {"heat_leak", {{"q_w_m2", 0.0}}},                 // a constant extra flux on some zones
+    };
+    return specs;
+}
+
+const TermSpec& spec_of(const std::string& name) {
+    for (const auto& s : term_specs())
+        if (name == s.name) return s;
+    std::string known;
+    for (const auto& s : term_specs()) known += std::string(known.empty() ? "" : ", ") + s.name;
+    throw std::invalid_argument("unknown twin term '" + name + "' (known: " + known + ")");
+}
+
+double param(const Term& term, const char* key, double fallback) {
+    const auto it = term.parameters.find(key);
+    return it == term.parameters.end() ? fallback : it->second;
+}
+
+// The resolved knobs of one version, looked up once per prediction.
+struct Knobs {
+    double gamma = 0.0;
+    double h0_w_m2k = 0.0;
+    double forced_scale = 0.0;
+    double wall_offset_c = 0.0;
+    double air_bias_c = 0.0;
+    double textile_r_m2k_w = 0.0;
+    std::vector<std::pair<std::string, double>> wettedness_by_region;
+    std::vector<std::pair<std::vector<int>, double>> leaks;
+};
+
+Knobs resolve(const TwinVersion& v) {
+    Knobs k;
+    for (const Term& t : v.terms) {
+        validate_term(t);
+        if (t.name == "humidity_buoyancy") k.gamma = param(t, "gamma", 0.0);
+        else if (t.name == "diffusion_floor") k.h0_w_m2k = param(t, "h0", 0.0);
+        else if (t.name == "mixed_convection") k.forced_scale = param(t, "scale", 0.0);
+        else if (t.name == "wall_offset") k.wall_offset_c = param(t, "delta_c", 0.0);
+        else if (t.name == "air_temp_bias") k.air_bias_c = param(t, "bias_c", 0.0);
+        else if (t.name == "textile_resistance") k.textile_r_m2k_w = param(t, "r_m2k_w", 0.0);
+        else if (t.name == "partial_wettedness") k.wettedness_by_region.emplace_back(t.region, param(t, "fraction", 1.0));
+        else if (t.name == "heat_leak") k.leaks.emplace_back(t.zones, param(t, "q_w_m2", 0.0));
+    }
+    return k;
+}
+
+}  // namespace
+
+const std::vector<SegmentConstants>& baseline_segments() {
+    // TWIN-BASELINE.md steps 2 (A, Wissler / Table 2) and 3 (radiating area fraction f).
+    static const std::vector<SegmentConstants> segments = {
+        {"head", 2.6, 0.95},      {"chest", 1.5, 0.85},   {"back", 1.5, 0.85},  {"pelvis", 1.5, 0.60},
+        {"upper_arm", 1.9, 0.70}, {"forearm", 1.9, 0.75}, {"hand", 2.7, 0.70},  {"thigh", 2.15, 0.70},
+        {"calf", 2.15, 0.80},     {"foot", 1.57, 0.60},
+    };
+    return segments;
+}
+
+std::optional<SegmentConstants> baseline_segment(const std::string& segment) {
+    for (const auto& s : baseline_segments())
+        if (s.segment == segment) return s;
+    return std::nullopt;
+}
+
+void validate_term(const Term& term) {
+    const TermSpec& spec = spec_of(term.name);
+    for (const auto& [key, value] : term.parameters) {
+        const bool known = std::any_of(spec.parameters.begin(), spec.parameters.end(),
+                                       [&](const auto& p) { return key == p.first; });
+        if (!known) throw std::invalid_argument("twin term '" + term.name + "' has no parameter '" + key + "'");
+        if (!std::isfinite(value)) throw std::invalid_argument("twin term '" + term.name + "': " + key + " is not finite");
+    }
+    if (term.name == "partial_wettedness" && term.region.empty())
+        throw std::invalid_argument("twin term 'partial_wettedness' needs a region");
+    if (term.name == "heat_leak" && term.zones.empty())
+        throw std::invalid_argument("twin term 'heat_leak' needs zones");
+}
+
+std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions& trial) {
+    const Knobs k = resolve(version);
+    const double air_c = trial.air_temp_c - k.air_bias_c;  // the probe read air + bias
+    const double wall_c = trial.wall_temp_c.value_or(trial.air_temp_c) + k.wall_offset_c;
+    const double speed_m_s = std::max(0.0, trial.air_speed_m_s.value_or(0.0));
+    const double p_air_pa = vapour_pressure_pa(air_c, trial.air_rh_pct);
+    const double c_air_kg_m3 = vapour_concentration_kg_m3(p_air_pa, air_c);
+    const double h_forced_w_m2k = k.forced_scale > 0.0 ? k.forced_scale * h_forced_de_dear_w_m2k(speed_m_s) : 0.0;
+
+    std::vector<ZoneFlux> out;
+    out.reserve(trial.zones.size());
+    for (const ZoneInput& z : trial.zones) {
+        const auto seg = baseline_segment(z.segment);
+        if (!seg) throw std::invalid_argument("zone " + std::to_string(z.zone) + ": unknown segment '" + z.segment + "'");
+        double wettedness = trial.wettedness;
+        for (const auto& [region, fraction] : k.wettedness_by_region)
+            if (region == z.region) wettedness *= std::clamp(fraction, 0.0, 1.0);
+        double leak_w_m2 = 0.0;
+        for (const auto& [zones, q] : k.leaks)
+            if (std::find(zones.begin(), zones.end(), z.zone) != zones.end()) leak_w_m2 += q;
+
+        // Fluxes from an exchange surface at surface_c (the textile, when it has resistance).
+        auto fluxes_at = [&](double surface_c) {
+            ZoneFlux f;
+            f.zone = z.zone;
+            f.surface_temp_c = surface_c;
+            const double dt_c = surface_c - air_c;
+            const double dc_kg_m3 = saturation_concentration_kg_m3(surface_c) - c_air_kg_m3;
+            const double drive_c = dt_c + k.gamma * wettedness * dc_kg_m3;  // Eq. 7 with omega
+            double h = k.h0_w_m2k + seg->wissler_a * std::pow(std::abs(drive_c), 0.25);
+            if (h_forced_w_m2k > 0.0) h = h_mixed_w_m2k(h, h_forced_w_m2k);  // Eq. 9, n = 3
+            f.h_c_w_m2k = h;
+            f.q_convection_w_m2 = h * dt_c;
+            f.q_radiation_w_m2 = radiative_heat_flux_w_m2(surface_c, wall_c, baseline_skin_emissivity, seg->radiating_fraction);
+            const double p_surface_pa = saturation_vapour_pressure_pa(surface_c);
+            // Eq. 1; no condensation modelled (TWIN-BASELINE step 4).
+            f.q_evaporation_w_m2 = p_surface_pa > p_air_pa
+                                       ? evaporative_heat_flux_w_m2(h, p_surface_pa, p_air_pa, wettedness, baseline_lewis_k_kpa)
+                                       : 0.0;
+            f.q_other_w_m2 = leak_w_m2;
+            f.q_total_w_m2 = f.q_convection_w_m2 + f.q_radiation_w_m2 + f.q_evaporation_w_m2 + f.q_other_w_m2;
+            return f;
+        };
+
+        ZoneFlux f = fluxes_at(z.skin_temp_c);
+        if (k.textile_r_m2k_w > 0.0) {
+            // Surface temperature T_txt = T_s - R q(T_txt): damped fixed point (R q' << 1 here).
+            double surface_c = z.skin_temp_c;
+            for (int i = 0; i < 50; ++i) {
+                const double next_c = z.skin_temp_c - k.textile_r_m2k_w * (f.q_total_w_m2 - f.q_other_w_m2);
+                if (std::abs(next_c - surface_c) < 1e-9) break;
+                surface_c = 0.5 * (surface_c + next_c);
+                f = fluxes_at(surface_c);
+            }
+        }
+        out.push_back(f);
+    }
+    return out;
+}
+
+double area_weighted_mean_w_m2(const std::vector<ZoneFlux>& fluxes, const std::vector<ZoneInput>& zones,
+                               const std::vector<int>& zone_ids) {
+    double sum = 0.0, area = 0.0;
+    for (std::size_t i = 0; i < fluxes.size() && i < zones.size(); ++i) {
+        if (std::find(zone_ids.begin(), zone_ids.end(), zones[i].zone) == zone_ids.end()) continue;
+        sum += fluxes[i].q_total_w_m2 * zones[i].area_m2;
+        area += zones[i].area_m2;
+    }
+    return area > 0.0 ? sum / area : 0.0;
+}
+
+}  // namespace manikind::physics::twin

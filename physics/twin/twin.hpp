@@ -1,0 +1,78 @@
+#pragma once
+// The digital twin: per-zone steady heat flux from the recorded conditions of a trial, with an
+// explicit, named list of physics terms. The baseline is TWIN-BASELINE.md (temperature-driven
+// free convection, grey radiation, Lewis-relation evaporation); every other twin version is the
+// baseline plus terms with parameters. Pure: no I/O. Flux positive = heat lost by the manikin.
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace manikind::physics::twin {
+
+// Baseline constants per manikin segment (TWIN-BASELINE.md steps 2-3), kept in one place.
+struct SegmentConstants {
+    std::string segment;
+    double wissler_a = 0.0;          // h_c = A |dT|^(1/4), Table 2 (Wissler)
+    double radiating_fraction = 0.0; // f in q_rad
+};
+const std::vector<SegmentConstants>& baseline_segments();
+std::optional<SegmentConstants> baseline_segment(const std::string& segment);
+
+inline constexpr double baseline_skin_emissivity = 0.98;  // Text S3.3
+inline constexpr double baseline_lewis_k_kpa = 16.5;      // Eq. 1
+
+struct ZoneInput {
+    int zone = 0;
+    std::string segment;        // zone map segment (head, chest, ..., foot)
+    std::string region;         // zone map region (head, chest, upper_arm_l, ...)
+    double area_m2 = 0.0;
+    double skin_temp_c = 35.0;
+};
+
+struct TrialConditions {
+    double air_temp_c = 35.0;
+    double air_rh_pct = 50.0;
+    std::optional<double> wall_temp_c;    // equal to air where not recorded
+    std::optional<double> air_speed_m_s;  // 0 where not recorded
+    double wettedness = 0.0;              // campaign: wet -> 1, dry -> 0
+    std::vector<ZoneInput> zones;
+};
+
+// A physics term: a name from the library and its parameters. `zones` and `region` scope a
+// term to part of the body where the term allows it (partial_wettedness, heat_leak).
+struct Term {
+    std::string name;
+    std::map<std::string, double> parameters;
+    std::string region;            // partial_wettedness: the zone-map region it applies to
+    std::vector<int> zones;        // heat_leak: the zones it applies to
+};
+
+struct TwinVersion {
+    std::string name = "baseline";
+    std::vector<Term> terms;       // applied on top of the baseline
+};
+
+struct ZoneFlux {
+    int zone = 0;
+    double h_c_w_m2k = 0.0;
+    double q_convection_w_m2 = 0.0;
+    double q_radiation_w_m2 = 0.0;
+    double q_evaporation_w_m2 = 0.0;
+    double q_other_w_m2 = 0.0;     // e.g. heat_leak
+    double q_total_w_m2 = 0.0;
+    double surface_temp_c = 0.0;   // exchange surface (textile) temperature
+};
+
+// Every term the twin knows, with its parameters; throws std::invalid_argument for an unknown
+// term or parameter (message names it and lists the known ones).
+void validate_term(const Term& term);
+
+// Predicts every zone of one trial. Throws std::invalid_argument for an unknown segment or term.
+std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions& trial);
+
+// Area-weighted mean of the zone totals (regions and whole body, as for measurements).
+double area_weighted_mean_w_m2(const std::vector<ZoneFlux>& fluxes, const std::vector<ZoneInput>& zones,
+                               const std::vector<int>& zone_ids);
+
+}  // namespace manikind::physics::twin

@@ -1,0 +1,135 @@
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "physics/twin/twin.hpp"
+
+using namespace manikind::physics::twin;
+
+namespace {
+
+// The shipped zone map (config/andi35_zone_map.csv) as twin inputs.
+std::vector<ZoneInput> andi35_zones(double skin_temp_c) {
+    std::ifstream in(std::string(MANIKIND_CONFIG_DIR) + "/andi35_zone_map.csv");
+    std::string line;
+    std::getline(in, line);
+    std::vector<ZoneInput> zones;
+    while (std::getline(in, line)) {
+        std::stringstream ss(line);
+        std::string zone, name, region, segment, side, area;
+        std::getline(ss, zone, ',');
+        std::getline(ss, name, ',');
+        std::getline(ss, region, ',');
+        std::getline(ss, segment, ',');
+        std::getline(ss, side, ',');
+        std::getline(ss, area, ',');
+        zones.push_back({std::stoi(zone), segment, region, std::stod(area), skin_temp_c});
+    }
+    return zones;
+}
+
+// TWIN-BASELINE.md written out by hand for one zone, independent of the implementation.
+double baseline_by_hand(double a, double f, double ts, double ta, double tw, double rh, double w) {
+    auto psat = [](double t_c) {
+        const double t = t_c + 273.15;
+        return std::exp(77.3450 + 0.0057 * t - 7235.0 / t) / std::pow(t, 8.2);
+    };
+    const double h = a * std::pow(std::abs(ts - ta), 0.25);
+    const double q_conv = h * (ts - ta);
+    const double q_rad = f * 0.98 * 5.670374e-8 * (std::pow(ts + 273.15, 4) - std::pow(tw + 273.15, 4));
+    const double ps = psat(ts), pa = rh / 100.0 * psat(ta);
+    const double q_evap = ps > pa ? w * 16.5 * h * (ps - pa) / 1000.0 : 0.0;
+    return q_conv + q_rad + q_evap;
+}
+
+}  // namespace
+
+TEST_CASE("twin: baseline is TWIN-BASELINE.md zone by zone (Table S3 case 9: 39.6 C, 38.3 %, wet)", "[physics][twin]") {
+    TrialConditions trial;
+    trial.air_temp_c = 39.6;
+    trial.air_rh_pct = 38.3;
+    trial.wettedness = 1.0;
+    trial.zones = andi35_zones(35.0);
+    REQUIRE(trial.zones.size() == 35);
+    const auto fluxes = predict(TwinVersion{}, trial);
+    REQUIRE(fluxes.size() == 35);
+    for (std::size_t i = 0; i < fluxes.size(); ++i) {
+        const auto seg = baseline_segment(trial.zones[i].segment);
+        REQUIRE(seg.has_value());
+        INFO("zone " << trial.zones[i].zone);
+        CHECK(fluxes[i].q_total_w_m2 == Approx(baseline_by_hand(seg->wissler_a, seg->radiating_fraction, 35.0, 39.6, 39.6, 38.3, 1.0)));
+    }
+    // Whole body: the area-weighted mean of the zones; ANDI's area is 1.86 m2 (Text S2.2).
+    std::vector<int> all;
+    double area = 0.0;
+    for (const auto& z : trial.zones) {
+        all.push_back(z.zone);
+        area += z.area_m2;
+    }
+    CHECK(area == Approx(1.86));
+    const double wb = area_weighted_mean_w_m2(fluxes, trial.zones, all);
+    CHECK(wb > 0.0);  // evaporation exceeds the convective gain from 39.6 C air
+}
+
+TEST_CASE("twin: dry skin in hot air gains heat (Table S3 case 3: 44.2 C, 34 C skin)", "[physics][twin]") {
+    TrialConditions trial;
+    trial.air_temp_c = 44.2;
+    trial.air_rh_pct = 23.5;
+    trial.wettedness = 0.0;
+    trial.zones = andi35_zones(34.0);
+    for (const auto& f : predict(TwinVersion{}, trial)) {
+        CHECK(f.q_total_w_m2 < 0.0);
+        CHECK(f.q_evaporation_w_m2 == 0.0);
+    }
+}
+
+TEST_CASE("twin: humidity buoyancy with gamma = 146 and a floor h0 give Eq. 7 per zone", "[physics][twin]") {
+    TrialConditions trial;
+    trial.air_temp_c = 41.0;
+    trial.air_rh_pct = 10.0;
+    trial.wettedness = 1.0;
+    trial.zones = {{1, "head", "head", 0.0571, 35.0}};
+    TwinVersion v{"eq7", {{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}}, {"diffusion_floor", {{"h0", 0.567}}, "", {}}}};
+    const auto f = predict(v, trial).at(0);
+    const double dc = 0.0341;  // C_sat(35) - C_air(41 C, 10 %), kg/m3 (manikin physics buoyancy)
+    CHECK(f.h_c_w_m2k == Approx(0.567 + 2.6 * std::pow(std::abs(-6.0 + 146.0 * dc), 0.25)).epsilon(0.01));
+    // Near stagnation the coupled h is far below the temperature-only one.
+    CHECK(f.h_c_w_m2k < predict(TwinVersion{}, trial).at(0).h_c_w_m2k);
+}
+
+TEST_CASE("twin: each term moves the flux the way its physics says", "[physics][twin]") {
+    TrialConditions trial;
+    trial.air_temp_c = 39.6;
+    trial.air_rh_pct = 38.3;
+    trial.wettedness = 1.0;
+    trial.air_speed_m_s = 0.1;
+    trial.wall_temp_c = 39.0;
+    trial.zones = {{5, "chest", "chest", 0.0882, 35.0}, {23, "thigh", "thigh_l", 0.0934, 35.0}};
+    const auto base = predict(TwinVersion{}, trial);
+    auto with = [&](Term t) { return predict(TwinVersion{"t", {t}}, trial); };
+    CHECK(with({"mixed_convection", {{"scale", 1.0}}, "", {}})[0].h_c_w_m2k > base[0].h_c_w_m2k);
+    CHECK(with({"wall_offset", {{"delta_c", 2.0}}, "", {}})[0].q_radiation_w_m2 < base[0].q_radiation_w_m2);
+    CHECK(with({"air_temp_bias", {{"bias_c", 1.0}}, "", {}})[0].q_convection_w_m2 > base[0].q_convection_w_m2);
+    const auto txt = with({"textile_resistance", {{"r_m2k_w", 0.0054}}, "", {}});  // Text S2.4
+    CHECK(txt[0].surface_temp_c < 35.0);
+    CHECK(txt[0].surface_temp_c == Approx(35.0 - 0.0054 * txt[0].q_total_w_m2).margin(1e-6));
+    const auto pw = with({"partial_wettedness", {{"fraction", 0.3}}, "chest", {}});
+    CHECK(pw[0].q_evaporation_w_m2 == Approx(0.3 * base[0].q_evaporation_w_m2));
+    CHECK(pw[1].q_evaporation_w_m2 == Approx(base[1].q_evaporation_w_m2));  // other regions untouched
+    const auto leak = with({"heat_leak", {{"q_w_m2", 12.0}}, "", {23}});
+    CHECK(leak[1].q_total_w_m2 == Approx(base[1].q_total_w_m2 + 12.0));
+    CHECK(leak[0].q_total_w_m2 == Approx(base[0].q_total_w_m2));
+}
+
+TEST_CASE("twin: unknown terms, parameters and segments are refused by name", "[physics][twin]") {
+    TrialConditions trial;
+    trial.zones = {{1, "head", "head", 0.05, 35.0}};
+    CHECK_THROWS_WITH(predict(TwinVersion{"x", {{"warp_drive", {}, "", {}}}}, trial), Catch::Contains("warp_drive"));
+    CHECK_THROWS_WITH(predict(TwinVersion{"x", {{"humidity_buoyancy", {{"g", 1.0}}, "", {}}}}, trial),
+                      Catch::Contains("no parameter 'g'"));
+    trial.zones[0].segment = "tail";
+    CHECK_THROWS_AS(predict(TwinVersion{}, trial), std::invalid_argument);
+}
