@@ -151,13 +151,19 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
 
         ZoneFlux f = fluxes_at(z.skin_temp_c);
         if (k.textile_r_m2k_w > 0.0) {
-            // Surface temperature T_txt = T_s - R q(T_txt): damped fixed point (R q' << 1 here).
+            // Surface temperature: root of g(T) = T - T_s + R q(T). q rises with T, so g' > 1 and
+            // Newton (secant derivative) converges in a few steps; kept within ±30 K of the skin.
+            const double r = k.textile_r_m2k_w;
             double surface_c = z.skin_temp_c;
-            for (int i = 0; i < 50; ++i) {
-                const double next_c = z.skin_temp_c - k.textile_r_m2k_w * (f.q_total_w_m2 - f.q_other_w_m2);
-                if (std::abs(next_c - surface_c) < 1e-9) break;
-                surface_c = 0.5 * (surface_c + next_c);
+            double g = r * (f.q_total_w_m2 - f.q_other_w_m2);
+            for (int i = 0; i < 20 && std::abs(g) > 1e-9; ++i) {
+                const double probe_c = surface_c + 1e-4;
+                const ZoneFlux fp = fluxes_at(probe_c);
+                const double g_probe = probe_c - z.skin_temp_c + r * (fp.q_total_w_m2 - fp.q_other_w_m2);
+                const double slope = std::max((g_probe - g) / 1e-4, 1.0);
+                surface_c = std::clamp(surface_c - g / slope, z.skin_temp_c - 30.0, z.skin_temp_c + 30.0);
                 f = fluxes_at(surface_c);
+                g = surface_c - z.skin_temp_c + r * (f.q_total_w_m2 - f.q_other_w_m2);
             }
         }
         out.push_back(f);

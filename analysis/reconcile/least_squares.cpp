@@ -1,0 +1,99 @@
+#include "analysis/reconcile/least_squares.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Dense>
+
+namespace manikind::analysis::reconcile {
+namespace {
+
+double sum_squares(const std::vector<double>& r) {
+    double s = 0.0;
+    for (double x : r) s += x * x;
+    return s;
+}
+
+void clamp_to(std::vector<double>& p, const std::vector<Bounds>& b) {
+    for (std::size_t i = 0; i < p.size(); ++i) p[i] = std::clamp(p[i], b[i].lo, b[i].hi);
+}
+
+Eigen::MatrixXd jacobian(const ResidualFunction& f, const std::vector<double>& p, const std::vector<double>& r0,
+                         const std::vector<Bounds>& b) {
+    Eigen::MatrixXd j(r0.size(), p.size());
+    for (std::size_t k = 0; k < p.size(); ++k) {
+        const double span = b[k].hi - b[k].lo;
+        double step = 1e-6 * std::max(span, 1e-9) + 1e-7 * std::abs(p[k]);
+        std::vector<double> q = p;
+        // Step inward at an upper bound so the derivative stays inside the allowed range.
+        if (q[k] + step > b[k].hi) step = -step;
+        q[k] += step;
+        const std::vector<double> r1 = f(q);
+        for (std::size_t i = 0; i < r0.size(); ++i) j(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = (r1[i] - r0[i]) / step;
+    }
+    return j;
+}
+
+}  // namespace
+
+FitResult fit_weighted_least_squares(const ResidualFunction& f, std::vector<double> p, const std::vector<Bounds>& b,
+                                     int max_iterations) {
+    clamp_to(p, b);
+    std::vector<double> r = f(p);
+    double chi2 = sum_squares(r);
+    double lambda = 1e-3;
+    FitResult out;
+    const auto n_params = static_cast<Eigen::Index>(p.size());
+    for (int it = 0; it < max_iterations; ++it) {
+        out.iterations = it + 1;
+        const Eigen::MatrixXd j = jacobian(f, p, r, b);
+        const Eigen::Map<const Eigen::VectorXd> rv(r.data(), static_cast<Eigen::Index>(r.size()));
+        const Eigen::MatrixXd jtj = j.transpose() * j;
+        const Eigen::VectorXd jtr = j.transpose() * rv;
+        bool improved = false;
+        for (int tries = 0; tries < 12 && !improved; ++tries) {
+            Eigen::MatrixXd a = jtj;
+            for (Eigen::Index i = 0; i < n_params; ++i) a(i, i) += lambda * std::max(jtj(i, i), 1e-12);
+            const Eigen::VectorXd step = a.ldlt().solve(-jtr);
+            std::vector<double> q = p;
+            for (Eigen::Index i = 0; i < n_params; ++i) q[static_cast<std::size_t>(i)] += step(i);
+            clamp_to(q, b);
+            const std::vector<double> rq = f(q);
+            const double chi2_q = sum_squares(rq);
+            if (std::isfinite(chi2_q) && chi2_q < chi2) {
+                const double gain = chi2 - chi2_q;
+                p = q;
+                r = rq;
+                chi2 = chi2_q;
+                lambda = std::max(lambda / 10.0, 1e-9);
+                improved = true;
+                if (gain < 1e-9 * (1.0 + chi2)) out.converged = true;
+            } else {
+                lambda *= 10.0;
+            }
+        }
+        if (!improved || out.converged) {
+            out.converged = true;
+            break;
+        }
+    }
+    out.parameters = p;
+    out.chi2 = chi2;
+    out.n_points = static_cast<int>(r.size());
+    // Covariance from the curvature; inflate by the Birge ratio when the fit is worse than the CIs say.
+    const Eigen::MatrixXd j = jacobian(f, p, r, b);
+    const Eigen::MatrixXd jtj = j.transpose() * j;
+    const int dof = std::max(1, out.n_points - static_cast<int>(p.size()));
+    const double birge = std::max(1.0, chi2 / dof);
+    out.standard_errors.assign(p.size(), std::numeric_limits<double>::infinity());
+    Eigen::FullPivLU<Eigen::MatrixXd> lu(jtj);
+    if (lu.isInvertible()) {
+        const Eigen::MatrixXd cov = lu.inverse() * birge;
+        for (Eigen::Index i = 0; i < n_params; ++i)
+            out.standard_errors[static_cast<std::size_t>(i)] = std::sqrt(std::max(0.0, cov(i, i)));
+    }
+    return out;
+}
+
+}  // namespace manikind::analysis::reconcile

@@ -1,0 +1,107 @@
+#pragma once
+// Case-level recordings made from a "world" twin version (the baseline plus a hidden effect),
+// with replicate scatter and a GUM budget, for testing reconcile. The code under test receives
+// only the CaseInput list (conditions, Q_exp, U, k): never the world's terms.
+#include <cmath>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <boost/math/distributions/students_t.hpp>
+
+#include "analysis/reconcile/reconcile.hpp"
+#include "physics/twin/twin.hpp"
+
+namespace manikind::test {
+
+struct ZoneRow {
+    int zone;
+    std::string name, region, segment, side;
+    double area_m2, height_m;
+};
+
+inline std::vector<ZoneRow> zone_map() {
+    std::ifstream in(std::string(MANIKIND_CONFIG_DIR) + "/andi35_zone_map.csv");
+    std::string line;
+    std::getline(in, line);
+    std::vector<ZoneRow> rows;
+    while (std::getline(in, line)) {
+        std::stringstream ss(line);
+        std::string f[7];
+        for (auto& x : f) std::getline(ss, x, ',');
+        rows.push_back({std::stoi(f[0]), f[1], f[2], f[3], f[4], std::stod(f[5]), std::stod(f[6])});
+    }
+    return rows;
+}
+
+struct CaseSpec {
+    int case_id;
+    double air_temp_c, air_rh_pct, skin_temp_c, wettedness;
+};
+
+// Table S3 (measured enclosure conditions, skin temperature, wettedness).
+inline std::vector<CaseSpec> table_s3_cases() {
+    return {{1, 40.4, 27.6, 34.0, 0}, {2, 42.0, 25.4, 34.0, 0}, {3, 44.2, 23.5, 34.0, 0}, {4, 43.8, 23.8, 31.0, 0},
+            {5, 35.3, 35.6, 35.0, 1}, {6, 35.3, 48.7, 35.0, 1}, {7, 35.5, 65.2, 35.4, 1}, {8, 35.5, 81.4, 35.4, 1},
+            {9, 39.6, 38.3, 35.0, 1}, {10, 39.6, 48.3, 35.0, 1}, {11, 39.5, 60.3, 35.0, 1}, {12, 39.6, 68.9, 35.0, 1},
+            {13, 42.4, 34.7, 35.0, 1}, {14, 42.5, 47.1, 35.0, 1}, {15, 42.4, 59.4, 35.0, 1}};
+}
+
+struct SyntheticOptions {
+    unsigned seed = 7;
+    int replicates = 3;
+    double replicate_sd_w_m2 = 1.5;       // trial-to-trial scatter
+    double flux_accuracy_w_m2 = 1.0;      // Type B: a + b |q|, rectangular
+    double flux_accuracy_of_reading = 0.03;
+    bool vary_air_speed = true;           // recorded air speed 0.02..0.30 m/s across cases
+};
+
+inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::twin::TwinVersion& world,
+                                                                 const SyntheticOptions& o = {}) {
+    std::mt19937 rng(o.seed);
+    std::normal_distribution<double> noise(0.0, 1.0);
+    const auto zones = zone_map();
+    std::vector<analysis::reconcile::CaseInput> out;
+    int index = 0;
+    for (const auto& c : table_s3_cases()) {
+        analysis::reconcile::CaseInput in;
+        in.case_id = c.case_id;
+        auto& cond = in.conditions;
+        cond.air_temp_c = c.air_temp_c;
+        cond.air_rh_pct = c.air_rh_pct;
+        cond.wettedness = c.wettedness;
+        cond.wall_temp_c = c.air_temp_c - 0.4 - 0.1 * (index % 3);          // walls a little cooler (Text S3.3)
+        cond.air_speed_m_s = o.vary_air_speed ? 0.02 + 0.02 * index : 0.01;  // 0.02 .. 0.30 m/s
+        for (const auto& z : zones) {
+            cond.zones.push_back({z.zone, z.segment, z.region, z.area_m2, c.skin_temp_c});
+            in.zone_names.push_back(z.name);
+            in.sides.push_back(z.side);
+            in.heights_m.push_back(z.height_m);
+        }
+        const auto truth = physics::twin::predict(world, cond);
+        for (const auto& f : truth) {
+            double sum = 0.0, sum_sq = 0.0;
+            std::vector<double> reps;
+            for (int r = 0; r < o.replicates; ++r) reps.push_back(f.q_total_w_m2 + o.replicate_sd_w_m2 * noise(rng));
+            for (double v : reps) sum += v;
+            const double mean = sum / o.replicates;
+            for (double v : reps) sum_sq += (v - mean) * (v - mean);
+            const double u_a = std::sqrt(sum_sq / (o.replicates - 1) / o.replicates);
+            const double u_b = (o.flux_accuracy_w_m2 + o.flux_accuracy_of_reading * std::abs(mean)) / std::sqrt(3.0);
+            const double u_c = std::hypot(u_a, u_b);
+            // Welch-Satterthwaite: Type A with n-1 dof, Type B infinite.
+            const double nu = std::pow(u_c, 4) / (std::pow(u_a, 4) / (o.replicates - 1));
+            const double k = boost::math::quantile(boost::math::complement(boost::math::students_t(std::min(nu, 1e6)), 0.025));
+            in.q_exp_w_m2.push_back(mean);
+            in.expanded_u_w_m2.push_back(k * u_c);
+            in.coverage_k.push_back(k);
+        }
+        out.push_back(std::move(in));
+        ++index;
+    }
+    return out;
+}
+
+}  // namespace manikind::test
