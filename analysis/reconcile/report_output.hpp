@@ -1,0 +1,22 @@
+#pragma once
+// Reconcile's outputs: the JSON contract of FORMATS.md (`manikin reconcile --json`), a readable
+// text report, and SVG plots (parity with 95 % error bars before/after, residual vs driver).
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "analysis/reconcile/reconcile.hpp"
+
+namespace manikind::analysis::reconcile {
+
+nlohmann::json report_to_json(const Report& report, const ForwardModel& model);
+std::string report_to_text(const Report& report);
+
+// Writes parity.svg (Q_sim vs Q_exp with 95 % error bars, before and after) and
+// residual_vs_driver.svg into `dir` (created if missing); returns the paths written.
+std::vector<std::filesystem::path> write_plots(const Report& report, const ForwardModel& model,
+                                               const std::filesystem::path& dir, const std::string& unit = "W/m²");
+
+}  // namespace manikind::analysis::reconcile
