@@ -8,6 +8,8 @@ namespace manikind::cli {
 void add_physics_commands(CLI::App& app);    // cmd_physics.cpp: `manikin physics ...`
 void add_selfcheck_command(CLI::App& app);   // cmd_selfcheck.cpp: `manikin selfcheck`
 void add_config_command(CLI::App& app);      // cmd_config.cpp: `manikin config check|show`
+void add_analyze_command(CLI::App& app);     // cmd_analyze.cpp: `manikin analyze <campaign>`
 void add_simulate_command(CLI::App& app);    // cmd_simulate.cpp: `manikin simulate-campaign`
+void add_reconcile_command(CLI::App& app);   // cmd_reconcile.cpp: `manikin reconcile`
 
 }  // namespace manikind::cli

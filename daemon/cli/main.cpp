@@ -27,7 +27,9 @@ int main(int argc, char** argv) {
     manikind::cli::add_physics_commands(app);
     manikind::cli::add_selfcheck_command(app);
     manikind::cli::add_config_command(app);
+    manikind::cli::add_analyze_command(app);
     manikind::cli::add_simulate_command(app);
+    manikind::cli::add_reconcile_command(app);
 
     try {
         app.parse(argc, argv);

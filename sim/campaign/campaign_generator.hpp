@@ -36,7 +36,7 @@ struct GeneratorOptions {
     double sample_period_s = 5.0;           // Text S3.2: every 5 s
     std::uint64_t seed = 1;
     double unsteady_probability = 0.0;      // chance a trial never settles
-    double skin_time_constant_s = 600.0;    // shell warm-up lag
+    double skin_time_constant_s = 300.0;    // shell warm-up lag under the manikin's PI control
     double skin_noise_c = 0.004;            // zone RTD noise (well inside the 0.05 °C rule)
     double flux_noise_w_m2 = 1.5;           // heat-flux sensor noise
     double replicate_flux_sd_w_m2 = 1.2;    // trial-to-trial offset per zone (textile fit, placement)

@@ -1,0 +1,135 @@
+// `manikin reconcile <campaign>`: where the twin and the recordings disagree, which physics
+// term explains it, and the fit before and after (analysis/reconcile).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "analysis/analyze.hpp"
+#include "analysis/input_error.hpp"
+#include "analysis/reconcile/reconcile.hpp"
+#include "analysis/reconcile/report_output.hpp"
+#include "daemon/cli/commands.hpp"
+#include "daemon/core/twin_store.hpp"
+#include "daemon/core/user_error.hpp"
+
+namespace manikind::cli {
+namespace {
+
+namespace rc = analysis::reconcile;
+
+double condition(const analysis::CaseResult& c, const std::string& channel, double fallback) {
+    for (const auto& e : c.conditions)
+        if (e.channel == channel && std::isfinite(e.e.value)) return e.e.value;
+    return fallback;
+}
+
+// Case results (replicate means and U per zone) -> reconcile's case inputs.
+std::vector<rc::CaseInput> to_case_inputs(const analysis::CampaignResult& result, const analysis::ZoneMap& map) {
+    std::vector<rc::CaseInput> out;
+    for (const auto& c : result.cases) {
+        rc::CaseInput in;
+        in.case_id = c.case_id;
+        auto& cond = in.conditions;
+        cond.air_temp_c = condition(c, "air_temp_c", NAN);
+        cond.air_rh_pct = condition(c, "air_rh_pct", NAN);
+        const double wall = condition(c, "wall_temp_c", NAN);
+        if (std::isfinite(wall)) cond.wall_temp_c = wall;
+        const double speed = condition(c, "air_speed_m_s", NAN);
+        if (std::isfinite(speed)) cond.air_speed_m_s = speed;
+        cond.wettedness = c.wettedness.value_or(0.0);
+        // Zone skin temperatures: mean over the replicates used.
+        std::vector<double> skin_sum(map.size(), 0.0);
+        int used = 0;
+        for (const auto& t : c.trials)
+            if (t.included && t.zone_skin_temp_c.size() == map.size()) {
+                for (std::size_t z = 0; z < map.size(); ++z) skin_sum[z] += t.zone_skin_temp_c[z];
+                ++used;
+            }
+        for (std::size_t z = 0; z < map.size() && z < c.zones.size(); ++z) {
+            const auto& zone = map.zones[z];
+            const double skin = used > 0 ? skin_sum[z] / used : c.skin_setpoint_c.value_or(35.0);
+            cond.zones.push_back({zone.zone, zone.segment, zone.region, zone.area_m2, skin});
+            in.q_exp_w_m2.push_back(c.zones[z].q.value);
+            in.expanded_u_w_m2.push_back(c.zones[z].q.U);
+            in.coverage_k.push_back(c.zones[z].q.k);
+            in.zone_names.push_back(zone.name);
+            in.sides.push_back(zone.side);
+            in.heights_m.push_back(zone.centroid_height_m);
+        }
+        if (!std::isfinite(cond.air_temp_c) || !std::isfinite(cond.air_rh_pct)) {
+            spdlog::warn("case {}: no air temperature or humidity in the steady window; left out", c.case_id);
+            continue;
+        }
+        out.push_back(std::move(in));
+    }
+    return out;
+}
+
+}  // namespace
+
+void add_reconcile_command(CLI::App& app) {
+    struct Opts {
+        std::string campaign, twin = "baseline", plots, write_twin;
+        bool json = false, no_pairs = false;
+    };
+    auto o = std::make_shared<Opts>();
+    auto* cmd = app.add_subcommand("reconcile", "Find the physics the twin left out: locate the mismatch, fit candidate "
+                                                "terms, show the fit improve");
+    cmd->add_option("campaign", o->campaign, "Campaign folder (manikin-recording/1)")->required();
+    cmd->add_option("--twin", o->twin, "Twin version: 'baseline' (TWIN-BASELINE.md) or a twin-version TOML file")
+        ->capture_default_str();
+    cmd->add_flag("--json", o->json, "Print one JSON document (FORMATS.md contract) instead of the report");
+    cmd->add_option("--plots", o->plots, "Write parity.svg and residual_vs_driver.svg into this folder");
+    cmd->add_option("--write-twin", o->write_twin, "Write the new twin version (TOML) here when a term is found");
+    cmd->add_flag("--no-pairs", o->no_pairs, "Fit single terms only");
+    cmd->footer("The twin sees only the campaign's recorded conditions; every zone of every case is compared with\n"
+                "its 95 % CI from `manikin analyze`. Exit status 0 whether or not a term is found.\n"
+                "Example: manikin simulate-campaign --effect humidity_buoyancy:gamma=146 --out /tmp/c\n"
+                "         manikin reconcile /tmp/c --plots /tmp/c/plots --write-twin /tmp/c/twin.toml");
+    cmd->callback([o] {
+        const auto t0 = std::chrono::steady_clock::now();
+        const auto base = twin_store::load_twin_version(o->twin);
+        analysis::Campaign campaign;
+        try {
+            campaign = analysis::read_campaign(o->campaign);
+        } catch (const analysis::InputError& e) {
+            throw UserError(e.what());
+        }
+        for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
+        const auto result = analysis::analyze_campaign(campaign);
+        auto cases = to_case_inputs(result, campaign.zone_map);
+        if (cases.empty()) throw UserError(fmt::format("{}: no case has a steady window to compare", o->campaign));
+        const auto model = rc::make_twin_model(std::move(cases), base);
+        rc::Options opt;
+        opt.try_pairs = !o->no_pairs;
+        opt.new_version_name = fmt::format("{}+reconciled", base.name);
+        const auto report = rc::reconcile(*model, opt);
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (!o->plots.empty()) {
+            for (const auto& p : rc::write_plots(report, *model, o->plots)) spdlog::info("wrote {}", p.string());
+        }
+        if (!o->write_twin.empty() && report.explanation) {
+            twin_store::save_twin_version(report.new_version, o->write_twin, base.name,
+                                          fmt::format("found by manikin reconcile {}", o->campaign));
+            spdlog::info("wrote twin version {}", o->write_twin);
+        }
+        if (o->json) {
+            auto j = rc::report_to_json(report, *model);
+            j["campaign"] = o->campaign;
+            j["seconds"] = seconds;
+            std::printf("%s\n", j.dump(2).c_str());
+        } else {
+            std::printf("Campaign: %s (%zu cases)\n%s", o->campaign.c_str(), result.cases.size(),
+                        rc::report_to_text(report).c_str());
+            std::printf("(%.2f s)\n", seconds);
+        }
+    });
+}
+
+}  // namespace manikind::cli

@@ -1,0 +1,63 @@
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "tests/cli/run_cli.hpp"
+
+using manikind::test::run_manikin;
+
+namespace {
+std::string temp_dir(const std::string& name) {
+    const auto dir = std::filesystem::temp_directory_path() / ("manikind-test-" + name);
+    std::filesystem::remove_all(dir);
+    return dir.string();
+}
+}  // namespace
+
+TEST_CASE("cli: simulate-campaign with hidden humidity buoyancy, then reconcile names it from the files alone", "[cli][reconcile]") {
+    const std::string dir = temp_dir("gamma120");
+    auto r = run_manikin("simulate-campaign --effect humidity_buoyancy:gamma=120 --seed 11 --unsteady-probability 0.05 --out " + dir);
+    REQUIRE(r.exit_code == 0);
+    r = run_manikin("reconcile " + dir + " --json --plots " + dir + "/plots --write-twin " + dir + "/twin.toml");
+    REQUIRE(r.exit_code == 0);
+    const auto j = nlohmann::json::parse(r.out);
+    REQUIRE(j.at("explanation").is_object());
+    CHECK(j["explanation"]["term"] == "humidity_buoyancy");
+    const double gamma = j["explanation"]["parameters"]["gamma"].get<double>();
+    const double u = j["explanation"]["parameter_u"]["gamma"].get<double>();
+    CHECK(std::abs(gamma - 120.0) <= 2.0 * u);
+    CHECK(j["after"]["rmse_w_m2"].get<double>() < 0.2 * j["before"]["rmse_w_m2"].get<double>());
+    CHECK(j["after"]["chi2_per_dof"].get<double>() < 1.5);
+    CHECK(j["before"]["outside_ci"].get<int>() > 100);
+    CHECK(std::filesystem::exists(dir + "/plots/parity.svg"));
+    CHECK(std::filesystem::exists(dir + "/plots/residual_vs_driver.svg"));
+    // The written twin version, used as the twin, leaves nothing to explain.
+    r = run_manikin("reconcile " + dir + " --json --twin " + dir + "/twin.toml");
+    REQUIRE(r.exit_code == 0);
+    const auto again = nlohmann::json::parse(r.out);
+    CHECK(again["consistent_before"] == true);
+    CHECK(again["explanation"].is_null());
+    std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("cli: reconcile of a campaign with no hidden physics claims nothing", "[cli][reconcile]") {
+    const std::string dir = temp_dir("clean");
+    REQUIRE(run_manikin("simulate-campaign --seed 5 --out " + dir).exit_code == 0);
+    const auto r = run_manikin("reconcile " + dir + " --json");
+    REQUIRE(r.exit_code == 0);
+    const auto j = nlohmann::json::parse(r.out);
+    CHECK(j["explanation"].is_null());
+    CHECK(j["consistent_before"] == true);
+    std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("cli: bad --effect and --twin inputs are refused with what was expected", "[cli][reconcile]") {
+    auto r = run_manikin("simulate-campaign --effect warp:x=1 --out /tmp/manikind-never 2>&1");
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.out, Catch::Contains("unknown twin term 'warp'"));
+    r = run_manikin("reconcile /nonexistent-campaign --twin /nonexistent.toml 2>&1");
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.out, Catch::Contains("--twin"));
+}
