@@ -12,6 +12,7 @@
 
 #include "analysis/analyze.hpp"
 #include "analysis/input_error.hpp"
+#include "analysis/reconcile/from_analysis.hpp"
 #include "analysis/reconcile/reconcile.hpp"
 #include "analysis/reconcile/report_output.hpp"
 #include "daemon/cli/commands.hpp"
@@ -22,54 +23,6 @@ namespace manikind::cli {
 namespace {
 
 namespace rc = analysis::reconcile;
-
-double condition(const analysis::CaseResult& c, const std::string& channel, double fallback) {
-    for (const auto& e : c.conditions)
-        if (e.channel == channel && std::isfinite(e.e.value)) return e.e.value;
-    return fallback;
-}
-
-// Case results (replicate means and U per zone) -> reconcile's case inputs.
-std::vector<rc::CaseInput> to_case_inputs(const analysis::CampaignResult& result, const analysis::ZoneMap& map) {
-    std::vector<rc::CaseInput> out;
-    for (const auto& c : result.cases) {
-        rc::CaseInput in;
-        in.case_id = c.case_id;
-        auto& cond = in.conditions;
-        cond.air_temp_c = condition(c, "air_temp_c", NAN);
-        cond.air_rh_pct = condition(c, "air_rh_pct", NAN);
-        const double wall = condition(c, "wall_temp_c", NAN);
-        if (std::isfinite(wall)) cond.wall_temp_c = wall;
-        const double speed = condition(c, "air_speed_m_s", NAN);
-        if (std::isfinite(speed)) cond.air_speed_m_s = speed;
-        cond.wettedness = c.wettedness.value_or(0.0);
-        // Zone skin temperatures: mean over the replicates used.
-        std::vector<double> skin_sum(map.size(), 0.0);
-        int used = 0;
-        for (const auto& t : c.trials)
-            if (t.included && t.zone_skin_temp_c.size() == map.size()) {
-                for (std::size_t z = 0; z < map.size(); ++z) skin_sum[z] += t.zone_skin_temp_c[z];
-                ++used;
-            }
-        for (std::size_t z = 0; z < map.size() && z < c.zones.size(); ++z) {
-            const auto& zone = map.zones[z];
-            const double skin = used > 0 ? skin_sum[z] / used : c.skin_setpoint_c.value_or(35.0);
-            cond.zones.push_back({zone.zone, zone.segment, zone.region, zone.area_m2, skin});
-            in.q_exp_w_m2.push_back(c.zones[z].q.value);
-            in.expanded_u_w_m2.push_back(c.zones[z].q.U);
-            in.coverage_k.push_back(c.zones[z].q.k);
-            in.zone_names.push_back(zone.name);
-            in.sides.push_back(zone.side);
-            in.heights_m.push_back(zone.centroid_height_m);
-        }
-        if (!std::isfinite(cond.air_temp_c) || !std::isfinite(cond.air_rh_pct)) {
-            spdlog::warn("case {}: no air temperature or humidity in the steady window; left out", c.case_id);
-            continue;
-        }
-        out.push_back(std::move(in));
-    }
-    return out;
-}
 
 }  // namespace
 
@@ -103,7 +56,9 @@ void add_reconcile_command(CLI::App& app) {
         }
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
         const auto result = analysis::analyze_campaign(campaign);
-        auto cases = to_case_inputs(result, campaign.zone_map);
+        std::vector<int> skipped;
+        auto cases = rc::case_inputs_from_results(result, campaign.zone_map, &skipped);
+        for (int id : skipped) spdlog::warn("case {}: no air temperature or humidity in the steady window; left out", id);
         if (cases.empty()) throw UserError(fmt::format("{}: no case has a steady window to compare", o->campaign));
         const auto model = rc::make_twin_model(std::move(cases), base);
         rc::Options opt;

@@ -1,0 +1,59 @@
+#include "analysis/reconcile/from_analysis.hpp"
+
+#include <cmath>
+#include <limits>
+
+namespace manikind::analysis::reconcile {
+namespace {
+
+double condition(const CaseResult& c, const std::string& channel) {
+    for (const auto& e : c.conditions)
+        if (e.channel == channel && std::isfinite(e.e.value)) return e.e.value;
+    return std::numeric_limits<double>::quiet_NaN();
+}
+
+}  // namespace
+
+std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, const ZoneMap& map,
+                                                std::vector<int>* skipped) {
+    std::vector<CaseInput> out;
+    for (const auto& c : result.cases) {
+        CaseInput in;
+        in.case_id = c.case_id;
+        auto& cond = in.conditions;
+        cond.air_temp_c = condition(c, "air_temp_c");
+        cond.air_rh_pct = condition(c, "air_rh_pct");
+        if (!std::isfinite(cond.air_temp_c) || !std::isfinite(cond.air_rh_pct)) {
+            if (skipped) skipped->push_back(c.case_id);
+            continue;
+        }
+        const double wall = condition(c, "wall_temp_c");
+        if (std::isfinite(wall)) cond.wall_temp_c = wall;
+        const double speed = condition(c, "air_speed_m_s");
+        if (std::isfinite(speed)) cond.air_speed_m_s = speed;
+        cond.wettedness = c.wettedness.value_or(0.0);
+        // Zone skin temperatures: the mean over the replicates used.
+        std::vector<double> skin_sum(map.size(), 0.0);
+        int used = 0;
+        for (const auto& t : c.trials)
+            if (t.included && t.zone_skin_temp_c.size() == map.size()) {
+                for (std::size_t z = 0; z < map.size(); ++z) skin_sum[z] += t.zone_skin_temp_c[z];
+                ++used;
+            }
+        for (std::size_t z = 0; z < map.size() && z < c.zones.size(); ++z) {
+            const auto& zone = map.zones[z];
+            const double skin = used > 0 ? skin_sum[z] / used : c.skin_setpoint_c.value_or(35.0);
+            cond.zones.push_back({zone.zone, zone.segment, zone.region, zone.area_m2, skin});
+            in.q_exp_w_m2.push_back(c.zones[z].q.value);
+            in.expanded_u_w_m2.push_back(c.zones[z].q.U);
+            in.coverage_k.push_back(c.zones[z].q.k);
+            in.zone_names.push_back(zone.name);
+            in.sides.push_back(zone.side);
+            in.heights_m.push_back(zone.centroid_height_m);
+        }
+        out.push_back(std::move(in));
+    }
+    return out;
+}
+
+}  // namespace manikind::analysis::reconcile
