@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <cstdio>
 
 #include "tests/reconcile/synthetic_campaign.hpp"
 
@@ -33,6 +34,9 @@ void check_recovers(const std::string& term, const std::string& region, const st
     const double value = rep.explanation->values.at(0);
     const double u = rep.explanation->uncertainties.at(0);
     INFO("fitted " << value << " +- " << u);
+    std::printf("recovered %s%s%s: %s = %.5g +- %.2g (truth %.5g), chi2/dof %.2f -> %.2f, RMSE %.2f -> %.2f W/m2\n",
+                term.c_str(), region.empty() ? "" : ":", region.c_str(), parameter.c_str(), value, u, truth,
+                rep.before.chi2_per_dof, rep.after.chi2_per_dof, rep.before.rmse, rep.after.rmse);
     CHECK(std::abs(value - truth) <= 2.0 * u);  // within its expanded (k = 2) uncertainty
     CHECK(u < 0.1 * std::abs(truth));           // and identified, not merely consistent
     // After the fit the twin is consistent with the CIs, and much better than before.
