@@ -11,5 +11,6 @@ void add_config_command(CLI::App& app);      // cmd_config.cpp: `manikin config 
 void add_analyze_command(CLI::App& app);     // cmd_analyze.cpp: `manikin analyze <campaign>`
 void add_simulate_command(CLI::App& app);    // cmd_simulate.cpp: `manikin simulate-campaign`
 void add_reconcile_command(CLI::App& app);   // cmd_reconcile.cpp: `manikin reconcile`
+void add_demo_command(CLI::App& app);        // cmd_demo.cpp: `manikin demo` (the README main job)
 
 }  // namespace manikind::cli

@@ -30,6 +30,7 @@ int main(int argc, char** argv) {
     manikind::cli::add_analyze_command(app);
     manikind::cli::add_simulate_command(app);
     manikind::cli::add_reconcile_command(app);
+    manikind::cli::add_demo_command(app);
 
     try {
         app.parse(argc, argv);
