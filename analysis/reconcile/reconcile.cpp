@@ -526,6 +526,14 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
                                           where, rep.located.front().driver, rep.located.front().strength);
     }
 
+    std::set<int> case_ids;
+    for (const auto& p : pts) case_ids.insert(p.case_id);
+    for (int id : case_ids) {
+        std::vector<std::size_t> idx;
+        for (std::size_t i = 0; i < pts.size(); ++i)
+            if (pts[i].case_id == id) idx.push_back(i);
+        rep.by_case.push_back({id, {"", stats_of(pts, rep.predicted_before, 0, &idx), stats_of(pts, rep.predicted_after, 0, &idx)}});
+    }
     std::set<std::string> regions;
     for (const auto& p : pts) regions.insert(p.region);
     for (const auto& region : regions) {

@@ -109,6 +109,7 @@ struct Report {
     std::string statement;                   // plain language; says so when nothing explains
     FitStats after;
     std::vector<RegionComparison> by_region;
+    std::vector<std::pair<int, RegionComparison>> by_case;  // RegionComparison.region empty
     physics::twin::TwinVersion new_version;  // base + winner (equal to base when no winner)
     std::vector<double> predicted_before;
     std::vector<double> predicted_after;

@@ -97,6 +97,9 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
     j["by_region"] = nlohmann::json::array();
     for (const auto& b : r.by_region)
         j["by_region"].push_back({{"region", b.region}, {"before", stats_json(b.before)}, {"after", stats_json(b.after)}});
+    j["by_case"] = nlohmann::json::array();
+    for (const auto& [id, b] : r.by_case)
+        j["by_case"].push_back({{"case", id}, {"before", stats_json(b.before)}, {"after", stats_json(b.after)}});
     nlohmann::json terms = nlohmann::json::array();
     for (const auto& t : r.new_version.terms) terms.push_back({{"name", t.name}, {"parameters", t.parameters}, {"region", t.region}, {"zones", t.zones}});
     j["new_twin_version"] = {{"name", r.new_version.name}, {"terms", terms}};
@@ -132,7 +135,11 @@ std::string report_to_text(const Report& r) {
     }
     if (r.candidates.size() > 12) o << fmt::format("  ... and {} more (--json lists all)\n", r.candidates.size() - 12);
     o << "\n" << (r.explanation ? "Explanation: " + r.explanation->label : std::string("Explanation: none")) << "\n  " << r.statement << "\n";
-    o << "\nAfter:  " << stats_line(r.after) << "\n\nBy region (RMSE before -> after, outside CI before -> after):\n";
+    o << "\nAfter:  " << stats_line(r.after) << "\n\nBy case (RMSE before -> after, outside CI before -> after):\n";
+    for (const auto& [id, b] : r.by_case)
+        o << fmt::format("  case {:<9d} {:7.2f} -> {:7.2f}   {:3d} -> {:3d} of {}\n", id, b.before.rmse, b.after.rmse,
+                         b.before.outside_ci, b.after.outside_ci, b.before.n_points);
+    o << "\nBy region (RMSE before -> after, outside CI before -> after):\n";
     for (const auto& b : r.by_region)
         o << fmt::format("  {:<14} {:7.2f} -> {:7.2f}   {:3d} -> {:3d} of {}\n", b.region, b.before.rmse, b.after.rmse,
                          b.before.outside_ci, b.after.outside_ci, b.before.n_points);
