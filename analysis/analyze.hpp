@@ -1,0 +1,116 @@
+#pragma once
+// The analysis pipeline (Text S3, "3.2 Experimental procedure", Eq. S7):
+//   per trial:  steady-state window, zone time-means of heat flux and skin temperature;
+//   per case:   replicate means, Type A (scatter of the replicates), Type B (instrument
+//               specs), area weighting to regions and whole body, u_C, nu_eff, k, U.
+// Results are plain structs so a recorder can store them (SQLite) as well as print them.
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "analysis/recording.hpp"
+#include "analysis/steady_state.hpp"
+#include "analysis/uncertainty.hpp"
+
+namespace manikind::analysis {
+
+// How the zone heat-flux sensors' Type B errors combine in an area-weighted mean
+// (docs/analysis.md, "Type B of a region").
+enum class TypeBCorrelation {
+    correlated,    // r = 1 between zones: u_B(region) = sum w_z u_B(z) (default, conservative)
+    uncorrelated,  // r = 0: u_B(region) = sqrt(sum (w_z u_B(z))²)
+};
+const char* to_string(TypeBCorrelation c);
+
+struct AnalysisOptions {
+    SteadyStateOptions steady;
+    bool include_unsteady = false;   // analyse trials that never settled (flagged either way)
+    TypeBCorrelation type_b_correlation = TypeBCorrelation::correlated;
+    double confidence = 0.95;        // the paper's 95 % (Eq. S7)
+};
+
+// One line of an uncertainty budget. Shares add up to 1 over a budget: the Type A line
+// takes u_A²/u_C², the Type B lines split u_B²/u_C² between zones (or regions).
+struct BudgetLine {
+    std::string source;              // "Type A: replicate scatter", "Type B: heat flux, head"
+    char type = 'A';                 // 'A' or 'B'
+    double u_w_m2 = 0.0;             // the contribution to u_C (for B lines: w x u_B of the part)
+    double dof = kInfiniteDof;
+    double share = 0.0;              // fraction of u_C²
+    std::string part;                // for B lines: the region (whole body) or zone (region)
+};
+
+struct AreaResult {                  // a region or the whole body
+    std::string name;                // region name, or "whole_body"
+    double area_m2 = 0.0;
+    Estimate q;                      // q.value in W/m², positive = heat lost by the manikin
+    std::vector<BudgetLine> budget;
+};
+
+struct ZoneResult {
+    int zone = 0;
+    std::string name;
+    std::string region;
+    double area_m2 = 0.0;
+    Estimate q;
+    double skin_temp_c = 0.0;        // replicate mean of the window-mean skin temperature
+};
+
+struct TrialResult {
+    std::string id;
+    int replicate = 0;
+    std::size_t rows = 0;
+    SteadyStateResult steady;
+    bool included = false;           // used for the case's results
+    std::string exclusion_reason;    // empty when included
+    // Means over the steady window (NaN when the trial has none).
+    double whole_body_q_w_m2 = 0.0;
+    std::vector<double> zone_q_w_m2;
+    std::vector<double> zone_skin_temp_c;
+    double air_temp_c = 0.0;
+    double air_rh_pct = 0.0;
+    double air_speed_m_s = 0.0;      // NaN when not recorded
+    double wall_temp_c = 0.0;        // NaN when not recorded
+    double mean_skin_temp_c = 0.0;   // area-weighted
+};
+
+struct ConditionEstimate {
+    std::string channel;             // air_temp_c, air_rh_pct, skin_temp_c, air_speed_m_s, wall_temp_c
+    Estimate e;
+};
+
+struct CaseResult {
+    int case_id = 0;
+    int n_replicates = 0;            // trials used
+    std::vector<ConditionEstimate> conditions;
+    std::optional<double> wettedness;
+    std::optional<double> skin_setpoint_c;
+    AreaResult whole_body;
+    std::vector<AreaResult> regions;
+    std::vector<ZoneResult> zones;
+    std::vector<TrialResult> trials; // all trials of the case, used or not
+    std::vector<std::string> warnings;
+};
+
+struct CampaignResult {
+    std::string campaign;
+    AnalysisOptions options;
+    std::vector<CaseResult> cases;           // cases with at least one usable trial
+    std::vector<CaseResult> unanalysed_cases;// cases whose every trial was excluded
+    std::vector<std::string> warnings;       // includes the reader's
+};
+
+CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions& options = {});
+
+// The `manikin analyze --json` contract (FORMATS.md section 2), plus extra fields.
+nlohmann::json to_json(const CampaignResult& result);
+// A readable table: per case, whole body and regions with u_A, u_B, u_C, nu_eff, k, U, the
+// trials and their steady windows, and the whole-body uncertainty budget.
+std::string format_table(const CampaignResult& result);
+// One row per case and whole body / region / zone.
+std::string format_csv(const CampaignResult& result);
+
+}  // namespace manikind::analysis

@@ -1,0 +1,112 @@
+#pragma once
+// A campaign in memory, as read from or written to the interchange format
+// `manikin-recording/1` (FORMATS.md section 1): campaign.json + trials/<id>.csv.
+//
+// Samples are stored column-wise (one vector per channel) because everything downstream
+// (steady state, window means) walks one channel over time. Empty CSV cells are NaN.
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "analysis/zone_map.hpp"
+
+namespace manikind::analysis {
+
+inline constexpr const char* kRecordingFormat = "manikin-recording/1";
+
+// A Type B specification: the manufacturer's limit ±(accuracy + accuracy_of_reading x |reading|).
+enum class Distribution {
+    rectangular,   // limits of a uniform distribution: u = a / sqrt(3) (GUM 4.3.7)
+    normal_k2,     // an expanded uncertainty stated at k = 2 (95 %): u = a / 2
+    triangular,    // u = a / sqrt(6) (GUM 4.3.9)
+};
+
+struct InstrumentSpec {
+    double accuracy = 0.0;             // in the channel's unit
+    double accuracy_of_reading = 0.0;  // fraction of |reading|
+    Distribution distribution = Distribution::rectangular;
+
+    // Half-width of the limit at this reading, in the channel's unit.
+    double limit(double reading) const;
+    // Standard uncertainty u_B at this reading.
+    double standard_uncertainty(double reading) const;
+};
+
+const char* to_string(Distribution d);
+std::optional<Distribution> distribution_from_string(const std::string& s);
+
+// The channels that carry Type B specs, by the names used in campaign.json `instruments`.
+inline constexpr const char* kInstrumentChannels[] = {"air_temp_c", "air_rh_pct", "air_speed_m_s",
+                                                      "wall_temp_c", "skin_temp_c", "heat_flux_w_m2"};
+
+// Defaults when campaign.json leaves a channel out: Tables S1-S2 for the air and wall
+// sensors (EE181 ±0.2 °C and ±(1.4 + 0.01 RH) %, hot-wire ±0.02 m/s, Type-T ±0.5 °C); the
+// manikin's own skin-temperature and heat-flux specs are not in the paper and come from the
+// project's configuration (config/manikind.toml: ±0.1 °C, ±(1.0 W/m² + 3 % of reading)).
+std::map<std::string, InstrumentSpec> default_instrument_specs();
+
+struct TrialInfo {
+    std::string id;
+    int case_id = 0;
+    int replicate = 0;
+    std::string file;                  // relative to the campaign folder
+    std::optional<double> skin_setpoint_c;
+    std::optional<double> wettedness;  // "wettedness", else 1 if "wet" is true, 0 if false
+    std::optional<double> chamber_setpoint_temp_c;
+    std::optional<double> chamber_setpoint_rh_pct;
+    std::string started_utc;
+};
+
+// One trial's samples. `skin_temp_c[z]` and `heat_flux_w_m2[z]` are indexed like the zone
+// map (zone number - 1); all vectors have `t_s.size()` entries.
+struct TrialData {
+    std::vector<double> t_s;
+    std::vector<double> air_temp_c;
+    std::vector<double> air_rh_pct;
+    std::vector<double> air_speed_m_s;   // empty when the file has no such column
+    std::vector<double> wall_temp_c;     // empty when the file has no such column
+    std::vector<std::vector<double>> skin_temp_c;
+    std::vector<std::vector<double>> heat_flux_w_m2;
+
+    std::size_t rows() const { return t_s.size(); }
+};
+
+struct Trial {
+    TrialInfo info;
+    TrialData data;
+};
+
+struct Campaign {
+    std::string name;
+    ZoneMap zone_map;
+    bool zone_map_inline = false;      // written back inline rather than by name
+    std::map<std::string, InstrumentSpec> instruments;  // every channel, defaults filled in
+    std::vector<Trial> trials;
+    std::vector<std::string> warnings; // unknown keys and the like, with the file named
+};
+
+struct ReadOptions {
+    // Channels missing from campaign.json take these (the CLI passes the configured ones).
+    std::map<std::string, InstrumentSpec> default_instruments = default_instrument_specs();
+};
+
+// Reads a whole campaign folder. The CSVs are streamed in fixed-size chunks and parsed with
+// std::from_chars. Everything is parsed into local structures first; on any error an
+// InputError (file, line, column, field) is thrown and nothing is returned, so a campaign
+// is never half-imported.
+Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options = {});
+
+// Parses one trial CSV (exposed for tests and tools). `display_name` is used in messages.
+TrialData read_trial_csv(const std::filesystem::path& file, const ZoneMap& map, const std::string& display_name);
+
+// Writes campaign.json and trials/<id>.csv into `folder` (created if needed). Numbers are
+// written with the shortest representation that reads back to the same double, so a
+// write/read round trip is exact. NaN samples are written as empty cells.
+void write_campaign(const std::filesystem::path& folder, const Campaign& campaign);
+
+// Column names of the trial CSV for a map, in the order the writer uses.
+std::vector<std::string> trial_csv_columns(const ZoneMap& map, bool with_air_speed, bool with_wall_temp);
+
+}  // namespace manikind::analysis

@@ -1,0 +1,532 @@
+// Reader for `manikin-recording/1` (FORMATS.md section 1).
+//
+// Trial CSVs are streamed: read in fixed-size chunks, split into lines in place, each cell
+// parsed with std::from_chars straight out of the chunk (no per-line std::string, no
+// iostreams). A whole campaign is built in local structures and returned only when every
+// file parsed, so an error never leaves a half-imported campaign behind.
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <set>
+#include <sstream>
+#include <string_view>
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+
+#include "analysis/input_error.hpp"
+#include "analysis/recording.hpp"
+
+namespace manikind::analysis {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+struct FileCloser {
+    void operator()(std::FILE* f) const { std::fclose(f); }
+};
+using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+// Yields the lines of a file one at a time from a fixed-size buffer. A line longer than the
+// buffer grows it (a 99-zone header is still only a few kB).
+class ChunkedLineReader {
+public:
+    explicit ChunkedLineReader(std::FILE* f, std::size_t chunk_bytes = 1 << 18) : file_(f), buffer_(chunk_bytes) {}
+
+    // Returns false at end of file. The view stays valid until the next call.
+    bool next(std::string_view& line) {
+        for (;;) {
+            const char* begin = buffer_.data() + pos_;
+            const char* end = buffer_.data() + filled_;
+            const auto* newline = static_cast<const char*>(std::memchr(begin, '\n', static_cast<std::size_t>(end - begin)));
+            if (newline) {
+                line = std::string_view(begin, static_cast<std::size_t>(newline - begin));
+                pos_ = static_cast<std::size_t>(newline - buffer_.data()) + 1;
+                strip_cr(line);
+                return true;
+            }
+            if (eof_) {
+                if (begin == end) return false;
+                line = std::string_view(begin, static_cast<std::size_t>(end - begin));
+                pos_ = filled_;
+                strip_cr(line);
+                return true;
+            }
+            // Move the partial line to the front and read the next chunk behind it.
+            const std::size_t rest = filled_ - pos_;
+            std::memmove(buffer_.data(), buffer_.data() + pos_, rest);
+            pos_ = 0;
+            filled_ = rest;
+            if (filled_ == buffer_.size()) buffer_.resize(buffer_.size() * 2);
+            const std::size_t n = std::fread(buffer_.data() + filled_, 1, buffer_.size() - filled_, file_);
+            if (n == 0) {
+                if (std::ferror(file_)) throw std::runtime_error(std::strerror(errno));
+                eof_ = true;
+            }
+            filled_ += n;
+        }
+    }
+
+private:
+    static void strip_cr(std::string_view& line) {
+        if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    }
+    std::FILE* file_;
+    std::vector<char> buffer_;
+    std::size_t pos_ = 0;
+    std::size_t filled_ = 0;
+    bool eof_ = false;
+};
+
+enum class Role { time, air_temp, air_rh, air_speed, wall_temp, skin, flux };
+
+struct Column {
+    Role role;
+    std::size_t zone_index = 0;  // for skin and flux
+    std::string name;
+};
+
+std::string_view trim(std::string_view s) {
+    while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+    while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+    return s;
+}
+
+// "z07_skin_c" -> 7 and "skin"; returns 0 when the name is not a zone column.
+int zone_column_number(std::string_view name, std::string_view& kind) {
+    if (name.size() < 4 || name[0] != 'z' || name[1] < '0' || name[1] > '9' || name[2] < '0' || name[2] > '9' ||
+        name[3] != '_')
+        return 0;
+    kind = name.substr(4);
+    return (name[1] - '0') * 10 + (name[2] - '0');
+}
+
+std::vector<Column> parse_header(std::string_view line, const ZoneMap& map, const std::string& file) {
+    std::vector<Column> columns;
+    std::set<std::string> seen;
+    std::size_t start = 0;
+    for (;;) {
+        const std::size_t comma = line.find(',', start);
+        const std::string_view raw = line.substr(start, comma == std::string_view::npos ? std::string_view::npos : comma - start);
+        const std::string name(trim(raw));
+        const std::size_t column = start + 1;
+        if (name.empty()) throw InputError(file, 1, column, "", "empty column name in the header");
+        if (!seen.insert(name).second) throw InputError(file, 1, column, name, "column appears twice in the header");
+        std::string_view kind;
+        const int zone = zone_column_number(name, kind);
+        if (name == "t_s") columns.push_back({Role::time, 0, name});
+        else if (name == "air_temp_c") columns.push_back({Role::air_temp, 0, name});
+        else if (name == "air_rh_pct") columns.push_back({Role::air_rh, 0, name});
+        else if (name == "air_speed_m_s") columns.push_back({Role::air_speed, 0, name});
+        else if (name == "wall_temp_c") columns.push_back({Role::wall_temp, 0, name});
+        else if (zone > 0 && (kind == "skin_c" || kind == "flux_w_m2")) {
+            if (static_cast<std::size_t>(zone) > map.size())
+                throw InputError(file, 1, column, name,
+                                 fmt::format("unknown zone column: the zone map '{}' has zones 01..{:02}", map.name, map.size()));
+            columns.push_back({kind == "skin_c" ? Role::skin : Role::flux, static_cast<std::size_t>(zone - 1), name});
+        } else {
+            throw InputError(file, 1, column, name,
+                             "unknown column; expected t_s, air_temp_c, air_rh_pct, air_speed_m_s, wall_temp_c, "
+                             "zNN_skin_c or zNN_flux_w_m2");
+        }
+        if (comma == std::string_view::npos) break;
+        start = comma + 1;
+    }
+    auto require = [&](const std::string& name) {
+        if (!seen.count(name)) throw InputError(file, 1, 0, name, "required column is missing from the header");
+    };
+    require("t_s");
+    require("air_temp_c");
+    require("air_rh_pct");
+    for (const auto& z : map.zones) {
+        require(fmt::format("z{:02}_skin_c", z.zone));
+        require(fmt::format("z{:02}_flux_w_m2", z.zone));
+    }
+    return columns;
+}
+
+// Parses one cell: empty -> NaN (a sensor slower than the manikin), "nan" -> NaN, else a
+// finite number. Returns false on anything else.
+bool parse_cell(std::string_view cell, double& value) {
+    cell = trim(cell);
+    if (cell.empty()) {
+        value = kNaN;
+        return true;
+    }
+    const char* first = cell.data();
+    const char* last = cell.data() + cell.size();
+    if (*first == '+') ++first;  // from_chars refuses a leading '+', spreadsheets write one
+    const auto [ptr, ec] = std::from_chars(first, last, value);
+    if (ec != std::errc() || ptr != last) return false;
+    if (std::isinf(value)) return false;
+    if (std::isnan(value)) value = kNaN;  // normalise the sign/payload of a written "nan"
+    return true;
+}
+
+std::string shorten(std::string_view s) {
+    if (s.size() <= 40) return std::string(s);
+    return std::string(s.substr(0, 37)) + "...";
+}
+
+}  // namespace
+
+std::vector<std::string> trial_csv_columns(const ZoneMap& map, bool with_air_speed, bool with_wall_temp) {
+    std::vector<std::string> names{"t_s", "air_temp_c", "air_rh_pct"};
+    if (with_air_speed) names.emplace_back("air_speed_m_s");
+    if (with_wall_temp) names.emplace_back("wall_temp_c");
+    for (const auto& z : map.zones) names.push_back(fmt::format("z{:02}_skin_c", z.zone));
+    for (const auto& z : map.zones) names.push_back(fmt::format("z{:02}_flux_w_m2", z.zone));
+    return names;
+}
+
+TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const std::string& file) {
+    FilePtr f(std::fopen(path.c_str(), "rb"));
+    if (!f) throw InputError(file, 0, 0, "", fmt::format("cannot open the trial file: {}", std::strerror(errno)));
+    ChunkedLineReader reader(f.get());
+    std::string_view line;
+    std::size_t line_no = 0;
+    bool have_header = false;
+    while (!have_header) {
+        if (!reader.next(line)) throw InputError(file, line_no + 1, 1, "", "empty file: expected a header row");
+        ++line_no;
+        have_header = !trim(line).empty();
+    }
+    // A UTF-8 byte-order mark from a spreadsheet export is not part of the first name.
+    if (line.size() >= 3 && line.substr(0, 3) == "\xEF\xBB\xBF") line.remove_prefix(3);
+    const std::vector<Column> columns = parse_header(line, map, file);
+
+    TrialData data;
+    data.skin_temp_c.resize(map.size());
+    data.heat_flux_w_m2.resize(map.size());
+    // Where each column's values go, resolved once.
+    std::vector<std::vector<double>*> target(columns.size());
+    for (std::size_t c = 0; c < columns.size(); ++c) {
+        switch (columns[c].role) {
+            case Role::time: target[c] = &data.t_s; break;
+            case Role::air_temp: target[c] = &data.air_temp_c; break;
+            case Role::air_rh: target[c] = &data.air_rh_pct; break;
+            case Role::air_speed: target[c] = &data.air_speed_m_s; break;
+            case Role::wall_temp: target[c] = &data.wall_temp_c; break;
+            case Role::skin: target[c] = &data.skin_temp_c[columns[c].zone_index]; break;
+            case Role::flux: target[c] = &data.heat_flux_w_m2[columns[c].zone_index]; break;
+        }
+    }
+    std::size_t time_column = 0;
+    for (std::size_t c = 0; c < columns.size(); ++c)
+        if (columns[c].role == Role::time) time_column = c;
+
+    double previous_t_s = -std::numeric_limits<double>::infinity();
+    while (reader.next(line)) {
+        ++line_no;
+        if (trim(line).empty()) continue;  // a blank line carries no sample
+        std::size_t start = 0;
+        std::size_t c = 0;
+        for (;; ++c) {
+            const std::size_t comma = line.find(',', start);
+            if (c >= columns.size())
+                throw InputError(file, line_no, start + 1, "",
+                                 fmt::format("too many fields: the header has {} columns", columns.size()));
+            const std::string_view cell =
+                line.substr(start, comma == std::string_view::npos ? std::string_view::npos : comma - start);
+            double value = 0.0;
+            if (!parse_cell(cell, value))
+                throw InputError(file, line_no, start + 1, columns[c].name,
+                                 fmt::format("expected a number, found '{}'", shorten(cell)));
+            if (c == time_column) {
+                if (std::isnan(value)) throw InputError(file, line_no, start + 1, "t_s", "the time cell is empty");
+                if (value <= previous_t_s)
+                    throw InputError(file, line_no, start + 1, "t_s",
+                                     fmt::format("time goes backwards or repeats: {} s after {} s on an earlier row; "
+                                                 "rows must be in increasing time order", value, previous_t_s));
+                previous_t_s = value;
+            }
+            target[c]->push_back(value);
+            if (comma == std::string_view::npos) break;
+            start = comma + 1;
+        }
+        if (c + 1 != columns.size())
+            throw InputError(file, line_no, line.size() + 1, "",
+                             fmt::format("too few fields: found {}, the header has {} columns", c + 1, columns.size()));
+    }
+    return data;
+}
+
+// --- campaign.json ------------------------------------------------------------------------
+
+namespace {
+
+using nlohmann::json;
+
+struct Located {
+    std::size_t line = 0;
+    std::size_t column = 0;
+};
+
+Located locate_offset(const std::string& text, std::size_t offset) {
+    Located at{1, 1};
+    for (std::size_t i = 0; i < offset && i < text.size(); ++i) {
+        if (text[i] == '\n') {
+            ++at.line;
+            at.column = 1;
+        } else {
+            ++at.column;
+        }
+    }
+    return at;
+}
+
+// Position of the nth (0-based) occurrence of `needle`; {0,0} when absent. Used to point at
+// a trial entry by its quoted id: nlohmann's DOM does not keep positions.
+Located locate(const std::string& text, const std::string& needle, std::size_t nth = 0) {
+    std::size_t pos = 0;
+    for (std::size_t i = 0;; ++i) {
+        pos = text.find(needle, pos);
+        if (pos == std::string::npos) return {};
+        if (i == nth) return locate_offset(text, pos);
+        pos += needle.size();
+    }
+}
+
+class CampaignJson {
+public:
+    CampaignJson(std::string file, std::string text) : file_(std::move(file)), text_(std::move(text)) {}
+
+    [[noreturn]] void fail(const std::string& field, const std::string& message, Located at = {}) const {
+        throw InputError(file_, at.line, at.column, field, message);
+    }
+
+    double number(const json& obj, const std::string& key, const std::string& path, Located at) const {
+        const auto& v = obj.at(key);
+        if (!v.is_number()) fail(path + key, fmt::format("expected a number, found {}", v.dump()), at);
+        const double x = v.get<double>();
+        if (!std::isfinite(x)) fail(path + key, "expected a finite number", at);
+        return x;
+    }
+    std::string string(const json& obj, const std::string& key, const std::string& path, Located at) const {
+        const auto& v = obj.at(key);
+        if (!v.is_string()) fail(path + key, fmt::format("expected a string, found {}", v.dump()), at);
+        return v.get<std::string>();
+    }
+    int integer(const json& obj, const std::string& key, const std::string& path, Located at) const {
+        const auto& v = obj.at(key);
+        if (!v.is_number_integer()) fail(path + key, fmt::format("expected an integer, found {}", v.dump()), at);
+        return v.get<int>();
+    }
+
+    const std::string& file() const { return file_; }
+    const std::string& text() const { return text_; }
+
+private:
+    std::string file_;
+    std::string text_;
+};
+
+ZoneMap parse_inline_zone_map(const json& arr, const CampaignJson& cj) {
+    ZoneMap map;
+    map.name = "inline";
+    const Located at = locate(cj.text(), "\"zone_map\"");
+    for (std::size_t i = 0; i < arr.size(); ++i) {
+        const auto& e = arr[i];
+        const std::string path = fmt::format("zone_map[{}].", i);
+        if (!e.is_object()) cj.fail(path, "expected an object", at);
+        for (const char* key : {"zone", "name", "region", "area_m2"})
+            if (!e.contains(key)) cj.fail(path + key, "required key is missing", at);
+        Zone z;
+        z.zone = cj.integer(e, "zone", path, at);
+        z.name = cj.string(e, "name", path, at);
+        z.region = cj.string(e, "region", path, at);
+        z.segment = e.contains("segment") ? cj.string(e, "segment", path, at) : z.region;
+        z.side = e.contains("side") ? cj.string(e, "side", path, at) : "c";
+        z.area_m2 = cj.number(e, "area_m2", path, at);
+        z.centroid_height_m = e.contains("centroid_height_m") ? cj.number(e, "centroid_height_m", path, at) : 0.0;
+        map.zones.push_back(std::move(z));
+    }
+    std::sort(map.zones.begin(), map.zones.end(), [](const Zone& a, const Zone& b) { return a.zone < b.zone; });
+    if (auto problem = validate_zone_map(map); !problem.empty()) cj.fail("zone_map", problem, at);
+    return map;
+}
+
+InstrumentSpec parse_instrument(const json& v, const std::string& channel, const CampaignJson& cj,
+                                std::vector<std::string>& warnings) {
+    const std::string path = "instruments." + channel + ".";
+    const Located at = locate(cj.text(), "\"" + channel + "\"");
+    if (!v.is_object()) cj.fail("instruments." + channel, "expected an object {\"accuracy\": ...}", at);
+    if (!v.contains("accuracy")) cj.fail(path + "accuracy", "required key is missing", at);
+    InstrumentSpec spec;
+    spec.accuracy = cj.number(v, "accuracy", path, at);
+    if (v.contains("accuracy_of_reading")) spec.accuracy_of_reading = cj.number(v, "accuracy_of_reading", path, at);
+    if (spec.accuracy < 0.0 || spec.accuracy_of_reading < 0.0) cj.fail(path + "accuracy", "must not be negative", at);
+    if (v.contains("distribution")) {
+        const std::string d = cj.string(v, "distribution", path, at);
+        const auto parsed = distribution_from_string(d);
+        if (!parsed)
+            cj.fail(path + "distribution",
+                    fmt::format("unknown distribution '{}'; expected rectangular, normal (stated at k = 2) or triangular", d), at);
+        spec.distribution = *parsed;
+    }
+    for (const auto& [key, value] : v.items()) {
+        (void)value;
+        if (key != "accuracy" && key != "accuracy_of_reading" && key != "distribution")
+            warnings.push_back(fmt::format("{}:{}:{}: unknown key '{}{}' ignored", cj.file(), at.line, at.column, path, key));
+    }
+    return spec;
+}
+
+TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson& cj, std::vector<std::string>& warnings) {
+    const std::string path = fmt::format("trials[{}].", index);
+    if (!t.is_object()) cj.fail(fmt::format("trials[{}]", index), "expected an object");
+    if (!t.contains("id")) cj.fail(path + "id", "required key is missing");
+    TrialInfo info;
+    info.id = cj.string(t, "id", path, {});
+    const Located at = locate(cj.text(), "\"" + info.id + "\"");
+    if (info.id.empty() || info.id.find_first_of("/\\") != std::string::npos)
+        cj.fail(path + "id", "a trial id must be non-empty and contain no slash", at);
+    if (!t.contains("case")) cj.fail(path + "case", "required key is missing", at);
+    info.case_id = cj.integer(t, "case", path, at);
+    info.replicate = t.contains("replicate") ? cj.integer(t, "replicate", path, at) : 0;
+    info.file = t.contains("file") ? cj.string(t, "file", path, at) : "trials/" + info.id + ".csv";
+    if (t.contains("skin_setpoint_c")) info.skin_setpoint_c = cj.number(t, "skin_setpoint_c", path, at);
+    if (t.contains("wet")) {
+        if (!t.at("wet").is_boolean()) cj.fail(path + "wet", "expected true or false", at);
+        info.wettedness = t.at("wet").get<bool>() ? 1.0 : 0.0;
+    }
+    if (t.contains("wettedness")) {
+        const double w = cj.number(t, "wettedness", path, at);
+        if (w < 0.0 || w > 1.0) cj.fail(path + "wettedness", fmt::format("must be within 0..1, found {}", w), at);
+        info.wettedness = w;
+    }
+    if (t.contains("chamber_setpoint")) {
+        const auto& cs = t.at("chamber_setpoint");
+        if (!cs.is_object()) cj.fail(path + "chamber_setpoint", "expected an object", at);
+        if (cs.contains("temp_c")) info.chamber_setpoint_temp_c = cj.number(cs, "temp_c", path + "chamber_setpoint.", at);
+        if (cs.contains("rh_pct")) info.chamber_setpoint_rh_pct = cj.number(cs, "rh_pct", path + "chamber_setpoint.", at);
+    }
+    if (t.contains("started_utc")) info.started_utc = cj.string(t, "started_utc", path, at);
+    static const std::set<std::string> known{"id", "case", "replicate", "file", "skin_setpoint_c", "wet",
+                                             "wettedness", "chamber_setpoint", "started_utc"};
+    for (const auto& [key, value] : t.items()) {
+        (void)value;
+        if (!known.count(key))
+            warnings.push_back(fmt::format("{}:{}:{}: unknown key '{}{}' ignored", cj.file(), at.line, at.column, path, key));
+    }
+    return info;
+}
+
+}  // namespace
+
+Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options) {
+    const std::filesystem::path json_path = folder / "campaign.json";
+    const std::string json_file = json_path.string();
+    std::ifstream in(json_path, std::ios::binary);
+    if (!in) {
+        if (!std::filesystem::exists(folder))
+            throw InputError(folder.string(), 0, 0, "", "no such campaign folder");
+        throw InputError(json_file, 0, 0, "", "cannot open campaign.json (a campaign is a folder with campaign.json and trials/)");
+    }
+    std::stringstream ss;
+    ss << in.rdbuf();  // campaign.json is metadata (a few kB); the samples are streamed below
+    const CampaignJson cj(json_file, ss.str());
+
+    json doc;
+    try {
+        doc = json::parse(cj.text());
+    } catch (const json::parse_error& e) {
+        const Located at = locate_offset(cj.text(), e.byte > 0 ? e.byte - 1 : 0);
+        std::string what = e.what();
+        if (const auto colon = what.rfind(": "); colon != std::string::npos) what = what.substr(colon + 2);
+        cj.fail("", "invalid JSON: " + what, at);
+    }
+    if (!doc.is_object()) cj.fail("", "expected a JSON object at the top level", {1, 1});
+
+    Campaign campaign;
+    if (!doc.contains("format")) cj.fail("format", fmt::format("required key is missing (expected \"{}\")", kRecordingFormat));
+    const std::string format = cj.string(doc, "format", "", locate(cj.text(), "\"format\""));
+    if (format != kRecordingFormat)
+        cj.fail("format", fmt::format("unsupported format '{}'; this program reads '{}'", format, kRecordingFormat),
+                locate(cj.text(), "\"format\""));
+    campaign.name = doc.contains("name") ? cj.string(doc, "name", "", locate(cj.text(), "\"name\""))
+                                         : folder.filename().string();
+
+    campaign.zone_map = andi35_zone_map();
+    if (doc.contains("zone_map")) {
+        const auto& zm = doc.at("zone_map");
+        if (zm.is_string()) {
+            if (zm.get<std::string>() != "andi35")
+                cj.fail("zone_map", fmt::format("unknown built-in zone map '{}'; built in: andi35 (or give an inline array)",
+                                                zm.get<std::string>()),
+                        locate(cj.text(), "\"zone_map\""));
+        } else if (zm.is_array()) {
+            campaign.zone_map = parse_inline_zone_map(zm, cj);
+            campaign.zone_map_inline = true;
+        } else {
+            cj.fail("zone_map", "expected a built-in map name or an array of zones", locate(cj.text(), "\"zone_map\""));
+        }
+    }
+
+    campaign.instruments = options.default_instruments;
+    if (doc.contains("instruments")) {
+        const auto& inst = doc.at("instruments");
+        if (!inst.is_object()) cj.fail("instruments", "expected an object keyed by channel", locate(cj.text(), "\"instruments\""));
+        for (const auto& [channel, spec] : inst.items()) {
+            const bool known = std::any_of(std::begin(kInstrumentChannels), std::end(kInstrumentChannels),
+                                           [&](const char* c) { return channel == c; });
+            if (!known) {
+                const Located at = locate(cj.text(), "\"" + channel + "\"");
+                campaign.warnings.push_back(fmt::format("{}:{}:{}: unknown instrument channel 'instruments.{}' ignored",
+                                                        json_file, at.line, at.column, channel));
+                continue;
+            }
+            campaign.instruments[channel] = parse_instrument(spec, channel, cj, campaign.warnings);
+        }
+    }
+
+    static const std::set<std::string> known_top{"format", "name", "zone_map", "instruments", "trials"};
+    for (const auto& [key, value] : doc.items()) {
+        (void)value;
+        if (!known_top.count(key)) {
+            const Located at = locate(cj.text(), "\"" + key + "\"");
+            campaign.warnings.push_back(fmt::format("{}:{}:{}: unknown key '{}' ignored", json_file, at.line, at.column, key));
+        }
+    }
+
+    if (!doc.contains("trials")) cj.fail("trials", "required key is missing");
+    const auto& trials = doc.at("trials");
+    if (!trials.is_array()) cj.fail("trials", "expected an array of trials", locate(cj.text(), "\"trials\""));
+    std::set<std::string> ids;
+    std::vector<TrialInfo> infos;
+    for (std::size_t i = 0; i < trials.size(); ++i) {
+        TrialInfo info = parse_trial_info(trials[i], i, cj, campaign.warnings);
+        if (!ids.insert(info.id).second)
+            cj.fail(fmt::format("trials[{}].id", i), fmt::format("duplicated trial id '{}'", info.id),
+                    locate(cj.text(), "\"" + info.id + "\"", 1));
+        infos.push_back(std::move(info));
+    }
+    // Replicate numbers default to the order within a case.
+    std::map<int, int> count_per_case;
+    std::set<std::pair<int, int>> case_replicates;
+    for (auto& info : infos) {
+        const int n = ++count_per_case[info.case_id];
+        if (info.replicate == 0) info.replicate = n;
+        if (!case_replicates.insert({info.case_id, info.replicate}).second)
+            campaign.warnings.push_back(fmt::format("{}: trial '{}' repeats replicate {} of case {}", json_file, info.id,
+                                                    info.replicate, info.case_id));
+    }
+
+    for (auto& info : infos) {
+        const std::filesystem::path csv = folder / info.file;
+        Trial trial;
+        trial.data = read_trial_csv(csv, campaign.zone_map, csv.string());
+        trial.info = std::move(info);
+        campaign.trials.push_back(std::move(trial));
+    }
+    return campaign;
+}
+
+}  // namespace manikind::analysis

@@ -1,0 +1,70 @@
+#include "analysis/uncertainty.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include <boost/math/distributions/normal.hpp>
+#include <boost/math/distributions/students_t.hpp>
+
+namespace manikind::analysis {
+
+double mean(const std::vector<double>& values) {
+    if (values.empty()) return std::numeric_limits<double>::quiet_NaN();
+    double sum = 0.0;
+    for (double v : values) sum += v;
+    return sum / static_cast<double>(values.size());
+}
+
+double sample_sd(const std::vector<double>& values) {
+    if (values.size() < 2) return 0.0;
+    const double m = mean(values);
+    double ss = 0.0;
+    for (double v : values) ss += (v - m) * (v - m);
+    return std::sqrt(ss / static_cast<double>(values.size() - 1));
+}
+
+double type_a_of_mean(const std::vector<double>& values) {
+    if (values.size() < 2) return 0.0;
+    return sample_sd(values) / std::sqrt(static_cast<double>(values.size()));
+}
+
+double welch_satterthwaite(const std::vector<Component>& components) {
+    double u_c2 = 0.0;
+    double denominator = 0.0;
+    for (const auto& c : components) {
+        u_c2 += c.u * c.u;
+        if (std::isfinite(c.dof) && c.u > 0.0) {
+            if (!(c.dof > 0.0)) throw std::invalid_argument("welch_satterthwaite: degrees of freedom must be positive");
+            denominator += std::pow(c.u, 4) / c.dof;
+        }
+    }
+    if (denominator <= 0.0) return kInfiniteDof;
+    return u_c2 * u_c2 / denominator;
+}
+
+double coverage_factor(double nu_eff, double confidence) {
+    if (!(confidence > 0.0 && confidence < 1.0)) throw std::invalid_argument("coverage_factor: confidence must be in (0, 1)");
+    const double tail = (1.0 - confidence) / 2.0;
+    // Beyond ~1e6 dof Student's t equals the normal distribution to many digits.
+    if (!std::isfinite(nu_eff) || nu_eff > 1e6) {
+        return boost::math::quantile(boost::math::complement(boost::math::normal_distribution<double>(), tail));
+    }
+    if (!(nu_eff > 0.0)) throw std::invalid_argument("coverage_factor: degrees of freedom must be positive");
+    return boost::math::quantile(boost::math::complement(boost::math::students_t_distribution<double>(nu_eff), tail));
+}
+
+Estimate combine(double value, double u_a, int n_replicates, double u_b, double confidence) {
+    Estimate e;
+    e.value = value;
+    e.n = n_replicates;
+    e.u_a = u_a;
+    e.u_b = u_b;
+    e.u_c = std::sqrt(u_a * u_a + u_b * u_b);  // Eq. S7
+    const double type_a_dof = n_replicates >= 2 ? static_cast<double>(n_replicates - 1) : kInfiniteDof;
+    e.nu_eff = welch_satterthwaite({{u_a, type_a_dof}, {u_b, kInfiniteDof}});
+    e.k = coverage_factor(e.nu_eff, confidence);
+    e.U = e.k * e.u_c;  // Eq. S7
+    return e;
+}
+
+}  // namespace manikind::analysis

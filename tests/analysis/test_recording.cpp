@@ -1,0 +1,280 @@
+// manikin-recording/1: round trip, the embedded zone map, and bad input that names file,
+// line, column and field (hand-made campaigns in tests/data/recordings).
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <string>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+
+#include "analysis/input_error.hpp"
+#include "analysis/recording.hpp"
+#include "analysis/synthetic.hpp"
+
+namespace an = manikind::analysis;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string recordings(const std::string& name) { return std::string(MANIKIND_TEST_DATA_DIR) + "/recordings/" + name; }
+
+// A fresh folder under the system temp dir, removed when the test ends.
+struct TempDir {
+    fs::path path;
+    TempDir() {
+        static std::atomic<int> counter{0};
+        path = fs::temp_directory_path() / ("manikind-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        fs::remove_all(path);
+    }
+    ~TempDir() { fs::remove_all(path); }
+};
+
+// Same doubles, NaN where NaN.
+bool same(const std::vector<double>& a, const std::vector<double>& b) {
+    if (a.size() != b.size()) return false;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+        if (std::isnan(a[i]) != std::isnan(b[i])) return false;
+        if (!std::isnan(a[i]) && a[i] != b[i]) return false;
+    }
+    return true;
+}
+
+std::string error_of(const std::string& folder) {
+    try {
+        (void)an::read_campaign(recordings(folder));
+    } catch (const an::InputError& e) {
+        return e.what();
+    }
+    return "no error";
+}
+
+}  // namespace
+
+TEST_CASE("embedded andi35 map equals config/andi35_zone_map.csv") {
+    std::ifstream in(std::string(MANIKIND_CONFIG_DIR) + "/andi35_zone_map.csv");
+    REQUIRE(in);
+    const auto file = an::parse_zone_map_csv(in, "andi35_zone_map.csv");
+    const auto& built_in = an::andi35_zone_map();
+    REQUIRE(file.size() == built_in.size());
+    CHECK(built_in.size() == 35);
+    for (std::size_t i = 0; i < file.size(); ++i) {
+        const auto& a = file.zones[i];
+        const auto& b = built_in.zones[i];
+        CHECK(a.zone == b.zone);
+        CHECK(a.name == b.name);
+        CHECK(a.region == b.region);
+        CHECK(a.segment == b.segment);
+        CHECK(a.side == b.side);
+        CHECK(a.area_m2 == b.area_m2);
+        CHECK(a.centroid_height_m == b.centroid_height_m);
+    }
+}
+
+TEST_CASE("andi35 regions: head to feet, left and right apart") {
+    const auto regions = an::andi35_zone_map().regions();
+    const std::vector<std::string> expected{"head",    "chest",     "back",   "pelvis",  "upper_arm_l", "upper_arm_r",
+                                            "forearm_l", "forearm_r", "hand_l", "hand_r", "thigh_l",     "thigh_r",
+                                            "calf_l",  "calf_r",    "foot_l", "foot_r"};
+    CHECK(regions == expected);
+    std::size_t zones = 0;
+    for (const auto& r : regions) zones += an::andi35_zone_map().zones_in(r).size();
+    CHECK(zones == 35);
+}
+
+TEST_CASE("round trip: write a campaign, read it back, identical numbers") {
+    auto campaign = an::make_synthetic_campaign(2, 3);
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    campaign.trials[1].data.heat_flux_w_m2[4][10] = nan;  // an empty cell
+    campaign.trials[2].data.air_temp_c[3] = nan;
+    campaign.trials[0].data.skin_temp_c[0][0] = 1.0 / 3.0;  // needs all 17 digits
+    campaign.trials[0].info.chamber_setpoint_temp_c = 40.0;
+    campaign.trials[0].info.chamber_setpoint_rh_pct = 19.0;
+    campaign.trials[0].info.started_utc = "2026-06-02T14:05:00Z";
+    campaign.instruments["heat_flux_w_m2"] = {0.7, 0.02, an::Distribution::normal_k2};
+    TempDir dir;
+    an::write_campaign(dir.path, campaign);
+    const auto back = an::read_campaign(dir.path);
+
+    CHECK(back.name == campaign.name);
+    CHECK(back.zone_map.name == "andi35");
+    REQUIRE(back.trials.size() == campaign.trials.size());
+    for (std::size_t t = 0; t < back.trials.size(); ++t) {
+        const auto& a = campaign.trials[t];
+        const auto& b = back.trials[t];
+        CHECK(a.info.id == b.info.id);
+        CHECK(a.info.case_id == b.info.case_id);
+        CHECK(a.info.replicate == b.info.replicate);
+        CHECK(a.info.wettedness == b.info.wettedness);
+        CHECK(a.info.skin_setpoint_c == b.info.skin_setpoint_c);
+        CHECK(a.info.chamber_setpoint_temp_c == b.info.chamber_setpoint_temp_c);
+        CHECK(a.info.started_utc == b.info.started_utc);
+        CHECK(same(a.data.t_s, b.data.t_s));
+        CHECK(same(a.data.air_temp_c, b.data.air_temp_c));
+        CHECK(same(a.data.air_rh_pct, b.data.air_rh_pct));
+        CHECK(same(a.data.air_speed_m_s, b.data.air_speed_m_s));
+        CHECK(same(a.data.wall_temp_c, b.data.wall_temp_c));
+        for (std::size_t z = 0; z < 35; ++z) {
+            CHECK(same(a.data.skin_temp_c[z], b.data.skin_temp_c[z]));
+            CHECK(same(a.data.heat_flux_w_m2[z], b.data.heat_flux_w_m2[z]));
+        }
+    }
+    const auto& spec = back.instruments.at("heat_flux_w_m2");
+    CHECK(spec.accuracy == 0.7);
+    CHECK(spec.accuracy_of_reading == 0.02);
+    CHECK(spec.distribution == an::Distribution::normal_k2);
+}
+
+TEST_CASE("round trip of an inline zone map") {
+    const auto original = an::read_campaign(recordings("good-2zone"));
+    CHECK(original.zone_map_inline);
+    TempDir dir;
+    an::write_campaign(dir.path, original);
+    const auto back = an::read_campaign(dir.path);
+    REQUIRE(back.zone_map.size() == 2);
+    CHECK(back.zone_map.zones[1].name == "back");
+    CHECK(back.zone_map.zones[1].area_m2 == 0.3);
+    CHECK(same(back.trials[2].data.heat_flux_w_m2[1], original.trials[2].data.heat_flux_w_m2[1]));
+}
+
+TEST_CASE("missing instruments fall back to Tables S1-S2 and the configured defaults") {
+    const auto c = an::read_campaign(recordings("good-2zone"));
+    CHECK(c.instruments.at("air_temp_c").accuracy == 0.2);        // EE181
+    CHECK(c.instruments.at("air_rh_pct").accuracy_of_reading == 0.01);
+    CHECK(c.instruments.at("wall_temp_c").accuracy == 0.5);       // Type-T
+}
+
+TEST_CASE("bad input: a non-numeric cell names file, line, column and field") {
+    const auto e = error_of("bad-non-numeric");
+    CHECK(e.find("c09-r3.csv:4:29 (field 'z02_flux_w_m2'): expected a number, found 'abc'") != std::string::npos);
+}
+
+TEST_CASE("bad input: wrong column count") {
+    const auto e = error_of("bad-column-count");
+    CHECK(e.find("c09-r3.csv:5:28") != std::string::npos);
+    CHECK(e.find("too few fields: found 6, the header has 7 columns") != std::string::npos);
+}
+
+TEST_CASE("bad input: time going backwards") {
+    const auto e = error_of("bad-time-backwards");
+    CHECK(e.find("c09-r3.csv:6:1 (field 't_s'): time goes backwards") != std::string::npos);
+}
+
+TEST_CASE("bad input: unknown zone column") {
+    const auto e = error_of("bad-unknown-zone");
+    CHECK(e.find("c09-r3.csv:1:77 (field 'z03_flux_w_m2'): unknown zone column") != std::string::npos);
+}
+
+TEST_CASE("bad input: duplicated trial id points at the second one") {
+    const auto e = error_of("bad-duplicate-id");
+    CHECK(e.find("campaign.json:") != std::string::npos);
+    CHECK(e.find("duplicated trial id 'c09-r1'") != std::string::npos);
+    // The second "c09-r1" in the file is the duplicate; find its line by hand.
+    std::ifstream in(recordings("bad-duplicate-id") + "/campaign.json");
+    std::string line;
+    int line_no = 0, hits = 0, dup_line = 0;
+    while (std::getline(in, line)) {
+        ++line_no;
+        if (line.find("\"c09-r1\"") != std::string::npos && ++hits == 2) dup_line = line_no;
+    }
+    REQUIRE(dup_line > 0);
+    CHECK(e.find("campaign.json:" + std::to_string(dup_line) + ":") != std::string::npos);
+}
+
+TEST_CASE("bad input: a missing trial file") {
+    const auto e = error_of("bad-missing-file");
+    CHECK(e.find("c09-r3.csv: cannot open the trial file") != std::string::npos);
+}
+
+TEST_CASE("bad input: a missing campaign folder, bad JSON, wrong format") {
+    CHECK(error_of("no-such-campaign").find("no such campaign folder") != std::string::npos);
+    TempDir dir;
+    fs::create_directories(dir.path);
+    {
+        std::ofstream(dir.path / "campaign.json") << "{\n  \"format\": \"manikin-recording/1\",\n  \"trials\": [,]\n}\n";
+    }
+    try {
+        (void)an::read_campaign(dir.path);
+        FAIL("no error");
+    } catch (const an::InputError& e) {
+        CHECK(e.line() == 3);
+        CHECK(std::string(e.what()).find("invalid JSON") != std::string::npos);
+    }
+    {
+        std::ofstream(dir.path / "campaign.json") << "{\"format\": \"manikin-recording/2\", \"trials\": []}";
+    }
+    CHECK_THROWS_WITH(an::read_campaign(dir.path), Catch::Contains("unsupported format 'manikin-recording/2'"));
+}
+
+TEST_CASE("bad input anywhere means nothing is imported, and good input still reads") {
+    // The first two trials of every bad-* campaign are the good ones from good-2zone:
+    // read_campaign must throw rather than return them.
+    for (const char* folder : {"bad-non-numeric", "bad-column-count", "bad-time-backwards", "bad-unknown-zone",
+                               "bad-duplicate-id", "bad-missing-file"}) {
+        INFO(folder);
+        CHECK_THROWS_AS(an::read_campaign(recordings(folder)), an::InputError);
+    }
+    const auto good = an::read_campaign(recordings("good-2zone"));
+    CHECK(good.trials.size() == 3);
+    CHECK(good.trials[0].data.rows() == 7);
+}
+
+TEST_CASE("unknown keys in campaign.json are warnings, not errors") {
+    TempDir dir;
+    auto c = an::read_campaign(recordings("good-2zone"));
+    an::write_campaign(dir.path, c);
+    std::ifstream in(dir.path / "campaign.json");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    text.replace(text.find("\"instruments\""), 13, "\"operator\": \"ana\",\n  \"instruments\"");
+    std::ofstream(dir.path / "campaign.json") << text;
+    const auto back = an::read_campaign(dir.path);
+    REQUIRE(back.warnings.size() == 1);
+    CHECK(back.warnings[0].find("unknown key 'operator'") != std::string::npos);
+}
+
+TEST_CASE("CSV cells: empty and nan are missing samples, inf is an error, CRLF is fine") {
+    TempDir dir;
+    fs::create_directories(dir.path);
+    const auto map = an::read_campaign(recordings("good-2zone")).zone_map;
+    const std::string header = "t_s,air_temp_c,air_rh_pct,z01_skin_c,z02_skin_c,z01_flux_w_m2,z02_flux_w_m2\r\n";
+    std::ofstream(dir.path / "ok.csv") << header << "0,39.6,,35,35,nan,2\r\n5,+39.6,38,35,35,1,2\r\n";
+    const auto d = an::read_trial_csv(dir.path / "ok.csv", map, "ok.csv");
+    REQUIRE(d.rows() == 2);
+    CHECK(std::isnan(d.air_rh_pct[0]));
+    CHECK(std::isnan(d.heat_flux_w_m2[0][0]));
+    CHECK(d.air_temp_c[1] == 39.6);
+    CHECK(d.heat_flux_w_m2[1][1] == 2.0);
+    std::ofstream(dir.path / "inf.csv") << header << "0,39.6,38,35,35,inf,2\n";
+    CHECK_THROWS_WITH(an::read_trial_csv(dir.path / "inf.csv", map, "inf.csv"),
+                      Catch::Contains("inf.csv:2:17 (field 'z01_flux_w_m2')"));
+    std::ofstream(dir.path / "notime.csv") << header << ",39.6,38,35,35,1,2\n";
+    CHECK_THROWS_WITH(an::read_trial_csv(dir.path / "notime.csv", map, "notime.csv"),
+                      Catch::Contains("notime.csv:2:1 (field 't_s'): the time cell is empty"));
+    std::ofstream(dir.path / "missing.csv") << "t_s,air_temp_c,air_rh_pct,z01_skin_c,z02_skin_c,z01_flux_w_m2\n";
+    CHECK_THROWS_WITH(an::read_trial_csv(dir.path / "missing.csv", map, "missing.csv"),
+                      Catch::Contains("(field 'z02_flux_w_m2'): required column is missing"));
+}
+
+TEST_CASE("a long trial streams through chunk boundaries intact") {
+    // 75 min at 5 s x 35 zones is ~0.6 MB: several 256 kB chunks, so lines straddle them.
+    an::SyntheticTrialOptions o;
+    const auto& map = an::andi35_zone_map();
+    an::Campaign c;
+    c.name = "one";
+    c.zone_map = map;
+    c.instruments = an::default_instrument_specs();
+    an::Trial t;
+    t.info.id = "t1";
+    t.info.case_id = 1;
+    t.info.replicate = 1;
+    t.data = an::make_synthetic_trial(map, o);
+    c.trials.push_back(t);
+    TempDir dir;
+    an::write_campaign(dir.path, c);
+    REQUIRE(fs::file_size(dir.path / "trials/t1.csv") > 3 * (1u << 18));
+    const auto back = an::read_campaign(dir.path);
+    CHECK(back.trials[0].data.rows() == 901);
+    CHECK(same(back.trials[0].data.heat_flux_w_m2[34], t.data.heat_flux_w_m2[34]));
+}
