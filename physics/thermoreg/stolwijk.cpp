@@ -1,0 +1,289 @@
+#include "physics/thermoreg/stolwijk.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+
+#include "physics/range_check.hpp"
+
+namespace manikind::physics::thermoreg {
+namespace {
+
+using Segments = std::array<double, segment_count>;
+using Nodes = std::array<double, node_count>;
+
+// ---- The code's tables (node order: per segment core, muscle, fat, skin; then central blood) ----
+constexpr Nodes heat_capacity_j_k = {9288.48, 1380.72, 920.48,  1004.16, 41086.88, 67571.6, 17782.0, 5062.64, 5899.44,
+                                     12719.36, 2426.72, 1799.12, 585.76,  251.04,   376.56,  711.28,  17740.16, 38367.28,
+                                     5983.12, 4518.72, 962.32,  251.04,  543.92,   920.48,  9414.00};
+constexpr Nodes basal_metabolism_w = {14.93, 0.12, 0.13, 0.09, 52.78, 5.82, 2.48, 0.47, 0.81, 1.10, 0.20, 0.15, 0.09,
+                                      0.23,  0.03, 0.06, 2.59,  3.33, 0.50, 0.37, 0.15, 0.02, 0.05, 0.08, 0.00};
+constexpr Nodes basal_blood_flow_l_h = {45.00, 0.12, 0.13, 1.44, 210.00, 6.00, 2.56, 2.10, 0.84, 1.14, 0.20, 0.50, 0.10,
+                                        0.24,  0.04, 2.00, 2.69,  3.43, 0.52, 2.85, 0.16, 0.02, 0.05, 3.00, 0.00};
+constexpr Nodes conductance_w_k = {1.605,  13.258, 16.049, 0.0, 1.593,  5.524,  23.027, 0.0, 1.396,
+                                   10.351, 30.471, 0.0,    6.397, 11.223, 11.514, 0.0,    10.467, 14.421,
+                                   74.432, 0.0,    16.282, 20.585, 16.398, 0.0,   0.0};
+// JOS-3 set points, kelvin (the code keeps node temperatures in kelvin).
+constexpr Nodes set_point_k = {310.61, 308.69, 308.58, 308.35, 310.18, 309.57, 308.87, 307.93, 309.29,
+                               307.86, 307.69, 307.34, 308.20, 308.17, 307.67, 307.59, 309.81, 309.29,
+                               308.46, 307.25, 307.89, 307.78, 307.46, 307.39, 310.49};
+
+constexpr Segments area_m2 = {0.133, 0.680, 0.254, 0.095, 0.597, 0.130};
+constexpr Segments df_work = {0.000, 0.300, 0.080, 0.010, 0.600, 0.010};
+constexpr Segments df_receptors = {0.0695, 0.4935, 0.0686, 0.1845, 0.1505, 0.0334};
+constexpr Segments df_vasodilation = {0.1320, 0.3220, 0.0950, 0.1210, 0.2300, 0.1000};
+constexpr Segments df_vasoconstriction = {0.0500, 0.1500, 0.0500, 0.3500, 0.0500, 0.3500};
+constexpr Segments df_sweat = {0.0810, 0.4810, 0.1540, 0.0310, 0.2180, 0.0350};
+constexpr Segments df_shiver = {0.0200, 0.8500, 0.0500, 0.0000, 0.0700, 0.0000};
+// Clothing: 0.26 clo concentrated on trunk, legs and feet (the code's Rc_cl, Re_cl).
+constexpr Segments clothing_r_m2k_w = {0.0, 0.054, 0.0, 0.0, 0.054, 0.054};
+constexpr Segments clothing_re_m2pa_w = {0.0, 9.4, 0.0, 0.0, 9.4, 9.4};
+// Heat transfer coefficients: forced (de Dear, a v^b), radiation, Table 2 free convection.
+constexpr Segments forced_a = {3.20, 8.1, 11.09, 14.40, 11.10, 12.00};
+constexpr Segments forced_b = {0.97, 0.62, 0.59, 0.55, 0.51, 0.49};
+constexpr Segments radiation_w_m2k = {4.89, 4.26, 4.49, 4.21, 5.08, 6.14};
+constexpr Segments coupled_h0 = {0.567, 0.29, 0.937, 0.5, 0.575, 1.151};
+constexpr Segments coupled_b_pos = {1.036, 0.996, 1.278, 2.4, 1.233, 1.673};  // the code's hc_e
+constexpr Segments coupled_b_neg = {1.4, 1.03, 1.164, 2.4, 0.623, 0.831};     // the code's hc_g
+constexpr Segments wissler_a = {2.6, 1.5, 1.9, 2.7, 2.15, 1.57};
+constexpr Segments stolwijk_h = {0.660, 1.860, 3.950, 6.050, 3.610, 5.930};
+constexpr Segments jos_h = {4.480, 2.910, 3.590, 3.670, 2.530, 2.040};
+
+constexpr double lewis_k_per_pa = 16.5 / 1000.0;  // Eq. S5, per Pa
+constexpr double basal_total_w = 86.45;
+constexpr double blood_heat_w_h_per_l_k = 1.163;  // W per (l/h) per K
+constexpr int core_trunk = 4;                     // node 5 in the code
+constexpr int central_blood = 24;
+
+int skin(int segment) { return 4 * segment + 3; }
+
+double psat_pa(double t_k) { return std::exp(77.3450 + 0.0057 * t_k - 7235.0 / t_k) / std::pow(t_k, 8.2); }
+
+}  // namespace
+
+const std::array<const char*, segment_count>& segment_names() {
+    static const std::array<const char*, segment_count> names = {"head", "trunk", "arms", "hands", "legs", "feet"};
+    return names;
+}
+
+const char* to_string(ConvectionModel m) {
+    switch (m) {
+        case ConvectionModel::coupled: return "coupled";
+        case ConvectionModel::dt_only: return "dt-only";
+        case ConvectionModel::constant_stolwijk: return "constant-stolwijk";
+        case ConvectionModel::constant_jos: return "constant-jos";
+    }
+    return "?";
+}
+
+double AirSpeedSchedule::at(double t_s) const {
+    if (square_wave_period_s <= 0.0) return speed_m_s;
+    const double phase = std::fmod(t_s, square_wave_period_s);
+    return phase < 0.5 * square_wave_period_s ? speed_m_s : 0.0;
+}
+
+void validate(const Exposure& e) {
+    require_in_range("relative humidity", e.rh_pct, 0.0, 100.0, "%");
+    require_in_range("air temperature", e.air_temp_c, -40.0, 70.0, "degC");
+    require_in_range("mean radiant temperature", e.mrt_c, -40.0, 150.0, "degC");
+    require_in_range("metabolic rate", e.met, 0.7, 10.0, "met");
+    require_in_range("air speed", e.air_speed.speed_m_s, 0.0, 20.0, "m/s");
+    require_in_range("square-wave period", e.air_speed.square_wave_period_s, 0.0, 86400.0, "s");
+    require_in_range("duration", e.duration_s, 1.0, 7.0 * 86400.0, "s");
+    // The fastest nodes (skin at full blood flow, 90 l/h) have time constants near 6 s; the
+    // explicit scheme needs a step below that to stay stable.
+    require_in_range("time step", e.time_step_s, 1e-3, 5.0, "s");
+    require_in_range("output interval", e.output_interval_s, e.time_step_s, e.duration_s, "s");
+    const double ratio = e.output_interval_s / e.time_step_s;
+    if (std::abs(ratio - std::round(ratio)) > 1e-9)
+        throw std::domain_error("output interval must be a whole number of time steps");
+}
+
+SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
+    validate(e);
+    const bool seed = opt.seed_compatible;
+    const double air_k = e.air_temp_c + 273.15;
+    const double mrt_k = e.mrt_c + 273.15;
+    const double rh = e.rh_pct / 100.0;
+    // Vapour concentration C = p M_w / (R T). The code uses M_w = 18 g/mol and adds 273.15 to a
+    // temperature already in kelvin, which roughly halves C (docs/thermoregulation.md, D1).
+    auto concentration = [seed](double p_pa, double t_k) {
+        return seed ? p_pa * 18e-3 / ((t_k + 273.15) * 8.314) : p_pa * 18.02e-3 / (t_k * 8.314);
+    };
+    const double p_air_pa = rh * psat_pa(air_k);
+    const double c_air = concentration(psat_pa(air_k), air_k) * rh;
+    const double area_total_m2 = std::accumulate(area_m2.begin(), area_m2.end(), 0.0);
+    const double q_total_w = e.met * 58.15 * area_total_m2;
+    const double q_work_w = std::max(q_total_w - basal_total_w, 0.0) * 0.78;
+
+    Nodes t_k = set_point_k;
+    const auto steps = static_cast<long>(std::llround(e.duration_s / e.time_step_s)) + 1;
+    const auto output_every = static_cast<long>(std::llround(e.output_interval_s / e.time_step_s));
+    SimulationResult result;
+
+    for (long step = 0; step < steps; ++step) {
+        const double time_s = static_cast<double>(step) * e.time_step_s;
+        const double v_m_s = e.air_speed.at(time_s);
+        Segments t_skin_k{}, h_conv{}, h_total{}, t_operative_k{}, f_cl{};
+        for (int i = 0; i < segment_count; ++i) t_skin_k[i] = t_k[skin(i)];
+
+        // ---- Convection: free law, mixed with forced by Eq. 9 (n = 3) ----
+        Segments c_skin{};
+        for (int i = 0; i < segment_count; ++i) c_skin[i] = concentration(psat_pa(t_skin_k[i]), t_skin_k[i]);
+        double mean_drive_c = 0.0;  // mean over segments of dT + 146 dC (the flow direction)
+        for (int j = 0; j < segment_count; ++j)
+            mean_drive_c += ((t_skin_k[j] - air_k) + 146.0 * (c_skin[j] - c_air)) / segment_count;
+        double reported_drive_c = mean_drive_c;
+        for (int i = 0; i < segment_count; ++i) {
+            double h_free = 0.0;
+            switch (opt.convection) {
+                case ConvectionModel::coupled: {
+                    double direction_c = mean_drive_c;
+                    if (seed) {
+                        // The code's mean mixes loop indices: segment j's p_sat takes segment i's
+                        // temperature in two of its three terms (docs/thermoregulation.md, D2).
+                        direction_c = 0.0;
+                        for (int j = 0; j < segment_count; ++j) {
+                            const double p = std::exp(77.3450 + 0.0057 * t_skin_k[j] - 7235.0 / t_skin_k[i]) /
+                                             std::pow(t_skin_k[i], 8.2);
+                            direction_c += ((t_skin_k[j] - air_k) + 146.0 * (concentration(p, t_skin_k[j]) - c_air)) / 6.0;
+                        }
+                        reported_drive_c = direction_c;  // the code plots the value left by the last segment
+                    }
+                    const double drive_c = (t_skin_k[i] - air_k) + 146.0 * (c_skin[i] - c_air);
+                    h_free = coupled_h0[i] + (direction_c > 0.0 ? coupled_b_pos[i] : coupled_b_neg[i]) *
+                                                 std::pow(std::abs(drive_c), 0.25);
+                    break;
+                }
+                case ConvectionModel::dt_only:
+                    h_free = wissler_a[i] * std::pow(std::abs(t_skin_k[i] - air_k), 0.25);
+                    break;
+                case ConvectionModel::constant_stolwijk: h_free = stolwijk_h[i]; break;
+                case ConvectionModel::constant_jos: h_free = jos_h[i]; break;
+            }
+            const double h_forced = forced_a[i] * std::pow(v_m_s, forced_b[i]);
+            h_conv[i] = std::cbrt(h_free * h_free * h_free + h_forced * h_forced * h_forced);
+            f_cl[i] = 1.0 + 1.81 * clothing_r_m2k_w[i];
+            h_total[i] = 1.0 / (clothing_r_m2k_w[i] + 1.0 / (f_cl[i] * (h_conv[i] + radiation_w_m2k[i])));
+            t_operative_k[i] = (h_conv[i] * air_k + radiation_w_m2k[i] * mrt_k) / (h_conv[i] + radiation_w_m2k[i]);
+        }
+
+        // ---- Control: error signals, skin receptors, vasomotion, shivering, sweating (JOS-3) ----
+        Nodes err{};
+        for (int j = 0; j < node_count; ++j) err[j] = t_k[j] - set_point_k[j];
+        double warm_skin = 0.0, cold_skin = 0.0;
+        for (int i = 0; i < segment_count; ++i) {
+            warm_skin += std::max(err[skin(i)], 0.0) * df_receptors[i];
+            cold_skin += std::max(-err[skin(i)], 0.0) * df_receptors[i];
+        }
+        const double vasodilation = std::max(100.5 * err[0] + 6.4 * (warm_skin - cold_skin), 0.0);
+        const double vasoconstriction = std::max(-10.8 * err[0] - 10.8 * (warm_skin - cold_skin), 0.0);
+        // The code's shivering goes negative when the head core is warm and the skin cold (D3).
+        double shivering_w = 24.36 * -err[0] * cold_skin;
+        if (!seed) shivering_w = std::max(shivering_w, 0.0);
+        const double sweat_signal_w = std::max(371.2 * err[0] + 33.64 * (warm_skin - cold_skin), 0.0);
+
+        Segments skin_blood_l_h{}, q_sweat_w{}, wettedness{};
+        for (int i = 0; i < segment_count; ++i) {
+            const int k = skin(i);
+            skin_blood_l_h[i] = std::min((basal_blood_flow_l_h[k] + df_vasodilation[i] * vasodilation) /
+                                             (1.0 + df_vasoconstriction[i] * vasoconstriction) * std::pow(2.0, err[k] / 6.0),
+                                         90.0);
+            const double h_evap = 1.0 / (clothing_re_m2pa_w[i] + 1.0 / (f_cl[i] * h_conv[i] * lewis_k_per_pa));
+            const double dp_pa = psat_pa(t_skin_k[i]) - p_air_pa;
+            const double q_max = h_evap * dp_pa * area_m2[i];
+            double q = std::min(df_sweat[i] * sweat_signal_w * std::pow(2.0, err[k] / 10.0), q_max);
+            wettedness[i] = q_max != 0.0 ? 0.06 + 0.94 * q / q_max : 0.06;
+            if (!seed) wettedness[i] = std::clamp(wettedness[i], 0.06, 1.0);
+            q_sweat_w[i] = wettedness[i] * h_evap * dp_pa * area_m2[i];
+        }
+
+        // ---- Heat generation, conduction and blood flow per node ----
+        Nodes q_w{}, blood_l_h{}, q_cond_w{};
+        for (int i = 0; i < segment_count; ++i) {
+            const int k = 4 * i;
+            q_w[k] = basal_metabolism_w[k];
+            blood_l_h[k] = basal_blood_flow_l_h[k];
+            q_w[k + 1] = basal_metabolism_w[k + 1] + df_shiver[i] * shivering_w + q_work_w * df_work[i];
+            blood_l_h[k + 1] = basal_blood_flow_l_h[k + 1] + (q_w[k + 1] - basal_metabolism_w[k + 1]) / blood_heat_w_h_per_l_k;
+            q_w[k + 2] = basal_metabolism_w[k + 2];
+            blood_l_h[k + 2] = basal_blood_flow_l_h[k + 2];
+            q_w[k + 3] = basal_metabolism_w[k + 3];
+            blood_l_h[k + 3] = basal_blood_flow_l_h[k + 3] + skin_blood_l_h[i];
+            for (int n = 0; n < 3; ++n) q_cond_w[k + n] = conductance_w_k[k + n] * (t_k[k + n] - t_k[k + n + 1]);
+        }
+        const double production_w = std::accumulate(q_w.begin(), q_w.end(), 0.0);
+        Nodes q_blood_w{};
+        for (int j = 0; j < central_blood; ++j)
+            q_blood_w[j] = blood_heat_w_h_per_l_k * blood_l_h[j] * (t_k[j] - t_k[central_blood]);
+
+        double sensible_w = 0.0, evaporation_loss_w = 0.0, conv_loss_w = 0.0, rad_loss_w = 0.0;
+        for (int i = 0; i < segment_count; ++i) {
+            const int k = 4 * i;
+            const double sensible = h_total[i] * (t_skin_k[i] - t_operative_k[i]) * area_m2[i];
+            q_w[k] -= q_blood_w[k] + q_cond_w[k];
+            q_w[k + 1] += -q_blood_w[k + 1] + q_cond_w[k] - q_cond_w[k + 1];
+            q_w[k + 2] += -q_blood_w[k + 2] + q_cond_w[k + 1] - q_cond_w[k + 2];
+            q_w[k + 3] += -q_blood_w[k + 3] + q_cond_w[k + 2] - q_sweat_w[i] - sensible;
+            sensible_w += sensible;
+            evaporation_loss_w += q_sweat_w[i];
+            if (seed) {
+                // The code splits convection and radiation at the skin temperature, ignoring the
+                // clothing, so the two do not add up to the sensible loss on clothed segments (D4).
+                conv_loss_w += h_conv[i] * (t_skin_k[i] - air_k) * area_m2[i];
+                rad_loss_w += radiation_w_m2k[i] * (t_skin_k[i] - mrt_k) * area_m2[i];
+            } else {
+                // Split at the clothing surface, whose temperature the sensible flux fixes.
+                const double t_surface_k = t_operative_k[i] + sensible / (area_m2[i] * f_cl[i] * (h_conv[i] + radiation_w_m2k[i]));
+                conv_loss_w += f_cl[i] * h_conv[i] * (t_surface_k - air_k) * area_m2[i];
+                rad_loss_w += f_cl[i] * radiation_w_m2k[i] * (t_surface_k - mrt_k) * area_m2[i];
+            }
+        }
+        const double respiration_w = (0.0014 * ((34.0 + 273.15) - air_k) + 0.0173 * (5.87 - p_air_pa / 1000.0)) * q_total_w;
+        q_w[core_trunk] -= respiration_w;
+        q_w[central_blood] = std::accumulate(q_blood_w.begin(), q_blood_w.begin() + central_blood, 0.0);
+
+        // ---- Explicit step ----
+        Nodes t_new_k{};
+        double storage_true_w = 0.0;
+        for (int j = 0; j < node_count; ++j) {
+            t_new_k[j] = t_k[j] + q_w[j] / heat_capacity_j_k[j] * e.time_step_s;
+            if (!std::isfinite(t_new_k[j]) || std::abs(t_new_k[j] - t_k[j]) > 2.0)
+                throw std::domain_error("the explicit scheme went unstable (a node moved more than 2 K in one step): "
+                                        "use a shorter time step");
+            storage_true_w += heat_capacity_j_k[j] * (t_new_k[j] - t_k[j]) / e.time_step_s;
+        }
+        const double losses_w = sensible_w + evaporation_loss_w + respiration_w;
+        const double residual_w = storage_true_w - (production_w - losses_w);
+        result.max_abs_energy_residual_w = std::max(result.max_abs_energy_residual_w, std::abs(residual_w));
+
+        if (step % output_every == 0 || step == steps - 1) {
+            OutputSample s;
+            s.t_s = time_s;
+            s.core_temp_c = t_new_k[core_trunk] - 273.15;
+            for (int i = 0; i < segment_count; ++i) {
+                s.mean_skin_temp_c += t_new_k[skin(i)] * area_m2[i] / area_total_m2;
+                s.mean_skin_wettedness += wettedness[i] * area_m2[i] / area_total_m2;
+            }
+            s.mean_skin_temp_c -= 273.15;
+            s.convection_w = -conv_loss_w;
+            s.radiation_w = -rad_loss_w;
+            s.evaporation_w = -evaporation_loss_w;
+            s.respiration_w = -respiration_w;
+            // The code plots met x area x 58 as "heat generation" and computes storage with
+            // Q_total - 0.22 Q_work as production (D5); the default reports what the nodes get.
+            s.metabolic_w = seed ? e.met * area_total_m2 * 58.0 : production_w;
+            s.storage_w = seed ? q_total_w - 0.22 * q_work_w - evaporation_loss_w - sensible_w - respiration_w : storage_true_w;
+            s.mean_buoyancy_drive_c = reported_drive_c;
+            s.energy_residual_w = residual_w;
+            if (step % output_every == 0) result.series.push_back(s);
+            result.final = s;
+        }
+        t_k = t_new_k;
+    }
+    for (int j = 0; j < node_count; ++j) result.final_node_temps_c[j] = t_k[j] - 273.15;
+    return result;
+}
+
+}  // namespace manikind::physics::thermoreg
