@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
     manikind::cli::add_simulate_command(app);
     manikind::cli::add_reconcile_command(app);
     manikind::cli::add_demo_command(app);
+    manikind::cli::add_thermoreg_command(app);
 
     try {
         app.parse(argc, argv);
