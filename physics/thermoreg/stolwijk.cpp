@@ -58,7 +58,10 @@ constexpr int central_blood = 24;
 
 int skin(int segment) { return 4 * segment + 3; }
 
-double psat_pa(double t_k) { return std::exp(77.3450 + 0.0057 * t_k - 7235.0 / t_k) / std::pow(t_k, 8.2); }
+// The seed formula exp(77.3450 + 0.0057 T - 7235/T) / T^8.2 with the power folded into the
+// exponent: one exp and one log per call (this runs ~10^5 times per simulated hour).
+double psat_pa(double t_k) { return std::exp(77.3450 + 0.0057 * t_k - 7235.0 / t_k - 8.2 * std::log(t_k)); }
+double quarter_power(double x) { return std::sqrt(std::sqrt(std::abs(x))); }
 
 }  // namespace
 
@@ -129,8 +132,11 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
         for (int i = 0; i < segment_count; ++i) t_skin_k[i] = t_k[skin(i)];
 
         // ---- Convection: free law, mixed with forced by Eq. 9 (n = 3) ----
-        Segments c_skin{};
-        for (int i = 0; i < segment_count; ++i) c_skin[i] = concentration(psat_pa(t_skin_k[i]), t_skin_k[i]);
+        Segments c_skin{}, p_skin_pa{};
+        for (int i = 0; i < segment_count; ++i) {
+            p_skin_pa[i] = psat_pa(t_skin_k[i]);
+            c_skin[i] = concentration(p_skin_pa[i], t_skin_k[i]);
+        }
         double mean_drive_c = 0.0;  // mean over segments of dT + 146 dC (the flow direction)
         for (int j = 0; j < segment_count; ++j)
             mean_drive_c += ((t_skin_k[j] - air_k) + 146.0 * (c_skin[j] - c_air)) / segment_count;
@@ -145,24 +151,23 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
                         // temperature in two of its three terms (docs/thermoregulation.md, D2).
                         direction_c = 0.0;
                         for (int j = 0; j < segment_count; ++j) {
-                            const double p = std::exp(77.3450 + 0.0057 * t_skin_k[j] - 7235.0 / t_skin_k[i]) /
-                                             std::pow(t_skin_k[i], 8.2);
+                            const double p = std::exp(77.3450 + 0.0057 * t_skin_k[j] - 7235.0 / t_skin_k[i] -
+                                                      8.2 * std::log(t_skin_k[i]));
                             direction_c += ((t_skin_k[j] - air_k) + 146.0 * (concentration(p, t_skin_k[j]) - c_air)) / 6.0;
                         }
                         reported_drive_c = direction_c;  // the code plots the value left by the last segment
                     }
                     const double drive_c = (t_skin_k[i] - air_k) + 146.0 * (c_skin[i] - c_air);
-                    h_free = coupled_h0[i] + (direction_c > 0.0 ? coupled_b_pos[i] : coupled_b_neg[i]) *
-                                                 std::pow(std::abs(drive_c), 0.25);
+                    h_free = coupled_h0[i] + (direction_c > 0.0 ? coupled_b_pos[i] : coupled_b_neg[i]) * quarter_power(drive_c);
                     break;
                 }
                 case ConvectionModel::dt_only:
-                    h_free = wissler_a[i] * std::pow(std::abs(t_skin_k[i] - air_k), 0.25);
+                    h_free = wissler_a[i] * quarter_power(t_skin_k[i] - air_k);
                     break;
                 case ConvectionModel::constant_stolwijk: h_free = stolwijk_h[i]; break;
                 case ConvectionModel::constant_jos: h_free = jos_h[i]; break;
             }
-            const double h_forced = forced_a[i] * std::pow(v_m_s, forced_b[i]);
+            const double h_forced = v_m_s > 0.0 ? forced_a[i] * std::pow(v_m_s, forced_b[i]) : 0.0;
             h_conv[i] = std::cbrt(h_free * h_free * h_free + h_forced * h_forced * h_forced);
             f_cl[i] = 1.0 + 1.81 * clothing_r_m2k_w[i];
             h_total[i] = 1.0 / (clothing_r_m2k_w[i] + 1.0 / (f_cl[i] * (h_conv[i] + radiation_w_m2k[i])));
@@ -188,12 +193,12 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
         for (int i = 0; i < segment_count; ++i) {
             const int k = skin(i);
             skin_blood_l_h[i] = std::min((basal_blood_flow_l_h[k] + df_vasodilation[i] * vasodilation) /
-                                             (1.0 + df_vasoconstriction[i] * vasoconstriction) * std::pow(2.0, err[k] / 6.0),
+                                             (1.0 + df_vasoconstriction[i] * vasoconstriction) * std::exp2(err[k] / 6.0),
                                          90.0);
             const double h_evap = 1.0 / (clothing_re_m2pa_w[i] + 1.0 / (f_cl[i] * h_conv[i] * lewis_k_per_pa));
-            const double dp_pa = psat_pa(t_skin_k[i]) - p_air_pa;
+            const double dp_pa = p_skin_pa[i] - p_air_pa;
             const double q_max = h_evap * dp_pa * area_m2[i];
-            double q = std::min(df_sweat[i] * sweat_signal_w * std::pow(2.0, err[k] / 10.0), q_max);
+            double q = std::min(df_sweat[i] * sweat_signal_w * std::exp2(err[k] / 10.0), q_max);
             wettedness[i] = q_max != 0.0 ? 0.06 + 0.94 * q / q_max : 0.06;
             if (!seed) wettedness[i] = std::clamp(wettedness[i], 0.06, 1.0);
             q_sweat_w[i] = wettedness[i] * h_evap * dp_pa * area_m2[i];
