@@ -36,7 +36,8 @@ TEST_CASE("Fig. 4C-D (seed-compatible): coupled model core 38.9 C and mean skin 
 }
 
 TEST_CASE("Fig. 4 text (seed-compatible): coupled model 38.3 C core and 37.9 C skin after 60 min (we get 38.1 / 37.7)", "[physics][thermoreg]") {
-    const auto& s = at_minute(run(ConvectionModel::coupled, true), 60.0);
+    const auto r = run(ConvectionModel::coupled, true);  // keep the result alive: at_minute returns into it
+    const auto& s = at_minute(r, 60.0);
     CHECK(s.core_temp_c == Approx(38.3).margin(0.25));
     CHECK(s.mean_skin_temp_c == Approx(37.9).margin(0.3));
 }
