@@ -1,6 +1,10 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
 #include <stdexcept>
 
 #include "physics/thermoreg/stolwijk.hpp"
@@ -130,4 +134,31 @@ TEST_CASE("Thermoregulation: bad inputs and unstable steps are refused by name",
     e.time_step_s = 1.0;
     CHECK_THROWS_AS(validate(e), std::domain_error);
     CHECK_NOTHROW(validate(Exposure{}));
+}
+
+TEST_CASE("Seed-compatible mode reproduces the published code's own output (GNU Octave run, every minute)", "[physics][thermoreg]") {
+    std::ifstream in(std::string(MANIKIND_TEST_DATA_DIR) + "/thermoreg/octave_fig4c.csv");
+    REQUIRE(in.good());
+    std::string line;
+    std::getline(in, line);
+    const auto r = run(ConvectionModel::coupled, true);
+    int rows = 0;
+    while (std::getline(in, line)) {
+        std::stringstream ss(line);
+        std::vector<double> v;
+        for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+        REQUIRE(v.size() == 8);
+        const auto& s = at_minute(r, v[0] / 60.0);
+        INFO("t = " << v[0] << " s");
+        // Octave's columns: core, mean skin, latent, conv, rad (losses), storage, 50 x drive.
+        CHECK(s.core_temp_c == Approx(v[1]).margin(1e-6));
+        CHECK(s.mean_skin_temp_c == Approx(v[2]).margin(1e-6));
+        CHECK(s.evaporation_w == Approx(-v[3]).margin(1e-5));
+        CHECK(s.convection_w == Approx(-v[4]).margin(1e-5));
+        CHECK(s.radiation_w == Approx(-v[5]).margin(1e-5));
+        CHECK(s.storage_w == Approx(v[6]).margin(1e-5));
+        CHECK(s.mean_buoyancy_drive_c == Approx(v[7] / 50.0).margin(1e-6));
+        ++rows;
+    }
+    CHECK(rows == 121);
 }
