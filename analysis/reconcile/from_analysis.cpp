@@ -4,15 +4,11 @@
 #include <limits>
 
 namespace manikind::analysis::reconcile {
-namespace {
-
-double condition(const CaseResult& c, const std::string& channel) {
+double case_condition(const CaseResult& c, const std::string& channel) {
     for (const auto& e : c.conditions)
         if (e.channel == channel && std::isfinite(e.e.value)) return e.e.value;
     return std::numeric_limits<double>::quiet_NaN();
 }
-
-}  // namespace
 
 std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, const ZoneMap& map,
                                                 std::vector<int>* skipped) {
@@ -21,15 +17,15 @@ std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, co
         CaseInput in;
         in.case_id = c.case_id;
         auto& cond = in.conditions;
-        cond.air_temp_c = condition(c, "air_temp_c");
-        cond.air_rh_pct = condition(c, "air_rh_pct");
+        cond.air_temp_c = case_condition(c, "air_temp_c");
+        cond.air_rh_pct = case_condition(c, "air_rh_pct");
         if (!std::isfinite(cond.air_temp_c) || !std::isfinite(cond.air_rh_pct)) {
             if (skipped) skipped->push_back(c.case_id);
             continue;
         }
-        const double wall = condition(c, "wall_temp_c");
+        const double wall = case_condition(c, "wall_temp_c");
         if (std::isfinite(wall)) cond.wall_temp_c = wall;
-        const double speed = condition(c, "air_speed_m_s");
+        const double speed = case_condition(c, "air_speed_m_s");
         if (std::isfinite(speed)) cond.air_speed_m_s = speed;
         cond.wettedness = c.wettedness.value_or(0.0);
         // Zone skin temperatures: the mean over the replicates used.

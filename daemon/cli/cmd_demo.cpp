@@ -76,11 +76,7 @@ void add_demo_command(CLI::App& app) {
         std::printf("  case  T_air °C  RH_air %%  T_skin °C  wet  n   Q_WB W/m²   U (95 %%)     k\n");
         std::vector<std::string> excluded;
         for (const auto& c : result.cases) {
-            auto cond = [&](const char* ch) {
-                for (const auto& e : c.conditions)
-                    if (e.channel == ch) return e.e.value;
-                return std::numeric_limits<double>::quiet_NaN();
-            };
+            auto cond = [&](const char* ch) { return rc::case_condition(c, ch); };
             std::printf("  %4d  %8.2f  %8.1f  %9.2f  %3.0f  %d  %9.2f  %9.2f  %6.3f\n", c.case_id, cond("air_temp_c"),
                         cond("air_rh_pct"), cond("skin_temp_c"), c.wettedness.value_or(0.0), c.n_replicates,
                         c.whole_body.q.value, c.whole_body.q.U, c.whole_body.q.k);

@@ -14,6 +14,7 @@
 #include "physics/convection.hpp"
 #include "physics/heat_exchange.hpp"
 #include "physics/psychrometrics.hpp"
+#include "physics/range_check.hpp"
 #include "physics/threshold_map.hpp"
 
 namespace manikind::cli {
@@ -52,20 +53,7 @@ ph::SkinAirState to_state(const StateOptions& o) {
 }
 
 // Non-physical inputs are errors; inputs outside a correlation's range are warnings.
-void validate_state(const StateOptions& o, Report& report) {
-    auto require = [](const char* name, double v, double lo, double hi, const char* unit) {
-        if (!std::isfinite(v) || v < lo || v > hi)
-            throw UserError(fmt::format("{} = {} {} is outside {}..{} {}", name, v, unit, lo, hi, unit));
-    };
-    require("--rh", o.rh_pct, 0.0, 100.0, "%");
-    require("--air-temp", o.air_temp_c, -40.0, 100.0, "°C");
-    require("--skin-temp", o.skin_temp_c, -40.0, 100.0, "°C");
-    require("--wettedness", o.wettedness, 0.0, 1.0, "");
-    require("--length", o.length_m, 0.01, 10.0, "m");
-    if (o.air_temp_c < 20.0 || o.air_temp_c > 50.0)
-        report.warn(fmt::format("air temperature {} °C is outside 20..50 °C, the range of the paper's CFD "
-                                "study behind Eq. 8 and Table 1", o.air_temp_c));
-}
+void validate_state(const StateOptions& o, Report& report);
 
 template <typename F>
 auto physics_call(F&& f) {
@@ -74,6 +62,20 @@ auto physics_call(F&& f) {
     } catch (const std::domain_error& e) {
         throw UserError(e.what());
     }
+}
+
+void validate_state(const StateOptions& o, Report& report) {
+    physics_call([&] {
+        ph::require_in_range("--rh", o.rh_pct, 0.0, 100.0, "%");
+        ph::require_in_range("--air-temp", o.air_temp_c, -40.0, 100.0, "°C");
+        ph::require_in_range("--skin-temp", o.skin_temp_c, -40.0, 100.0, "°C");
+        ph::require_in_range("--wettedness", o.wettedness, 0.0, 1.0, "");
+        ph::require_in_range("--length", o.length_m, 0.01, 10.0, "m");
+        return 0;
+    });
+    if (o.air_temp_c < 20.0 || o.air_temp_c > 50.0)
+        report.warn(fmt::format("air temperature {} °C is outside 20..50 °C, the range of the paper's CFD "
+                                "study behind Eq. 8 and Table 1", o.air_temp_c));
 }
 
 // --model grammar: eq8 | dt-only | eq5 | laminar | turbulent | table1:<segment> |
