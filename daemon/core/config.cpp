@@ -1,20 +1,17 @@
 #include "daemon/core/config.hpp"
 
-#include <fstream>
 #include <set>
-#include <sstream>
 
 #include <fmt/core.h>
 #include <toml++/toml.h>
 
+#include "daemon/core/toml_input.hpp"
 #include "daemon/core/user_error.hpp"
 
 namespace manikind::config {
 namespace {
 
-std::string where(const std::string& source, const toml::source_region& region) {
-    return fmt::format("{}:{}:{}", source, region.begin.line, region.begin.column);
-}
+using toml_input::where;
 
 std::string type_name(const toml::node& node) {
     switch (node.type()) {
@@ -109,13 +106,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
 }
 
 Config parse_config(const std::string& toml_text, const std::string& source_name, const Config& base) {
-    toml::table root;
-    try {
-        root = toml::parse(toml_text, source_name);
-    } catch (const toml::parse_error& e) {
-        throw UserError(fmt::format("{}:{}:{}: {}", source_name, e.source().begin.line, e.source().begin.column,
-                                    e.description()));
-    }
+    const toml::table root = toml_input::parse(toml_text, source_name);
     Config c = base;
     c.warnings.clear();
     Reader r(root, source_name, c);
@@ -167,11 +158,9 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
 }
 
 Config load_config(const std::filesystem::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw UserError(fmt::format("{}: cannot open the configuration file", path.string()));
-    std::ostringstream text;
-    text << in.rdbuf();
-    return parse_config(text.str(), path.string());
+    const auto text = toml_input::read_file(path);
+    if (!text) throw UserError(fmt::format("{}: cannot open the configuration file", path.string()));
+    return parse_config(*text, path.string());
 }
 
 }  // namespace manikind::config

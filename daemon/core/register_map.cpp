@@ -1,12 +1,11 @@
 #include "daemon/core/register_map.hpp"
 
-#include <fstream>
 #include <set>
-#include <sstream>
 
 #include <fmt/core.h>
 #include <toml++/toml.h>
 
+#include "daemon/core/toml_input.hpp"
 #include "daemon/core/user_error.hpp"
 
 namespace manikind {
@@ -20,13 +19,8 @@ const MappedRegister& RegisterMap::at(const std::string& name) const {
 }
 
 RegisterMap parse_register_map(const std::string& text, const std::string& source) {
-    toml::table root;
-    try {
-        root = toml::parse(text, source);
-    } catch (const toml::parse_error& e) {
-        throw UserError(fmt::format("{}:{}:{}: {}", source, e.source().begin.line, e.source().begin.column, e.description()));
-    }
-    auto where = [&](const toml::node& n) { return fmt::format("{}:{}:{}", source, n.source().begin.line, n.source().begin.column); };
+    const toml::table root = toml_input::parse(text, source);
+    auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
     RegisterMap map;
     map.family = root["family"].value_or(std::string("unnamed"));
     std::map<std::string, int> units;
@@ -95,11 +89,9 @@ RegisterMap parse_register_map(const std::string& text, const std::string& sourc
 }
 
 RegisterMap load_register_map(const std::filesystem::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw UserError(fmt::format("{}: cannot open the register map", path.string()));
-    std::ostringstream text;
-    text << in.rdbuf();
-    return parse_register_map(text.str(), path.string());
+    const auto text = toml_input::read_file(path);
+    if (!text) throw UserError(fmt::format("{}: cannot open the register map", path.string()));
+    return parse_register_map(*text, path.string());
 }
 
 }  // namespace manikind

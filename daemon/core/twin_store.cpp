@@ -7,19 +7,15 @@
 #include <fmt/core.h>
 #include <toml++/toml.h>
 
+#include "daemon/core/toml_input.hpp"
 #include "daemon/core/user_error.hpp"
 
 namespace manikind::twin_store {
 namespace tw = physics::twin;
 
 tw::TwinVersion parse_twin_version(const std::string& text, const std::string& source) {
-    toml::table root;
-    try {
-        root = toml::parse(text, source);
-    } catch (const toml::parse_error& e) {
-        throw UserError(fmt::format("{}:{}:{}: {}", source, e.source().begin.line, e.source().begin.column, e.description()));
-    }
-    auto where = [&](const toml::node& n) { return fmt::format("{}:{}:{}", source, n.source().begin.line, n.source().begin.column); };
+    const toml::table root = toml_input::parse(text, source);
+    auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
     tw::TwinVersion v;
     v.name = root["name"].value_or(std::string("unnamed"));
     if (const auto* terms = root.get("terms")) {
@@ -61,11 +57,9 @@ tw::TwinVersion parse_twin_version(const std::string& text, const std::string& s
 
 tw::TwinVersion load_twin_version(const std::string& name_or_path) {
     if (name_or_path == "baseline") return tw::TwinVersion{};
-    std::ifstream in(name_or_path, std::ios::binary);
-    if (!in) throw UserError(fmt::format("--twin {}: not 'baseline' and not a readable twin-version TOML file", name_or_path));
-    std::ostringstream text;
-    text << in.rdbuf();
-    return parse_twin_version(text.str(), name_or_path);
+    const auto text = toml_input::read_file(name_or_path);
+    if (!text) throw UserError(fmt::format("--twin {}: not 'baseline' and not a readable twin-version TOML file", name_or_path));
+    return parse_twin_version(*text, name_or_path);
 }
 
 std::string twin_version_to_toml(const tw::TwinVersion& v, const std::string& based_on, const std::string& note) {
