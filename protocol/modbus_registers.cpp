@@ -53,8 +53,11 @@ std::vector<std::uint16_t> encode(const RegisterSpec& s, double value) {
     }
     const double raw = (value - s.offset) / s.scale;
     auto fits = [&](double lo, double hi) {
-        if (std::round(raw) < lo || std::round(raw) > hi) throw std::out_of_range(describe(s, value) + " does not fit the register type");
-        return std::round(raw);
+        // Written so that NaN fails too (scale 0 with value == offset gives 0/0): converting
+        // NaN to an integer type is undefined behaviour.
+        const double rounded = std::round(raw);
+        if (!(rounded >= lo && rounded <= hi)) throw std::out_of_range(describe(s, value) + " does not fit the register type");
+        return rounded;
     };
     switch (s.type) {
         case RegisterType::int16: return {static_cast<std::uint16_t>(static_cast<std::int16_t>(fits(-32768, 32767)))};

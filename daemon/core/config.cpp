@@ -73,6 +73,21 @@ public:
         return node->as_table();
     }
 
+    void strings(const toml::table& table, const std::string& path, const char* key, std::vector<std::string>& value) {
+        mark(path, key);
+        const toml::node* node = table.get(key);
+        if (!node) return;
+        const std::string full = path.empty() ? key : path + "." + key;
+        const auto* arr = node->as_array();
+        if (!arr) throw UserError(fmt::format("{}: {}: expected an array of strings, found {}", where(source_, node->source()), full, type_name(*node)));
+        value.clear();
+        for (const auto& item : *arr) {
+            if (!item.is_string())
+                throw UserError(fmt::format("{}: {}: expected strings, found {}", where(source_, item.source()), full, type_name(item)));
+            value.push_back(item.as_string()->get());
+        }
+    }
+
     void mark(const std::string& path, const std::string& key) { known_.insert(path.empty() ? key : path + "." + key); }
 
     // Anything present in the file that no reader asked for.
@@ -153,6 +168,39 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
             c.instruments[channel] = spec;
         }
     }
+    if (const auto* d = r.table(root, "", "devices")) {
+        DeviceConfig& dc = c.devices;
+        for (auto [key, m] : {std::pair<const char*, ModbusDeviceConfig*>{"chamber", &dc.chamber}, {"datalogger", &dc.datalogger}})
+            if (const auto* t = r.table(*d, "devices", key)) {
+                const std::string path = std::string("devices.") + key;
+                r.text(*t, path, "host", m->host);
+                r.number(*t, path, "port", m->port, 1, 65535, "");
+                r.text(*t, path, "serial", m->serial);
+                r.number(*t, path, "baud", m->baud, 1200, 921600, "baud");
+                r.text(*t, path, "register_map", m->register_map);
+            }
+        if (const auto* t = r.table(*d, "devices", "windsonic")) {
+            r.text(*t, "devices.windsonic", "path", dc.windsonic_path);
+            r.number(*t, "devices.windsonic", "baud", dc.windsonic_baud, 1200, 921600, "baud");
+        }
+        if (const auto* t = r.table(*d, "devices", "csat3b")) {
+            r.text(*t, "devices.csat3b", "path", dc.csat3b_path);
+            r.number(*t, "devices.csat3b", "baud", dc.csat3b_baud, 1200, 921600, "baud");
+        }
+        if (const auto* t = r.table(*d, "devices", "manikin")) r.text(*t, "devices.manikin", "interface", dc.manikin_interface);
+        r.number(*d, "devices", "modbus_timeout_s", dc.modbus_timeout_s, 0.01, 30.0, "s");
+        r.number(*d, "devices", "poll_period_s", dc.poll_period_s, 0.05, 3600.0, "s");
+        r.number(*d, "devices", "stale_after_s", dc.stale_after_s, 0.1, 3600.0, "s");
+    }
+    if (const auto* s = r.table(root, "", "simulation")) {
+        double seed = static_cast<double>(c.simulation.seed);
+        r.number(*s, "simulation", "seed", seed, 0, 9007199254740992.0, "");
+        c.simulation.seed = static_cast<std::uint64_t>(seed);
+        r.strings(*s, "simulation", "world_effects", c.simulation.world_effects);
+        r.strings(*s, "simulation", "faults", c.simulation.faults);
+        r.text(*s, "simulation", "runtime_dir", c.simulation.runtime_dir);
+        r.number(*s, "simulation", "step_s", c.simulation.step_s, 0.01, 60.0, "s");
+    }
     r.warn_unknown(root, "");
     return c;
 }
@@ -160,7 +208,9 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
 Config load_config(const std::filesystem::path& path) {
     const auto text = toml_input::read_file(path);
     if (!text) throw UserError(fmt::format("{}: cannot open the configuration file", path.string()));
-    return parse_config(*text, path.string());
+    Config c = parse_config(*text, path.string());
+    c.source_dir = path.parent_path();
+    return c;
 }
 
 }  // namespace manikind::config

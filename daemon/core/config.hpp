@@ -3,6 +3,7 @@
 // column, and the key (`config/manikind.toml:12:1: safety.max_skin_temp_c: expected a number,
 // found a string`). Unknown keys are warnings (a typo must not silently drop a limit, but an
 // extra note in a lab's file must not stop a trial either).
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -33,6 +34,37 @@ struct SteadyStateRule {
     double max_skin_fluctuation_c = 0.05;  // Methods: < 0.05 °C
 };
 
+// Where each instrument is. "builtin" register maps are the shipped config/*_registers.toml.
+struct ModbusDeviceConfig {
+    std::string host = "127.0.0.1";
+    double port = 502;
+    std::string serial;              // RTU device path; overrides host/port when set
+    double baud = 19200;
+    std::string register_map = "builtin";
+};
+
+struct DeviceConfig {
+    ModbusDeviceConfig chamber;
+    ModbusDeviceConfig datalogger;
+    std::string windsonic_path = "/dev/ttyUSB0";
+    double windsonic_baud = 9600;    // WindSonic default (manual section 9)
+    std::string csat3b_path = "/dev/ttyUSB1";
+    double csat3b_baud = 115200;     // CSAT3B RS-485/USB default
+    std::string manikin_interface = "can0";
+    double modbus_timeout_s = 0.5;
+    double poll_period_s = 1.0;
+    double stale_after_s = 3.0;
+};
+
+// The simulated lab (mode = "simulated"): what the world does that the twin may not know.
+struct SimulationConfig {
+    std::uint64_t seed = 1;
+    std::vector<std::string> world_effects;   // physics terms, as `manikin simulate-campaign --effect`
+    std::vector<std::string> faults;          // scheduled faults: device:fault[=v][@start[-end]]
+    std::string runtime_dir;                  // pty links; empty: a fresh directory under /tmp
+    double step_s = 1.0;                      // virtual-clock step
+};
+
 struct Config {
     std::string lab_name = "simulated lab";
     std::string mode = "simulated";        // simulated | real
@@ -41,6 +73,9 @@ struct Config {
     SafetyLimits safety;
     SteadyStateRule steady_state;
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)
+    DeviceConfig devices;
+    SimulationConfig simulation;
+    std::filesystem::path source_dir;      // relative paths in the file resolve from here
     std::vector<std::string> warnings;     // unknown keys and similar, with file:line
 };
 

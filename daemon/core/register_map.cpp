@@ -30,6 +30,23 @@ RegisterMap parse_register_map(const std::string& text, const std::string& sourc
                 throw UserError(fmt::format("{}: units.{}: expected a Modbus unit id 0..247", where(v), std::string(k.str())));
             units[std::string(k.str())] = static_cast<int>(v.as_integer()->get());
         }
+    std::map<std::string, protocol::ProbeScaling> probes;
+    if (const auto* pt = root["probes"].as_table())
+        for (const auto& [k, v] : *pt) {
+            const auto* t = v.as_table();
+            if (!t) throw UserError(fmt::format("{}: probes.{}: expected a table", where(v), std::string(k.str())));
+            protocol::ProbeScaling s;
+            double* fields[] = {&s.raw_lo, &s.raw_hi, &s.lo, &s.hi};
+            const char* keys[] = {"raw_lo", "raw_hi", "lo", "hi"};
+            for (int i = 0; i < 4; ++i) {
+                const auto* n = t->get(keys[i]);
+                if (!n || !n->is_number())
+                    throw UserError(fmt::format("{}: probes.{}.{}: expected a number", where(n ? *n : v), std::string(k.str()), keys[i]));
+                *fields[i] = n->is_integer() ? static_cast<double>(n->as_integer()->get()) : n->as_floating_point()->get();
+            }
+            if (s.raw_hi == s.raw_lo) throw UserError(fmt::format("{}: probes.{}: raw_lo equals raw_hi", where(v), std::string(k.str())));
+            probes[std::string(k.str())] = s;
+        }
     const auto* regs = root["registers"].as_array();
     if (!regs) throw UserError(fmt::format("{}: no [[registers]] tables", source));
     std::set<std::string> names;
@@ -83,6 +100,13 @@ RegisterMap parse_register_map(const std::string& text, const std::string& sourc
         r.spec.max_value = number_of("max", 1e300);
         if (r.spec.writable && (r.spec.min_value <= -1e300 || r.spec.max_value >= 1e300))
             throw UserError(fmt::format("{}: registers: writable register '{}' needs min and max", where(node), r.spec.name));
+        const std::string probe = text_of("probe", false);
+        if (!probe.empty()) {
+            if (!probes.count(probe)) throw UserError(fmt::format("{}: registers.probe: '{}' is not in [probes]", where(node), probe));
+            r.probe = probes.at(probe);
+        }
+        r.valid_min = number_of("valid_min", -1e300);
+        r.valid_max = number_of("valid_max", 1e300);
         map.registers.push_back(std::move(r));
     }
     return map;
@@ -92,6 +116,19 @@ RegisterMap load_register_map(const std::filesystem::path& path) {
     const auto text = toml_input::read_file(path);
     if (!text) throw UserError(fmt::format("{}: cannot open the register map", path.string()));
     return parse_register_map(*text, path.string());
+}
+
+RegisterMap register_map_from_setting(const std::string& setting, const std::string& device,
+                                      const std::filesystem::path& base_dir) {
+    if (setting == "builtin") {
+        if (device == "chamber") return parse_register_map(builtin_chamber_registers_toml(), "config/chamber_registers.toml (built in)");
+        if (device == "datalogger")
+            return parse_register_map(builtin_datalogger_registers_toml(), "config/datalogger_registers.toml (built in)");
+        throw UserError("no built-in register map for " + device);
+    }
+    std::filesystem::path p = setting;
+    if (p.is_relative() && !base_dir.empty()) p = base_dir / p;
+    return load_register_map(p);
 }
 
 }  // namespace manikind

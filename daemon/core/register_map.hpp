@@ -6,13 +6,18 @@
 #include <string>
 #include <vector>
 
+#include <optional>
+
 #include "protocol/modbus_registers.hpp"
+#include "protocol/probe_scaling.hpp"
 
 namespace manikind {
 
 struct MappedRegister {
     protocol::modbus_registers::RegisterSpec spec;
     int unit_id = 1;
+    std::optional<protocol::ProbeScaling> probe;  // analog probe on a datalogger input ([probes.*])
+    double valid_min = -1e300, valid_max = 1e300;  // physical range of the value (out-of-range flag)
 };
 
 struct RegisterMap {
@@ -23,5 +28,13 @@ struct RegisterMap {
 
 RegisterMap parse_register_map(const std::string& toml_text, const std::string& source_name);
 RegisterMap load_register_map(const std::filesystem::path& path);
+
+// The shipped maps, compiled in (config/chamber_registers.toml, config/datalogger_registers.toml).
+const char* builtin_chamber_registers_toml();
+const char* builtin_datalogger_registers_toml();
+// A config setting: "builtin" (the shipped map for `device`: chamber | datalogger) or a path,
+// relative paths resolving from `base_dir`.
+RegisterMap register_map_from_setting(const std::string& setting, const std::string& device,
+                                      const std::filesystem::path& base_dir);
 
 }  // namespace manikind

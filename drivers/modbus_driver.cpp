@@ -1,0 +1,210 @@
+#include "drivers/modbus_driver.hpp"
+
+#include <fmt/format.h>
+
+#include <cerrno>
+#include <cmath>
+#include <stdexcept>
+
+namespace manikind::drivers {
+
+namespace mr = protocol::modbus_registers;
+
+ModbusDriver::ModbusDriver(ModbusOptions options, const Clock& clock, SampleSink sink)
+    : options_(std::move(options)), clock_(clock), sink_(std::move(sink)) {
+    status_.name = options_.device_name;
+    status_.transport = options_.serial_path.empty()
+                            ? fmt::format("modbus-tcp {}:{}", options_.host, options_.port)
+                            : fmt::format("modbus-rtu {} {} baud", options_.serial_path, options_.baud);
+}
+
+ModbusDriver::~ModbusDriver() { stop(); }
+
+void ModbusDriver::start() {
+    std::lock_guard lk(io_lock_);
+    ensure_connected(clock_.mono_ns());
+}
+
+void ModbusDriver::stop() {
+    {
+        std::lock_guard lk(worker_lock_);
+        worker_stop_ = true;
+    }
+    worker_cv_.notify_all();
+    if (worker_.joinable()) worker_.join();
+    std::lock_guard lk(io_lock_);
+    disconnect();
+}
+
+void ModbusDriver::disconnect() {
+    if (ctx_) {
+        modbus_close(ctx_);
+        modbus_free(ctx_);
+        ctx_ = nullptr;
+    }
+    std::lock_guard lk(status_lock_);
+    status_.connected = false;
+}
+
+bool ModbusDriver::ensure_connected(std::int64_t now_ns) {
+    if (ctx_) return true;
+    if (!backoff_.due(now_ns)) return false;
+    modbus_t* ctx = options_.serial_path.empty()
+                        ? modbus_new_tcp(options_.host.c_str(), options_.port)
+                        : modbus_new_rtu(options_.serial_path.c_str(), options_.baud, 'N', 8, 1);
+    if (!ctx) {
+        record_error(std::string("modbus_new: ") + modbus_strerror(errno));
+        backoff_.failed(now_ns);
+        return false;
+    }
+    const double t = options_.response_timeout_s;
+    const auto sec = static_cast<std::uint32_t>(t);
+    modbus_set_response_timeout(ctx, sec, static_cast<std::uint32_t>((t - sec) * 1e6));
+    if (modbus_connect(ctx) == -1) {
+        record_error(fmt::format("connect {}: {}", status_.transport, modbus_strerror(errno)));
+        modbus_free(ctx);
+        backoff_.failed(now_ns);
+        return false;
+    }
+    ctx_ = ctx;
+    backoff_.reset();
+    std::lock_guard lk(status_lock_);
+    if (ever_connected_) ++status_.reconnects;
+    ever_connected_ = true;
+    status_.connected = true;
+    if (status_.last_good_mono_ns < 0) status_.last_good_mono_ns = now_ns;
+    return true;
+}
+
+void ModbusDriver::record_error(const std::string& what) {
+    std::lock_guard lk(status_lock_);
+    ++status_.comm_errors;
+    status_.last_error = what;
+}
+
+const ModbusPoint* ModbusDriver::find(const std::string& channel) const {
+    for (const auto& p : options_.points)
+        if (p.channel == channel) return &p;
+    return nullptr;
+}
+
+// Caller holds io_lock_ and ctx_ is open.
+std::optional<double> ModbusDriver::read_point(const ModbusPoint& p, Quality& quality) {
+    const int count = mr::register_count(p.spec.type);
+    std::uint16_t words[2] = {0, 0};
+    modbus_set_slave(ctx_, p.unit_id);
+    const int rc = p.input_register ? modbus_read_input_registers(ctx_, p.spec.address, count, words)
+                                    : modbus_read_registers(ctx_, p.spec.address, count, words);
+    if (rc != count) {
+        const int err = errno;
+        quality = Quality::comm_error;
+        {
+            std::lock_guard lk(status_lock_);
+            status_.last_error = fmt::format("{} (unit {}, register {}): {}", p.channel, p.unit_id, p.spec.address,
+                                             modbus_strerror(err));
+            if (err == ETIMEDOUT) {
+                ++status_.timeouts;
+            } else if (err > MODBUS_ENOBASE && err < MODBUS_ENOBASE + 16) {
+                ++status_.exceptions;  // an exception response: the link itself is fine
+            } else if (err == EMBBADCRC) {
+                ++status_.checksum_errors;
+            } else {
+                ++status_.comm_errors;
+            }
+        }
+        // A timeout or broken link leaves unknown bytes in flight: start again from a clean socket.
+        if (err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EBADF || err == ECONNREFUSED ||
+            err == EMBBADDATA || err == EMBBADEXC || err == EMBBADCRC || err == EIO)
+            disconnect();
+        return std::nullopt;
+    }
+    double value = mr::decode(p.spec, std::span<const std::uint16_t>(words, static_cast<std::size_t>(count)));
+    if (p.scaling) value = p.scaling->to_value(value);
+    quality = (!std::isfinite(value) || value < p.valid_min || value > p.valid_max) ? Quality::out_of_range
+                                                                                     : Quality::good;
+    return value;
+}
+
+void ModbusDriver::poll() {
+    std::lock_guard lk(io_lock_);
+    const std::int64_t now = clock_.mono_ns();
+    const std::int64_t utc = clock_.utc_ns();
+    bool any_good = false;
+    for (const auto& p : options_.points) {
+        if (!p.poll) continue;
+        Quality q = Quality::comm_error;
+        std::optional<double> v;
+        if (ensure_connected(now)) v = read_point(p, q);
+        if (v && q != Quality::comm_error) any_good = true;
+        if (v) {
+            std::lock_guard sl(status_lock_);
+            ++status_.frames;
+            if (q == Quality::good) ++status_.samples;
+        }
+        sink_(Sample{options_.device_name, p.channel, v.value_or(std::nan("")), v ? q : Quality::comm_error, now, utc});
+    }
+    std::lock_guard sl(status_lock_);
+    if (any_good) {
+        status_.last_good_mono_ns = now;
+        status_.stale = false;
+    }
+}
+
+void ModbusDriver::start_worker() {
+    worker_stop_ = false;
+    worker_ = std::thread([this] {
+        std::unique_lock lk(worker_lock_);
+        while (!worker_stop_) {
+            lk.unlock();
+            poll();
+            lk.lock();
+            worker_cv_.wait_for(lk, std::chrono::duration<double>(options_.poll_period_s), [this] { return worker_stop_; });
+        }
+    });
+}
+
+void ModbusDriver::check(std::int64_t now_mono_ns) {
+    std::lock_guard lk(status_lock_);
+    const auto limit_ns = static_cast<std::int64_t>(3.0 * options_.poll_period_s * 1e9) + 1'000'000'000;
+    if (status_.last_good_mono_ns >= 0 && now_mono_ns - status_.last_good_mono_ns > limit_ns) status_.stale = true;
+}
+
+DriverStatus ModbusDriver::status() const {
+    std::lock_guard lk(status_lock_);
+    return status_;
+}
+
+std::string ModbusDriver::write(const std::string& channel, double value) {
+    const ModbusPoint* p = find(channel);
+    if (!p) return "no register named " + channel + " on " + options_.device_name;
+    std::vector<std::uint16_t> words;
+    try {
+        words = mr::encode(p->spec, value);
+    } catch (const std::exception& e) {
+        return e.what();
+    }
+    std::lock_guard lk(io_lock_);
+    if (!ensure_connected(clock_.mono_ns())) return options_.device_name + " is not connected: " + status().last_error;
+    modbus_set_slave(ctx_, p->unit_id);
+    const int rc = words.size() == 1 ? modbus_write_register(ctx_, p->spec.address, words[0])
+                                     : modbus_write_registers(ctx_, p->spec.address, static_cast<int>(words.size()),
+                                                              words.data());
+    if (rc == -1) {
+        const std::string why = fmt::format("write {} = {}: {}", channel, value, modbus_strerror(errno));
+        record_error(why);
+        if (errno == ETIMEDOUT || errno == ECONNRESET || errno == EPIPE) disconnect();
+        return why;
+    }
+    return {};
+}
+
+std::optional<double> ModbusDriver::read(const std::string& channel) {
+    const ModbusPoint* p = find(channel);
+    if (!p) return std::nullopt;
+    std::lock_guard lk(io_lock_);
+    if (!ensure_connected(clock_.mono_ns())) return std::nullopt;
+    Quality q = Quality::good;
+    return read_point(*p, q);
+}
+
+}  // namespace manikind::drivers

@@ -1,0 +1,92 @@
+#pragma once
+// Modbus devices through libmodbus: the chamber controller (setpoints, process values) and the
+// datalogger that carries the EE181 air T/RH probes and the wall thermocouples. libmodbus calls
+// block, so in real time each Modbus device polls on its own worker thread and cannot stall the
+// io_context the serial and CAN drivers share; on the virtual clock the acquisition loop calls
+// poll() itself, once per tick. Errors are classified (timeout, exception, connection lost),
+// counted, and turn the point's sample into comm_error; the connection is re-opened with backoff.
+#include <modbus/modbus.h>
+
+#include <condition_variable>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "drivers/driver.hpp"
+#include "protocol/modbus_registers.hpp"
+#include "protocol/probe_scaling.hpp"
+
+namespace manikind::drivers {
+
+struct ModbusPoint {
+    std::string channel;                           // "air_temp_c", "ee181_1.air_rh_pct"
+    protocol::modbus_registers::RegisterSpec spec;
+    int unit_id = 1;
+    bool input_register = false;                   // function 04 instead of 03
+    std::optional<protocol::ProbeScaling> scaling; // probe scaling after the register decode
+    double valid_min = -1e300, valid_max = 1e300;  // physical range: outside -> out_of_range
+    bool poll = true;                              // setpoints are written, not polled
+};
+
+struct ModbusOptions {
+    std::string device_name = "chamber";
+    std::string host = "127.0.0.1";                // TCP; or
+    int port = 502;
+    std::string serial_path;                       // RTU when set (e.g. /dev/ttyUSB1)
+    int baud = 19200;
+    double response_timeout_s = 0.5;
+    double poll_period_s = 1.0;                    // worker thread, real time
+    std::vector<ModbusPoint> points;
+};
+
+class ModbusDriver final : public Driver {
+public:
+    ModbusDriver(ModbusOptions options, const Clock& clock, SampleSink sink);
+    ~ModbusDriver() override;
+
+    const std::string& name() const override { return options_.device_name; }
+    void start() override;                      // connects (failure is counted, retried by poll)
+    void stop() override;                       // stops the worker and closes
+    void check(std::int64_t now_mono_ns) override;
+    DriverStatus status() const override;
+
+    // One read of every polled point. Safe to call from any thread (serialised internally).
+    void poll();
+    // Real-time mode: a worker thread that polls every poll_period_s until stop().
+    void start_worker();
+
+    // Writes one writable point. Returns an empty string on success, else why not (the register's
+    // limit named, read-only, or the Modbus error).
+    std::string write(const std::string& channel, double value);
+    // Reads one point now (any point, polled or not).
+    std::optional<double> read(const std::string& channel);
+
+    const ModbusOptions& options() const { return options_; }
+
+private:
+    bool ensure_connected(std::int64_t now_ns);
+    void disconnect();
+    void record_error(const std::string& what);
+    std::optional<double> read_point(const ModbusPoint& p, Quality& quality);
+    const ModbusPoint* find(const std::string& channel) const;
+
+    ModbusOptions options_;
+    const Clock& clock_;
+    SampleSink sink_;
+    std::mutex io_lock_;                 // one request at a time on the context
+    modbus_t* ctx_ = nullptr;
+    Backoff backoff_;
+    bool ever_connected_ = false;
+    mutable std::mutex status_lock_;
+    DriverStatus status_;
+    std::thread worker_;
+    std::mutex worker_lock_;
+    std::condition_variable worker_cv_;
+    bool worker_stop_ = false;
+};
+
+}  // namespace manikind::drivers

@@ -1,0 +1,144 @@
+#include "drivers/serial_line_driver.hpp"
+
+#include <boost/asio/write.hpp>
+
+namespace manikind::drivers {
+
+SerialLineDriver::SerialLineDriver(boost::asio::io_context& io, SerialOptions options, const Clock& clock,
+                                   SampleSink sink)
+    : clock_(clock), io_(io), options_(std::move(options)), sink_(std::move(sink)) {
+    status_.name = options_.device_name;
+    status_.transport = "serial " + options_.path;
+}
+
+SerialLineDriver::~SerialLineDriver() {
+    *alive_ = false;
+    stop();
+}
+
+void SerialLineDriver::start() {
+    running_ = true;
+    if (!open_port()) backoff_.failed(clock_.mono_ns());
+}
+
+void SerialLineDriver::stop() {
+    running_ = false;
+    if (port_) {
+        boost::system::error_code ignored;
+        port_->close(ignored);
+        port_.reset();
+    }
+    std::lock_guard lk(lock_);
+    status_.connected = false;
+}
+
+bool SerialLineDriver::open_port() {
+    auto port = std::make_unique<boost::asio::serial_port>(io_);
+    boost::system::error_code ec;
+    port->open(options_.path, ec);
+    if (!ec) port->set_option(boost::asio::serial_port_base::baud_rate(options_.baud), ec);
+    if (!ec) port->set_option(boost::asio::serial_port_base::character_size(8), ec);
+    if (!ec) port->set_option(boost::asio::serial_port_base::parity(boost::asio::serial_port_base::parity::none), ec);
+    if (!ec) port->set_option(boost::asio::serial_port_base::stop_bits(boost::asio::serial_port_base::stop_bits::one), ec);
+    std::lock_guard lk(lock_);
+    if (ec) {
+        ++status_.comm_errors;
+        status_.last_error = "open " + options_.path + ": " + ec.message();
+        return false;
+    }
+    port_ = std::move(port);
+    if (ever_connected_) ++status_.reconnects;
+    ever_connected_ = true;
+    status_.connected = true;
+    // A fresh connection starts the silence clock, so a device that never speaks goes stale.
+    status_.last_good_mono_ns = clock_.mono_ns();
+    start_read();
+    return true;
+}
+
+void SerialLineDriver::start_read() {
+    port_->async_read_some(boost::asio::buffer(buffer_), [this, alive = alive_](const boost::system::error_code& ec,
+                                                                              std::size_t n) {
+        if (!*alive) return;
+        if (ec) {
+            if (ec == boost::asio::error::operation_aborted) return;
+            close_port(ec.message());
+            return;
+        }
+        bytes_received_ += n;
+        on_bytes(buffer_.data(), n);
+        if (port_) start_read();
+    });
+}
+
+void SerialLineDriver::close_port(const std::string& why) {
+    if (port_) {
+        boost::system::error_code ignored;
+        port_->close(ignored);
+        port_.reset();
+    }
+    {
+        std::lock_guard lk(lock_);
+        status_.connected = false;
+        ++status_.comm_errors;
+        status_.last_error = "read " + options_.path + ": " + why;
+    }
+    emit_degraded(Quality::comm_error);
+    backoff_.failed(clock_.mono_ns());
+}
+
+void SerialLineDriver::check(std::int64_t now_mono_ns) {
+    if (!running_) return;
+    if (!port_) {
+        if (backoff_.due(now_mono_ns)) {
+            if (open_port()) backoff_.reset();
+            else backoff_.failed(now_mono_ns);
+        }
+        return;
+    }
+    bool went_stale = false;
+    {
+        std::lock_guard lk(lock_);
+        const auto limit_ns = static_cast<std::int64_t>(options_.stale_after_s * 1e9);
+        if (status_.last_good_mono_ns >= 0 && now_mono_ns - status_.last_good_mono_ns > limit_ns) {
+            if (!status_.stale) ++status_.timeouts;
+            status_.stale = true;
+            went_stale = true;
+        }
+    }
+    if (went_stale) emit_degraded(Quality::stale);
+}
+
+DriverStatus SerialLineDriver::status() const {
+    std::lock_guard lk(lock_);
+    return status_;
+}
+
+bool SerialLineDriver::send(const std::string& bytes) {
+    if (!port_) return false;
+    boost::system::error_code ec;
+    boost::asio::write(*port_, boost::asio::buffer(bytes), ec);
+    if (ec) {
+        std::lock_guard lk(lock_);
+        ++status_.comm_errors;
+        status_.last_error = "write: " + ec.message();
+        return false;
+    }
+    return true;
+}
+
+void SerialLineDriver::emit(const std::string& channel, double value, Quality quality) {
+    if (quality == Quality::good) {
+        std::lock_guard lk(lock_);
+        ++status_.samples;
+    }
+    sink_(Sample{options_.device_name, channel, value, quality, clock_.mono_ns(), clock_.utc_ns()});
+}
+
+void SerialLineDriver::note_good_frame() {
+    ++status_.frames;
+    status_.stale = false;
+    status_.last_good_mono_ns = clock_.mono_ns();
+}
+
+}  // namespace manikind::drivers

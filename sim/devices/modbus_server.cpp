@@ -1,0 +1,208 @@
+#include "sim/devices/modbus_server.hpp"
+
+#include <arpa/inet.h>
+#include <modbus/modbus.h>
+#include <netinet/in.h>
+#include <sys/select.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <set>
+#include <stdexcept>
+
+namespace manikind::sim {
+
+namespace mr = protocol::modbus_registers;
+
+namespace {
+modbus_mapping_t* as_mapping(void* p) { return static_cast<modbus_mapping_t*>(p); }
+modbus_t* as_ctx(void* p) { return static_cast<modbus_t*>(p); }
+}  // namespace
+
+VirtualModbusServer::VirtualModbusServer(std::string name, std::vector<ServedRegister> registers,
+                                         std::mutex& world_lock)
+    : name_(std::move(name)), registers_(std::move(registers)), world_lock_(world_lock) {
+    std::map<int, int> size_per_unit;
+    for (const auto& r : registers_) {
+        int& n = size_per_unit[r.unit_id];
+        n = std::max(n, r.spec.address + mr::register_count(r.spec.type));
+    }
+    for (const auto& [unit, n] : size_per_unit) mappings_[unit] = modbus_mapping_new(0, 0, n, 0);
+}
+
+VirtualModbusServer::~VirtualModbusServer() {
+    stop();
+    for (auto& [unit, m] : mappings_) modbus_mapping_free(as_mapping(m));
+}
+
+std::vector<int> VirtualModbusServer::unit_ids() const {
+    std::vector<int> ids;
+    for (const auto& [unit, m] : mappings_) ids.push_back(unit);
+    return ids;
+}
+
+void VirtualModbusServer::start(int port) {
+    ctx_ = modbus_new_tcp("127.0.0.1", port);
+    if (!ctx_) throw std::runtime_error(name_ + ": modbus_new_tcp failed");
+    listen_fd_ = modbus_tcp_listen(as_ctx(ctx_), 8);
+    if (listen_fd_ < 0)
+        throw std::runtime_error(name_ + ": cannot listen on 127.0.0.1:" + std::to_string(port) + ": " +
+                                 modbus_strerror(errno));
+    sockaddr_in addr{};
+    socklen_t len = sizeof addr;
+    ::getsockname(listen_fd_, reinterpret_cast<sockaddr*>(&addr), &len);
+    port_ = ntohs(addr.sin_port);
+    if (::pipe(wake_pipe_) != 0) throw std::runtime_error(name_ + ": pipe failed");
+    stopping_ = false;
+    thread_ = std::thread([this] { serve(); });
+}
+
+void VirtualModbusServer::stop() {
+    if (!thread_.joinable()) return;
+    stopping_ = true;
+    const char b = 'x';
+    [[maybe_unused]] auto n = ::write(wake_pipe_[1], &b, 1);
+    thread_.join();
+    ::close(wake_pipe_[0]);
+    ::close(wake_pipe_[1]);
+    ::close(listen_fd_);
+    modbus_free(as_ctx(ctx_));
+    ctx_ = nullptr;
+}
+
+void VirtualModbusServer::set_faults(const ModbusFaults& f) {
+    std::lock_guard lk(faults_lock_);
+    if (f.stuck && !faults_.stuck) {
+        std::lock_guard wl(world_lock_);
+        frozen_.clear();
+        for (const auto& r : registers_) frozen_[r.spec.name] = r.read();
+    }
+    faults_ = f;
+}
+
+ModbusFaults VirtualModbusServer::faults() const {
+    std::lock_guard lk(faults_lock_);
+    return faults_;
+}
+
+// Encodes the world's current values into the unit's register image.
+void VirtualModbusServer::refresh(int unit) {
+    auto* m = as_mapping(mappings_.at(unit));
+    const ModbusFaults f = faults();
+    std::lock_guard wl(world_lock_);
+    for (const auto& r : registers_) {
+        if (r.unit_id != unit) continue;
+        double v = f.stuck && frozen_.count(r.spec.name) ? frozen_.at(r.spec.name) : r.read();
+        if (r.probe) v = r.probe->to_raw(v);
+        auto spec = r.spec;
+        spec.writable = true;  // encode for the image: limits are the client's to respect
+        spec.min_value = -1e300;
+        spec.max_value = 1e300;
+        std::vector<std::uint16_t> words;
+        try {
+            words = mr::encode(spec, v);
+        } catch (const std::exception&) {
+            continue;  // out of the raw type's range: the image keeps the last value
+        }
+        for (std::size_t i = 0; i < words.size(); ++i)
+            m->tab_registers[static_cast<std::size_t>(r.spec.address) + i] = words[i];
+    }
+}
+
+// Function 06 / 16 to a mapped register: decode, check limits, hand to the world. Returns false
+// (and the caller answers ILLEGAL DATA VALUE) when refused.
+bool VirtualModbusServer::handle_write(int unit, const std::uint8_t* q, int length, int h) {
+    const int function = q[h];
+    if (function != MODBUS_FC_WRITE_SINGLE_REGISTER && function != MODBUS_FC_WRITE_MULTIPLE_REGISTERS) return true;
+    const int address = (q[h + 1] << 8) | q[h + 2];
+    std::vector<std::uint16_t> words;
+    if (function == MODBUS_FC_WRITE_SINGLE_REGISTER) {
+        words.push_back(static_cast<std::uint16_t>((q[h + 3] << 8) | q[h + 4]));
+    } else {
+        const int count = (q[h + 3] << 8) | q[h + 4];
+        for (int i = 0; i < count && h + 6 + 2 * i + 1 < length; ++i)
+            words.push_back(static_cast<std::uint16_t>((q[h + 6 + 2 * i] << 8) | q[h + 7 + 2 * i]));
+    }
+    for (const auto& r : registers_) {
+        if (r.unit_id != unit || r.spec.address != address) continue;
+        if (!r.write) return false;  // read-only parameter
+        if (static_cast<int>(words.size()) < mr::register_count(r.spec.type)) return false;
+        const double v = mr::decode(r.spec, words);
+        if (v < r.spec.min_value || v > r.spec.max_value || !std::isfinite(v)) return false;
+        std::lock_guard wl(world_lock_);
+        return r.write(v);
+    }
+    return true;  // unmapped: libmodbus answers ILLEGAL DATA ADDRESS if out of the image
+}
+
+void VirtualModbusServer::serve() {
+    std::set<int> clients;
+    std::vector<std::uint8_t> query(MODBUS_TCP_MAX_ADU_LENGTH);
+    modbus_t* ctx = as_ctx(ctx_);
+    const int header = modbus_get_header_length(ctx);
+    while (!stopping_) {
+        fd_set fds;
+        FD_ZERO(&fds);
+        FD_SET(listen_fd_, &fds);
+        FD_SET(wake_pipe_[0], &fds);
+        int max_fd = std::max(listen_fd_, wake_pipe_[0]);
+        for (int c : clients) {
+            FD_SET(c, &fds);
+            max_fd = std::max(max_fd, c);
+        }
+        if (::select(max_fd + 1, &fds, nullptr, nullptr, nullptr) < 0) {
+            if (errno == EINTR) continue;
+            break;
+        }
+        if (FD_ISSET(wake_pipe_[0], &fds)) break;
+        if (FD_ISSET(listen_fd_, &fds)) {
+            const int c = ::accept(listen_fd_, nullptr, nullptr);
+            if (c >= 0) clients.insert(c);
+        }
+        for (auto it = clients.begin(); it != clients.end();) {
+            const int c = *it;
+            if (!FD_ISSET(c, &fds)) {
+                ++it;
+                continue;
+            }
+            modbus_set_socket(ctx, c);
+            const int rc = modbus_receive(ctx, query.data());
+            if (rc <= 0) {  // closed by the client, or a malformed frame: drop it as a device would
+                ::close(c);
+                it = clients.erase(it);
+                continue;
+            }
+            ++requests_;
+            const ModbusFaults f = faults();
+            if (f.drop) {
+                ::close(c);
+                it = clients.erase(it);
+                continue;
+            }
+            if (f.silent) {
+                ++it;
+                continue;
+            }
+            const int unit = query[static_cast<std::size_t>(header - 1)];
+            if (f.exception) {
+                modbus_reply_exception(ctx, query.data(), MODBUS_EXCEPTION_SLAVE_OR_SERVER_FAILURE);
+            } else if (!mappings_.count(unit)) {
+                modbus_reply_exception(ctx, query.data(), MODBUS_EXCEPTION_GATEWAY_TARGET);
+            } else {
+                refresh(unit);
+                if (!handle_write(unit, query.data(), rc, header))
+                    modbus_reply_exception(ctx, query.data(), MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE);
+                else
+                    modbus_reply(ctx, query.data(), rc, as_mapping(mappings_.at(unit)));
+            }
+            ++it;
+        }
+    }
+    for (int c : clients) ::close(c);
+}
+
+}  // namespace manikind::sim

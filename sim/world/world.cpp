@@ -1,0 +1,137 @@
+#include "sim/world/world.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace manikind::sim {
+
+namespace mc = protocol::manikin_can;
+
+World::World(WorldOptions options) : o_(std::move(options)), rng_(o_.seed) {
+    if (o_.zones.empty()) throw std::invalid_argument("the simulated manikin needs a zone map");
+    chamber_sp_c_ = chamber_air_c_ = air_c_ = o_.initial_temp_c;
+    chamber_sp_rh_ = chamber_rh_ = rh_ = o_.initial_rh_pct;
+    wall_c_ = air_c_ - o_.wall_below_air_c;
+    zones_.resize(o_.zones.size());
+    for (auto& z : zones_) z.skin_temp_c = o_.initial_temp_c;
+    for (const auto& spec : o_.zones) conditions_.zones.push_back(spec.zone);
+}
+
+void World::set_chamber_setpoints(double temp_c, double rh_pct) {
+    chamber_sp_c_ = temp_c;
+    chamber_sp_rh_ = rh_pct;
+    apply_enclosure_offsets();
+}
+
+void World::apply_enclosure_offsets() {
+    air_offset_c_ = rh_offset_pct_ = 0.0;
+    for (const auto& c : o_.enclosure_table)
+        if (std::abs(c.chamber_temp_c - chamber_sp_c_) <= 0.5 && std::abs(c.chamber_rh_pct - chamber_sp_rh_) <= 1.0) {
+            air_offset_c_ = c.air_temp_c - c.chamber_temp_c;
+            rh_offset_pct_ = c.air_rh_pct - c.chamber_rh_pct;
+            return;
+        }
+}
+
+void World::step(double dt_s) {
+    // Sub-steps keep the explicit PI/shell integration stable for any requested dt.
+    const int n = std::max(1, static_cast<int>(std::ceil(dt_s / 1.0)));
+    const double h = dt_s / n;
+    for (int i = 0; i < n; ++i) {
+        time_s_ += h;
+        auto lag = [h](double& x, double target, double tau) { x += (target - x) * (1.0 - std::exp(-h / tau)); };
+        lag(chamber_air_c_, chamber_sp_c_, o_.chamber_time_constant_s);
+        lag(chamber_rh_, chamber_sp_rh_, o_.chamber_time_constant_s);
+        lag(air_c_, chamber_air_c_ + air_offset_c_, o_.enclosure_time_constant_s);
+        lag(rh_, std::clamp(chamber_rh_ + rh_offset_pct_, 0.0, 100.0), o_.enclosure_time_constant_s);
+        lag(wall_c_, air_c_ - o_.wall_below_air_c, o_.wall_time_constant_s);
+
+        if (run_ && time_s_ - last_heartbeat_s_ > o_.watchdog_s) watchdog_tripped_ = true;
+        const bool heating = run_ && !watchdog_tripped_;
+
+        // Heat loss of every zone at its current skin temperature (the world's physics).
+        conditions_.air_temp_c = air_c_;
+        conditions_.air_rh_pct = rh_;
+        conditions_.wall_temp_c = wall_c_;
+        conditions_.air_speed_m_s = o_.air_speed_m_s;
+        bool any_wet = false;
+        for (std::size_t z = 0; z < zones_.size(); ++z) {
+            conditions_.zones[z].skin_temp_c = zones_[z].skin_temp_c;
+            any_wet = any_wet || (zones_[z].sweating && heating);
+        }
+        conditions_.wettedness = any_wet ? 1.0 : 0.0;
+        const auto fluxes = physics::twin::predict(o_.physics, conditions_);
+        for (std::size_t z = 0; z < zones_.size(); ++z) {
+            ZoneState& s = zones_[z];
+            s.loss_w_m2 = fluxes[z].q_total_w_m2;
+            double power = 0.0;
+            if (heating && !s.heater_failed) {
+                if (s.mode == mc::ControlMode::constant_skin_temp) {
+                    const double error = s.setpoint - s.skin_temp_c;
+                    const double max_p = o_.max_heater_power_w_m2;
+                    const double unclamped = o_.pi_kp_w_m2k * error + s.integral_w_m2;
+                    // Anti-windup: integrate only while the output is not saturated.
+                    if (std::abs(unclamped) < max_p) s.integral_w_m2 += o_.pi_ki_w_m2ks * error * h;
+                    // Negative power: the zone's coolant loop extracting heat (hot, dry cases).
+                    power = std::clamp(o_.pi_kp_w_m2k * error + s.integral_w_m2, -max_p, max_p);
+                } else if (s.mode == mc::ControlMode::constant_heat_flux) {
+                    power = std::clamp(s.setpoint, -o_.max_heater_power_w_m2, o_.max_heater_power_w_m2);
+                }
+            }
+            s.heater_power_w_m2 = power;
+            s.skin_temp_c += h * (power - s.loss_w_m2) / o_.shell_heat_capacity_j_m2k;
+        }
+    }
+}
+
+double World::measure_air_temp_c(int probe) { return air_c_ + 0.02 * (probe - 1) + gauss(o_.air_noise_c); }
+double World::measure_rh_pct(int) { return std::clamp(rh_ + gauss(o_.rh_noise_pct), 0.0, 100.0); }
+double World::measure_wall_temp_c(int) { return wall_c_ + gauss(o_.wall_noise_c); }
+double World::measure_air_speed_m_s() { return std::max(0.0, o_.air_speed_m_s + gauss(o_.speed_noise_m_s)); }
+
+void World::manikin_command(const mc::Setpoint& sp) {
+    auto apply = [&](ZoneState& z) {
+        z.mode = sp.mode;
+        z.setpoint = sp.value;
+        z.sweating = sp.sweating;
+        z.sweat_rate_g_m2_h = sp.sweating ? sp.sweat_rate_g_m2_h : 0.0;
+    };
+    if (sp.zone == 0) {
+        for (auto& z : zones_) apply(z);
+    } else if (sp.zone >= 1 && sp.zone <= zone_count()) {
+        apply(zones_[static_cast<std::size_t>(sp.zone - 1)]);
+    }
+}
+
+void World::manikin_control(bool run) {
+    if (run && !run_) {
+        watchdog_tripped_ = false;
+        for (auto& z : zones_) z.integral_w_m2 = 0.0;
+    }
+    run_ = run;
+    last_heartbeat_s_ = time_s_;
+    if (!run) watchdog_tripped_ = false;
+}
+
+mc::ZoneStatus World::measure_zone(int zone) {
+    const ZoneState& s = this->zone(zone);
+    mc::ZoneStatus st;
+    st.zone = zone;
+    st.skin_temp_c = s.skin_temp_c + gauss(o_.skin_noise_c);
+    // The manikin reports the electrical power it needs to hold the zone as its heat flux.
+    st.heater_power_w_m2 = std::max(0.0, s.heater_power_w_m2);
+    st.heat_flux_w_m2 = s.heater_power_w_m2 + gauss(o_.flux_noise_w_m2);
+    st.sweat_rate_g_m2_h = s.sweating ? s.sweat_rate_g_m2_h : 0.0;
+    st.flags = 0;
+    if (s.heater_power_w_m2 > 0.0) st.flags |= mc::heater_on;
+    if (s.sweating) st.flags |= mc::sweating_on;
+    if (s.heater_failed) st.flags |= mc::heater_fault;
+    return st;
+}
+
+void World::fail_heater(int zone, bool failed) {
+    if (zone >= 1 && zone <= zone_count()) zones_[static_cast<std::size_t>(zone - 1)].heater_failed = failed;
+}
+
+}  // namespace manikind::sim
