@@ -126,28 +126,33 @@ std::optional<double> ModbusDriver::read_point(const ModbusPoint& p, Quality& qu
 }
 
 void ModbusDriver::poll() {
-    std::lock_guard lk(io_lock_);
-    const std::int64_t now = clock_.mono_ns();
-    const std::int64_t utc = clock_.utc_ns();
-    bool any_good = false;
-    for (const auto& p : options_.points) {
-        if (!p.poll) continue;
-        Quality q = Quality::comm_error;
-        std::optional<double> v;
-        if (ensure_connected(now)) v = read_point(p, q);
-        if (v && q != Quality::comm_error) any_good = true;
-        if (v) {
-            std::lock_guard sl(status_lock_);
-            ++status_.frames;
-            if (q == Quality::good) ++status_.samples;
+    std::vector<Sample> out;
+    {
+        std::lock_guard lk(io_lock_);
+        const std::int64_t now = clock_.mono_ns();
+        const std::int64_t utc = clock_.utc_ns();
+        bool any_good = false;
+        for (const auto& p : options_.points) {
+            if (!p.poll) continue;
+            Quality q = Quality::comm_error;
+            std::optional<double> v;
+            if (ensure_connected(now)) v = read_point(p, q);
+            if (v && q != Quality::comm_error) any_good = true;
+            if (v) {
+                std::lock_guard sl(status_lock_);
+                ++status_.frames;
+                if (q == Quality::good) ++status_.samples;
+            }
+            out.push_back(Sample{options_.device_name, p.channel, v.value_or(std::nan("")), v ? q : Quality::comm_error, now, utc});
         }
-        sink_(Sample{options_.device_name, p.channel, v.value_or(std::nan("")), v ? q : Quality::comm_error, now, utc});
+        std::lock_guard sl(status_lock_);
+        if (any_good) {
+            status_.last_good_mono_ns = now;
+            status_.stale = false;
+        }
     }
-    std::lock_guard sl(status_lock_);
-    if (any_good) {
-        status_.last_good_mono_ns = now;
-        status_.stale = false;
-    }
+    // Outside the I/O lock: a sink may call back into write() (safety actions, setpoints).
+    for (const auto& s : out) sink_(s);
 }
 
 void ModbusDriver::start_worker() {

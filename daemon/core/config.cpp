@@ -200,6 +200,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.strings(*s, "simulation", "faults", c.simulation.faults);
         r.text(*s, "simulation", "runtime_dir", c.simulation.runtime_dir);
         r.number(*s, "simulation", "step_s", c.simulation.step_s, 0.01, 60.0, "s");
+        r.number(*s, "simulation", "manikin_period_s", c.simulation.manikin_period_s, 0.1, 60.0, "s");
     }
     r.warn_unknown(root, "");
     return c;

@@ -63,6 +63,7 @@ struct SimulationConfig {
     std::vector<std::string> faults;          // scheduled faults: device:fault[=v][@start[-end]]
     std::string runtime_dir;                  // pty links; empty: a fresh directory under /tmp
     double step_s = 1.0;                      // virtual-clock step
+    double manikin_period_s = 5.0;            // the manikin's zone report interval (Text S3.2: 5 s)
 };
 
 struct Config {

@@ -40,6 +40,7 @@ public:
     static config::Config quick_config() {
         config::Config c = config::default_config();
         c.devices.modbus_timeout_s = 0.05;  // a silent device costs 50 ms of real time per request
+        c.simulation.manikin_period_s = 1.0;
         return c;
     }
 

@@ -1,0 +1,94 @@
+#include "daemon/core/campaign_plan.hpp"
+
+#include <fmt/format.h>
+#include <toml++/toml.h>
+
+#include "daemon/core/toml_input.hpp"
+#include "daemon/core/user_error.hpp"
+#include "sim/campaign/campaign_generator.hpp"
+
+namespace manikind {
+
+CampaignPlan table_s3_plan(const std::string& name) {
+    CampaignPlan p;
+    p.name = name;
+    for (const auto& c : sim::table_s3_cases())
+        p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
+                           c.wettedness > 0.5 ? 300.0 : 0.0});
+    return p;
+}
+
+CampaignPlan parse_campaign_plan(const std::string& text, const std::string& source) {
+    const toml::table root = toml_input::parse(text, source);
+    auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
+    auto number = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
+        const auto* n = t.get(key);
+        if (!n) return fallback;
+        if (!n->is_number()) throw UserError(fmt::format("{}: {}: expected a number", where(*n), key));
+        const double v = n->is_integer() ? static_cast<double>(n->as_integer()->get()) : n->as_floating_point()->get();
+        if (!(v >= lo && v <= hi)) throw UserError(fmt::format("{}: {}: {} is outside {}..{}", where(*n), key, v, lo, hi));
+        return v;
+    };
+    CampaignPlan p;
+    const auto* name = root.get("name");
+    if (!name || !name->is_string()) throw UserError(fmt::format("{}: name: expected the campaign's name (a string)", source));
+    p.name = name->as_string()->get();
+    if (p.name.empty() || p.name.find_first_of("/\\") != std::string::npos)
+        throw UserError(fmt::format("{}: name: must be non-empty and contain no '/'", where(*name)));
+    p.replicates = static_cast<int>(number(root, "replicates", 3, 1, 20));
+    p.trial_duration_s = 60.0 * number(root, "trial_duration_min", 75, 1, 24 * 60);
+    p.settle_window_s = 60.0 * number(root, "settle_window_min", 10, 0, 600);
+    p.settle_band_c = number(root, "settle_band_c", 0.3, 0.01, 10);
+    if (const auto* b = root.get("builtin_cases")) {
+        if (!b->is_string() || b->as_string()->get() != "table-s3")
+            throw UserError(fmt::format("{}: builtin_cases: the only built-in list is \"table-s3\"", where(*b)));
+        p.cases = table_s3_plan(p.name).cases;
+    }
+    if (const auto* cases = root.get("cases")) {
+        const auto* arr = cases->as_array();
+        if (!arr) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(*cases)));
+        for (const auto& node : *arr) {
+            const auto* t = node.as_table();
+            if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
+            PlannedCase c;
+            c.id = static_cast<int>(number(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6));
+            if (!t->get("chamber_temp_c") || !t->get("chamber_rh_pct"))
+                throw UserError(fmt::format("{}: cases: chamber_temp_c and chamber_rh_pct are required", where(node)));
+            c.chamber_temp_c = number(*t, "chamber_temp_c", 0, -40, 80);
+            c.chamber_rh_pct = number(*t, "chamber_rh_pct", 0, 0, 100);
+            c.skin_setpoint_c = number(*t, "skin_setpoint_c", 35, 0, 60);
+            if (const auto* w = t->get("wet")) {
+                if (!w->is_boolean()) throw UserError(fmt::format("{}: wet: expected true or false", where(*w)));
+                c.wet = w->as_boolean()->get();
+            }
+            c.sweat_rate_g_m2_h = number(*t, "sweat_rate_g_m2_h", c.wet ? 300 : 0, 0, 510);
+            p.cases.push_back(c);
+        }
+    }
+    if (p.cases.empty()) throw UserError(fmt::format("{}: no cases (give [[cases]] or builtin_cases = \"table-s3\")", source));
+    return p;
+}
+
+CampaignPlan load_campaign_plan(const std::string& file) {
+    if (file == "builtin:table-s3") return table_s3_plan("table-s3");
+    const auto text = toml_input::read_file(file);
+    if (!text) throw UserError(fmt::format("{}: cannot open the campaign file", file));
+    return parse_campaign_plan(*text, file);
+}
+
+std::string check_plan_against_limits(const CampaignPlan& plan, const config::SafetyLimits& l) {
+    for (const auto& c : plan.cases) {
+        if (c.chamber_temp_c < l.min_chamber_temp_c || c.chamber_temp_c > l.max_chamber_temp_c)
+            return fmt::format("case {}: chamber_temp_c {} is outside the safety limits {}..{} °C (safety.min/max_chamber_temp_c)",
+                               c.id, c.chamber_temp_c, l.min_chamber_temp_c, l.max_chamber_temp_c);
+        if (c.chamber_rh_pct < l.min_chamber_rh_pct || c.chamber_rh_pct > l.max_chamber_rh_pct)
+            return fmt::format("case {}: chamber_rh_pct {} is outside the safety limits {}..{} % (safety.min/max_chamber_rh_pct)",
+                               c.id, c.chamber_rh_pct, l.min_chamber_rh_pct, l.max_chamber_rh_pct);
+        if (c.skin_setpoint_c < l.min_skin_temp_c || c.skin_setpoint_c > l.max_skin_temp_c)
+            return fmt::format("case {}: skin_setpoint_c {} is outside the safety limits {}..{} °C (safety.min/max_skin_temp_c)",
+                               c.id, c.skin_setpoint_c, l.min_skin_temp_c, l.max_skin_temp_c);
+    }
+    return {};
+}
+
+}  // namespace manikind

@@ -1,0 +1,503 @@
+#include "daemon/core/lab_daemon.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "analysis/analyze.hpp"
+#include "analysis/zone_map.hpp"
+#include "daemon/core/database_export.hpp"
+#include "daemon/core/user_error.hpp"
+
+namespace manikind {
+
+namespace mc = protocol::manikin_can;
+
+const char* to_string(Stage s) {
+    switch (s) {
+        case Stage::idle: return "idle";
+        case Stage::configuring: return "configuring";
+        case Stage::chamber_settling: return "chamber_settling";
+        case Stage::manikin_starting: return "manikin_starting";
+        case Stage::acquiring: return "acquiring";
+        case Stage::stopping: return "stopping";
+        case Stage::computing: return "computing";
+    }
+    return "unknown";
+}
+
+void SlidingRange::push(std::int64_t t, double v) {
+    while (!maxq_.empty() && maxq_.back().second <= v) maxq_.pop_back();
+    maxq_.emplace_back(t, v);
+    while (!minq_.empty() && minq_.back().second >= v) minq_.pop_back();
+    minq_.emplace_back(t, v);
+    all_.push_back(t);
+}
+
+void SlidingRange::evict_before(std::int64_t t) {
+    while (!maxq_.empty() && maxq_.front().first < t) maxq_.pop_front();
+    while (!minq_.empty() && minq_.front().first < t) minq_.pop_front();
+    while (!all_.empty() && all_.front() < t) all_.pop_front();
+}
+
+double SlidingRange::range() const {
+    if (maxq_.empty()) return std::nan("");
+    return maxq_.front().second - minq_.front().second;
+}
+
+LabDaemon::LabDaemon(DaemonOptions options)
+    : o_(std::move(options)),
+      db_path_(o_.config.database.is_relative() && !o_.config.source_dir.empty() ? o_.config.source_dir / o_.config.database
+                                                                                 : o_.config.database),
+      db_(recorder::Database::open(db_path_)) {
+    const int interrupted = db_.mark_interrupted_trials(system_clock_.utc_ns());
+    if (interrupted > 0)
+        db_.add_event(std::nullopt, 0, system_clock_.utc_ns(), "warn", "restart",
+                      fmt::format("{} trial(s) were running when the daemon stopped; marked interrupted", interrupted));
+    recorder_ = std::make_unique<recorder::Recorder>(db_path_);
+    skin_range_.resize(analysis::andi35_zone_map().size());
+    auto sink = [this](const drivers::Sample& s) { on_sample(s); };
+    if (o_.config.mode == "simulated") {
+        clock_ = &virtual_clock_;
+        acq_ = std::make_unique<Acquisition>(o_.config, virtual_clock_, sink);
+    } else {
+        clock_ = &system_clock_;
+        acq_ = std::make_unique<Acquisition>(o_.config, system_clock_, sink);
+        o_.virtual_clock = false;
+    }
+    acq_->start();
+    for (const auto& st : acq_->status())
+        db_.device_id(st.name, st.name == "manikin" ? "can" : (st.name == "chamber" || st.name == "datalogger") ? "modbus" : "serial",
+                      st.transport);
+    event("info", "daemon", fmt::format("started ({} lab, database {})", o_.config.mode, db_path_.string()));
+}
+
+LabDaemon::~LabDaemon() {
+    stop();
+    acq_.reset();
+    recorder_.reset();
+}
+
+std::int64_t LabDaemon::channel_id(const std::string& device, const std::string& channel) {
+    const std::string key = device + "/" + channel;
+    if (const auto it = channel_ids_.find(key); it != channel_ids_.end()) return it->second;
+    const auto dot = channel.rfind('_');
+    std::string unit = dot == std::string::npos ? "" : channel.substr(dot + 1);
+    if (unit == "c") unit = "°C";
+    else if (unit == "pct") unit = "%";
+    else if (unit == "s" && channel.find("_m_s") != std::string::npos) unit = "m/s";
+    else if (unit == "m2") unit = "W/m²";
+    else if (unit == "h") unit = "g/(m² h)";
+    const std::int64_t id = db_.channel_id(db_.device_id(device, "", ""), channel, unit);
+    channel_ids_[key] = id;
+    return id;
+}
+
+void LabDaemon::event(const std::string& severity, const std::string& kind, const std::string& message) {
+    const std::optional<std::int64_t> trial = trial_id_ ? std::optional<std::int64_t>(trial_id_) : std::nullopt;
+    db_.add_event(trial, clock_ ? clock_->mono_ns() : 0, clock_ ? clock_->utc_ns() : system_clock_.utc_ns(), severity, kind,
+                  message);
+    if (severity == "error") spdlog::error("{}: {}", kind, message);
+    else if (severity == "warn") spdlog::warn("{}: {}", kind, message);
+    else spdlog::debug("{}: {}", kind, message);
+}
+
+void LabDaemon::on_sample(const drivers::Sample& s) {
+    std::lock_guard lk(lock_);
+    live_[s.device + "/" + s.channel] = s;
+    // Safety: enforced here, whatever a client asked for.
+    if (s.device == "manikin" && s.quality != drivers::Quality::comm_error && acq_ && acq_->manikin().running_command()) {
+        const auto& lim = o_.config.safety;
+        if (s.channel.ends_with(".skin_temp_c") && s.value > lim.max_skin_temp_c)
+            safety_stop(fmt::format("{} = {:.2f} °C is above safety.max_skin_temp_c = {} °C", s.channel, s.value,
+                                    lim.max_skin_temp_c));
+        if (s.channel.ends_with(".heater_power_w_m2") && s.value > lim.max_heater_power_w_m2)
+            safety_stop(fmt::format("{} = {:.1f} W/m² is above safety.max_heater_power_w_m2 = {} W/m²", s.channel, s.value,
+                                    lim.max_heater_power_w_m2));
+    }
+    if (s.device == "manikin" && s.channel.ends_with(".skin_temp_c") && s.quality == drivers::Quality::good &&
+        stage_ == Stage::acquiring) {
+        const int zone = std::atoi(s.channel.c_str() + 1);
+        if (zone >= 1 && zone <= static_cast<int>(skin_range_.size())) skin_range_[static_cast<std::size_t>(zone - 1)].push(s.mono_ns, s.value);
+    }
+    if (s.device == "datalogger" && s.channel.ends_with("air_temp_c") && s.quality == drivers::Quality::good &&
+        s.channel == "ee181_1.air_temp_c")
+        enclosure_range_.push(s.mono_ns, s.value);
+    if (trial_id_ == 0) return;
+    recorder::SampleRow row{trial_id_, channel_id(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
+                            static_cast<std::uint8_t>(s.quality)};
+    if (!recorder_->push(row)) {
+        if (o_.virtual_clock) {
+            // Virtual time waits for the disk; nothing is dropped.
+            recorder_->flush();
+            recorder_->push(row);
+        } else {
+            ++dropped_samples_;
+        }
+    }
+}
+
+double LabDaemon::enclosure_air_c() const {
+    double sum = 0;
+    int n = 0;
+    for (const auto& [key, s] : live_)
+        if (key.starts_with("datalogger/ee181_") && key.ends_with(".air_temp_c") && s.quality == drivers::Quality::good)
+            sum += s.value, ++n;
+    return n ? sum / n : std::nan("");
+}
+
+double LabDaemon::stage_elapsed_s() const {
+    const std::int64_t now = paused_ ? paused_at_ns_ : clock_->mono_ns();
+    return static_cast<double>(now - stage_start_ns_) * 1e-9;
+}
+
+void LabDaemon::enter(Stage s, const std::string& why) {
+    stage_ = s;
+    stage_start_ns_ = clock_->mono_ns();
+    event("info", "stage", to_string(s));
+    if (!why.empty()) event("info", "stage_reason", why);
+    if (trial_id_) db_.set_trial_state(trial_id_, to_string(s), why, clock_->utc_ns());
+}
+
+std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
+    std::lock_guard lk(lock_);
+    if (plan_) return fmt::format("campaign '{}' is still running; abort it first", plan_->name);
+    if (const auto why = check_plan_against_limits(plan, o_.config.safety); !why.empty()) return why;
+    if (db_.find_campaign(plan.name)) return fmt::format("a campaign named '{}' is already in {}", plan.name, db_path_.string());
+    nlohmann::json def = {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
+    campaign_id_ = db_.create_campaign(plan.name, def.dump());
+    queue_.clear();
+    int position = 0;
+    std::vector<std::pair<PlannedCase, std::int64_t>> cases;
+    for (const auto& c : plan.cases) {
+        nlohmann::json cj = {{"id", c.id}, {"chamber_temp_c", c.chamber_temp_c}, {"chamber_rh_pct", c.chamber_rh_pct},
+                             {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
+        cases.emplace_back(c, db_.add_case(campaign_id_, fmt::format("case {}", c.id), cj.dump(), position++));
+    }
+    for (int r = 1; r <= plan.replicates; ++r)
+        for (const auto& [c, id] : cases) queue_.push_back({c, id, r});
+    trials_total_ = static_cast<int>(queue_.size());
+    trials_done_ = 0;
+    plan_ = plan;
+    safety_tripped_ = false;
+    trial_summaries_.clear();
+    last_campaign_ = plan.name;
+    db_.set_campaign_state(campaign_id_, "running");
+    event("info", "campaign", fmt::format("'{}' started: {} cases x {} replicates", plan.name, plan.cases.size(), plan.replicates));
+    return {};
+}
+
+std::string LabDaemon::abort(const std::string& reason) {
+    std::lock_guard lk(lock_);
+    if (!plan_) return "no campaign is running";
+    acq_->manikin().set_run(false);
+    if (trial_id_) finish_trial("aborted", reason);
+    finish_campaign("aborted");
+    return {};
+}
+
+std::string LabDaemon::pause() {
+    std::lock_guard lk(lock_);
+    if (!plan_) return "no campaign is running";
+    if (paused_) return "already paused";
+    paused_ = true;
+    paused_at_ns_ = clock_->mono_ns();
+    event("info", "campaign", "paused");
+    return {};
+}
+
+std::string LabDaemon::resume() {
+    std::lock_guard lk(lock_);
+    if (!paused_) return "not paused";
+    stage_start_ns_ += clock_->mono_ns() - paused_at_ns_;  // the stage's clock stood still
+    paused_ = false;
+    event("info", "campaign", "resumed");
+    return {};
+}
+
+std::string LabDaemon::set_chamber(double temp_c, double rh_pct) {
+    std::lock_guard lk(lock_);
+    const auto& l = o_.config.safety;
+    if (temp_c < l.min_chamber_temp_c || temp_c > l.max_chamber_temp_c)
+        return fmt::format("chamber_temp_c {} is outside the safety limits {}..{} °C (safety.min/max_chamber_temp_c)", temp_c,
+                           l.min_chamber_temp_c, l.max_chamber_temp_c);
+    if (rh_pct < l.min_chamber_rh_pct || rh_pct > l.max_chamber_rh_pct)
+        return fmt::format("chamber_rh_pct {} is outside the safety limits {}..{} % (safety.min/max_chamber_rh_pct)", rh_pct,
+                           l.min_chamber_rh_pct, l.max_chamber_rh_pct);
+    if (auto why = acq_->chamber().write("air_temp_remote_setpoint_c", temp_c); !why.empty()) return why;
+    if (auto why = acq_->chamber().write("air_rh_remote_setpoint_pct", rh_pct); !why.empty()) return why;
+    event("info", "setpoint", fmt::format("chamber {} °C, {} %", temp_c, rh_pct));
+    return {};
+}
+
+void LabDaemon::safety_stop(const std::string& why) {
+    if (safety_tripped_) return;
+    safety_tripped_ = true;
+    acq_->manikin().set_run(false);
+    event("error", "safety", "heating stopped: " + why);
+    if (trial_id_) {
+        db_.add_trial_flag(trial_id_, flag_safety_stop);
+        finish_trial("failed", "safety stop: " + why);
+    }
+    if (plan_) finish_campaign("aborted");
+}
+
+void LabDaemon::finish_trial(const std::string& state, const std::string& reason) {
+    flush_recorder();
+    db_.set_trial_state(trial_id_, state, reason, clock_->utc_ns());
+    if (dropped_samples_) db_.add_trial_flag(trial_id_, flag_dropped_samples);
+    trial_summaries_.push_back(fmt::format("case {} replicate {}: {}{}", current_->c.id, current_->replicate, state,
+                                           reason.empty() ? "" : " (" + reason + ")"));
+    trial_id_ = 0;
+    current_.reset();
+    ++trials_done_;
+    stage_ = Stage::idle;
+}
+
+void LabDaemon::flush_recorder() { recorder_->flush(); }
+
+void LabDaemon::finish_campaign(const std::string& state) {
+    queue_.clear();
+    if (state == "done") {
+        stage_ = Stage::computing;
+        try {
+            const auto campaign = campaign_from_database(db_, plan_->name);
+            const auto result = analysis::analyze_campaign(campaign);
+            db_.store_result(campaign_id_, analysis::to_json(result).dump(), clock_->utc_ns());
+            event("info", "results", fmt::format("'{}': results stored", plan_->name));
+        } catch (const std::exception& e) {
+            event("error", "results", std::string("could not compute results: ") + e.what());
+        }
+    }
+    db_.set_campaign_state(campaign_id_, state);
+    event("info", "campaign", fmt::format("'{}' {}", plan_->name, state));
+    plan_.reset();
+    paused_ = false;
+    stage_ = Stage::idle;
+}
+
+// The trial state machine: one transition check per call (every tick of the clock).
+void LabDaemon::tick_locked() {
+    const std::int64_t now = clock_->mono_ns();
+    // Gaps: a device that goes stale or disconnects is recorded, and flags the running trial.
+    for (const auto& st : acq_->status()) {
+        const bool down = st.stale || !st.connected;
+        const auto it = gap_since_ns_.find(st.name);
+        if (down && it == gap_since_ns_.end()) {
+            gap_since_ns_[st.name] = now;
+            event("warn", "gap", fmt::format("{} lost: {}", st.name, st.last_error));
+            if (trial_id_) db_.add_trial_flag(trial_id_, flag_device_gap);
+        } else if (!down && it != gap_since_ns_.end()) {
+            event("info", "gap", fmt::format("{} back after {:.0f} s", st.name, static_cast<double>(now - it->second) * 1e-9));
+            gap_since_ns_.erase(it);
+        }
+    }
+    // Watchdog: heating with a silent manikin or chamber is not allowed.
+    if (acq_->manikin().running_command()) {
+        const double limit_s = o_.config.safety.watchdog_timeout_s;
+        for (const char* dev : {"manikin", "chamber"}) {
+            const auto it = gap_since_ns_.find(dev);
+            if (it != gap_since_ns_.end() && static_cast<double>(now - it->second) * 1e-9 > limit_s)
+                safety_stop(fmt::format("watchdog: {} silent for more than safety.watchdog_timeout_s = {} s", dev, limit_s));
+        }
+    }
+    if (!plan_ || paused_) return;
+    const double elapsed = stage_elapsed_s();
+    switch (stage_) {
+        case Stage::idle: {
+            if (queue_.empty()) {
+                finish_campaign("done");
+                return;
+            }
+            current_ = queue_.front();
+            queue_.pop_front();
+            trial_id_ = db_.create_trial(campaign_id_, current_->case_id, current_->replicate);
+            dropped_samples_ = 0;
+            enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
+            if (const auto why = set_chamber(current_->c.chamber_temp_c, current_->c.chamber_rh_pct); !why.empty()) {
+                finish_trial("failed", "chamber setpoint refused: " + why);
+                return;
+            }
+            enclosure_range_.clear();
+            enter(Stage::chamber_settling);
+            return;
+        }
+        case Stage::chamber_settling: {
+            enclosure_range_.evict_before(now - static_cast<std::int64_t>(plan_->settle_window_s * 1e9));
+            const bool window_full = !enclosure_range_.empty() &&
+                                     static_cast<double>(now - enclosure_range_.oldest_ns()) * 1e-9 >= plan_->settle_window_s - 1.0;
+            if (window_full && enclosure_range_.range() < plan_->settle_band_c) {
+                enter(Stage::manikin_starting, fmt::format("enclosure stable at {:.2f} °C", enclosure_air_c()));
+            } else if (elapsed > plan_->settle_timeout_s) {
+                finish_trial("failed", fmt::format("timeout: the enclosure did not settle within {:.0f} min",
+                                                   plan_->settle_timeout_s / 60));
+            }
+            return;
+        }
+        case Stage::manikin_starting: {
+            mc::Setpoint sp;
+            sp.zone = 0;
+            sp.mode = mc::ControlMode::constant_skin_temp;
+            sp.value = current_->c.skin_setpoint_c;
+            sp.sweating = current_->c.wet;
+            sp.sweat_rate_g_m2_h = current_->c.sweat_rate_g_m2_h;
+            if (!acq_->manikin().send(sp) || !acq_->manikin().set_run(true)) {
+                finish_trial("failed", "the manikin bus refused the setpoint");
+                return;
+            }
+            for (auto& r : skin_range_) r.clear();
+            steady_since_ns_.reset();
+            acquiring_since_ns_ = now;
+            enter(Stage::acquiring, fmt::format("skin {} °C, {}", sp.value, sp.sweating ? "wet" : "dry"));
+            return;
+        }
+        case Stage::acquiring: {
+            const double window_s = o_.config.steady_state.window_s;
+            double worst = 0.0;
+            bool observed = static_cast<double>(now - acquiring_since_ns_) * 1e-9 >= window_s;
+            for (auto& r : skin_range_) {
+                r.evict_before(now - static_cast<std::int64_t>(window_s * 1e9));
+                if (r.empty()) observed = false;
+                else worst = std::max(worst, r.range());
+            }
+            const bool steady = observed && worst <= o_.config.steady_state.max_skin_fluctuation_c;
+            if (steady && !steady_since_ns_) {
+                steady_since_ns_ = now - static_cast<std::int64_t>(window_s * 1e9);
+                db_.set_trial_steady(trial_id_, *steady_since_ns_);
+                event("info", "steady", fmt::format("every zone within {:.3f} °C over the last {:.0f} min", worst, window_s / 60));
+            } else if (!steady && steady_since_ns_) {
+                steady_since_ns_.reset();
+            }
+            if (elapsed >= plan_->trial_duration_s && steady) {
+                enter(Stage::stopping, "trial duration reached, steady");
+            } else if (elapsed > plan_->acquire_timeout_s) {
+                db_.add_trial_flag(trial_id_, flag_never_steady);
+                enter(Stage::stopping, fmt::format("timeout: not steady after {:.0f} min (worst zone {:.3f} °C)",
+                                                   plan_->acquire_timeout_s / 60, worst));
+            }
+            return;
+        }
+        case Stage::stopping: {
+            acq_->manikin().set_run(false);
+            finish_trial("done", steady_since_ns_ ? "" : "never steady");
+            return;
+        }
+        case Stage::configuring:
+        case Stage::computing: return;
+    }
+}
+
+void LabDaemon::step_virtual(double dt_s) {
+    std::lock_guard lk(lock_);
+    acq_->step(dt_s);
+    tick_locked();
+}
+
+bool LabDaemon::campaign_active() {
+    std::lock_guard lk(lock_);
+    return plan_.has_value();
+}
+
+void LabDaemon::run_virtual(std::function<void(const std::string&)> on_trial, double max_virtual_s) {
+    const double dt = o_.config.simulation.step_s;
+    std::size_t reported = 0;
+    for (double t = 0; t < max_virtual_s; t += dt) {
+        step_virtual(dt);
+        std::lock_guard lk(lock_);
+        while (reported < trial_summaries_.size()) {
+            if (on_trial) on_trial(fmt::format("[{}/{}] {}", reported + 1, trials_total_, trial_summaries_[reported]));
+            ++reported;
+        }
+        if (!plan_) break;
+    }
+    recorder_->flush();
+}
+
+void LabDaemon::start_realtime() {
+    acq_->start_realtime(o_.speed);
+    stop_ = false;
+    tick_thread_ = std::thread([this] {
+        auto next = std::chrono::steady_clock::now();
+        for (;;) {
+            next += std::chrono::seconds(1);
+            std::this_thread::sleep_until(next);
+            std::lock_guard lk(lock_);
+            if (stop_) break;
+            tick_locked();
+        }
+    });
+}
+
+void LabDaemon::stop() {
+    {
+        std::lock_guard lk(lock_);
+        stop_ = true;
+    }
+    if (tick_thread_.joinable()) tick_thread_.join();
+    if (acq_) {
+        acq_->manikin().set_run(false);
+        acq_->stop();
+    }
+    if (recorder_) recorder_->flush();
+}
+
+nlohmann::json LabDaemon::status_json() {
+    std::lock_guard lk(lock_);
+    nlohmann::json j;
+    j["mode"] = o_.config.mode;
+    j["clock"] = o_.virtual_clock ? "virtual" : "real";
+    j["database"] = db_path_.string();
+    j["time_s"] = static_cast<double>(clock_->mono_ns()) * 1e-9;
+    j["campaign"] = plan_ ? nlohmann::json(plan_->name) : nlohmann::json(nullptr);
+    j["stage"] = to_string(stage_);
+    j["paused"] = paused_;
+    j["trials_done"] = trials_done_;
+    j["trials_total"] = trials_total_;
+    if (current_) {
+        j["trial"] = {{"case", current_->c.id}, {"replicate", current_->replicate}, {"id", trial_id_},
+                      {"stage_elapsed_s", stage_elapsed_s()}};
+        if (stage_ == Stage::acquiring) {
+            double worst = 0.0;
+            for (const auto& r : skin_range_)
+                if (!r.empty()) worst = std::max(worst, r.range());
+            const double window = o_.config.steady_state.window_s;
+            j["trial"]["steady_progress"] = std::min(1.0, static_cast<double>(clock_->mono_ns() - acquiring_since_ns_) * 1e-9 / window);
+            j["trial"]["worst_zone_range_c"] = worst;
+            j["trial"]["steady"] = steady_since_ns_.has_value();
+        }
+    }
+    nlohmann::json devices = nlohmann::json::array();
+    for (const auto& s : acq_->status())
+        devices.push_back({{"name", s.name}, {"transport", s.transport}, {"connected", s.connected}, {"stale", s.stale},
+                           {"samples", s.samples}, {"frames", s.frames}, {"checksum_errors", s.checksum_errors},
+                           {"malformed", s.malformed}, {"timeouts", s.timeouts}, {"exceptions", s.exceptions},
+                           {"reconnects", s.reconnects}, {"comm_errors", s.comm_errors}, {"device_faults", s.device_faults},
+                           {"last_error", s.last_error}});
+    j["devices"] = devices;
+    const auto rs = recorder_->stats();
+    j["recorder"] = {{"accepted", rs.accepted}, {"committed", rs.committed}, {"dropped", rs.dropped + dropped_samples_}};
+    j["safety_tripped"] = safety_tripped_;
+    return j;
+}
+
+nlohmann::json LabDaemon::live_json() {
+    std::lock_guard lk(lock_);
+    nlohmann::json j = nlohmann::json::object();
+    for (const auto& [key, s] : live_)
+        j[key] = {{"value", std::isfinite(s.value) ? nlohmann::json(s.value) : nlohmann::json(nullptr)},
+                  {"quality", drivers::to_string(s.quality)}, {"age_s", static_cast<double>(clock_->mono_ns() - s.mono_ns) * 1e-9}};
+    return j;
+}
+
+nlohmann::json LabDaemon::results_json(const std::string& campaign) {
+    std::lock_guard lk(lock_);
+    const auto id = db_.find_campaign(campaign);
+    if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), campaign));
+    const auto r = db_.latest_result(*id);
+    if (!r) throw UserError(fmt::format("campaign '{}' has no results yet", campaign));
+    return nlohmann::json::parse(r->json);
+}
+
+}  // namespace manikind

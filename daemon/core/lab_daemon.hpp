@@ -1,0 +1,144 @@
+#pragma once
+// The daemon's heart: acquisition (drivers, and the simulated lab in simulated mode), the
+// recorder, and the campaign state machine. One trial goes
+//   configuring -> chamber_settling -> manikin_starting -> acquiring -> stopping -> done
+// (or aborted / failed / interrupted), with a timeout and a reason for every stage that can
+// hang. Campaigns are cases x replicates, queued. The daemon enforces the manikin's safety
+// limits itself (skin temperature, heater power, a watchdog on the manikin and chamber) and
+// records every such event. Thread-safe: the control API calls in from its own thread.
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/core/acquisition.hpp"
+#include "daemon/core/campaign_plan.hpp"
+#include "daemon/core/config.hpp"
+#include "daemon/core/recorder/database.hpp"
+#include "daemon/core/recorder/recorder.hpp"
+
+namespace manikind {
+
+enum class Stage { idle, configuring, chamber_settling, manikin_starting, acquiring, stopping, computing };
+const char* to_string(Stage s);
+
+// Trial quality flags (trials.quality_flags).
+enum TrialFlag : std::int64_t { flag_device_gap = 1, flag_safety_stop = 2, flag_never_steady = 4, flag_dropped_samples = 8 };
+
+// The sliding range (max - min) of one signal over a time window: monotonic deques, O(1) per sample.
+class SlidingRange {
+public:
+    void push(std::int64_t t_ns, double v);
+    void evict_before(std::int64_t t_ns);
+    double range() const;
+    std::int64_t oldest_ns() const { return all_.empty() ? 0 : all_.front(); }
+    bool empty() const { return all_.empty(); }
+    void clear() { maxq_.clear(), minq_.clear(), all_.clear(); }
+
+private:
+    std::deque<std::pair<std::int64_t, double>> maxq_, minq_;
+    std::deque<std::int64_t> all_;
+};
+
+struct DaemonOptions {
+    config::Config config;
+    bool virtual_clock = true;   // simulated mode only: run as fast as the CPU allows
+    double speed = 1.0;          // simulated real-time mode: x wall clock
+};
+
+class LabDaemon {
+public:
+    explicit LabDaemon(DaemonOptions options);
+    ~LabDaemon();
+
+    // Commands: an empty string when accepted, else why not (the limit or state named).
+    std::string start_campaign(const CampaignPlan& plan);
+    std::string abort(const std::string& reason);
+    std::string pause();
+    std::string resume();
+    std::string set_chamber(double temp_c, double rh_pct);
+
+    nlohmann::json status_json();
+    nlohmann::json live_json();
+    nlohmann::json results_json(const std::string& campaign);   // latest stored results
+
+    // Virtual clock: steps until the queue is empty (or `max_virtual_s` passes). `on_trial` is
+    // called after each trial with a one-line summary.
+    void run_virtual(std::function<void(const std::string&)> on_trial = {}, double max_virtual_s = 1e12);
+    void step_virtual(double dt_s);
+    // Real time: acquisition threads plus a 1-s tick thread.
+    void start_realtime();
+    void stop();
+    bool campaign_active();
+
+    recorder::Database& db() { return db_; }
+    Acquisition& acquisition() { return *acq_; }
+    const std::filesystem::path& database_path() const { return db_path_; }
+    std::optional<std::string> last_campaign() const { return last_campaign_; }
+
+private:
+    struct TrialJob {
+        PlannedCase c;
+        std::int64_t case_id = 0;
+        int replicate = 0;
+    };
+    void on_sample(const drivers::Sample& s);
+    void tick_locked();
+    void enter(Stage s, const std::string& why = {});
+    void event(const std::string& severity, const std::string& kind, const std::string& message);
+    void finish_trial(const std::string& state, const std::string& reason);
+    void finish_campaign(const std::string& state);
+    void safety_stop(const std::string& why);
+    double stage_elapsed_s() const;
+    std::int64_t channel_id(const std::string& device, const std::string& channel);
+    double enclosure_air_c() const;
+    void flush_recorder();
+
+    DaemonOptions o_;
+    std::filesystem::path db_path_;
+    recorder::Database db_;
+    std::unique_ptr<recorder::Recorder> recorder_;
+    drivers::ManualClock virtual_clock_;
+    drivers::SystemClock system_clock_;
+    const drivers::Clock* clock_ = nullptr;
+    std::unique_ptr<Acquisition> acq_;
+    std::recursive_mutex lock_;
+
+    // Campaign state.
+    std::optional<CampaignPlan> plan_;
+    std::int64_t campaign_id_ = 0;
+    std::deque<TrialJob> queue_;
+    std::optional<TrialJob> current_;
+    std::int64_t trial_id_ = 0;
+    int trials_total_ = 0, trials_done_ = 0;
+    Stage stage_ = Stage::idle;
+    std::int64_t stage_start_ns_ = 0;
+    bool paused_ = false;
+    std::int64_t paused_at_ns_ = 0;
+    bool safety_tripped_ = false;
+    std::optional<std::string> last_campaign_;
+    std::vector<std::string> trial_summaries_;
+
+    // Live values and detectors.
+    std::map<std::string, drivers::Sample> live_;
+    std::map<std::string, std::int64_t> channel_ids_;
+    std::vector<SlidingRange> skin_range_;
+    SlidingRange enclosure_range_;
+    std::int64_t acquiring_since_ns_ = 0;
+    std::optional<std::int64_t> steady_since_ns_;
+    std::map<std::string, std::int64_t> gap_since_ns_;
+    std::int64_t manikin_silent_since_ns_ = -1;
+    std::uint64_t dropped_samples_ = 0;
+
+    std::thread tick_thread_;
+    bool stop_ = false;
+};
+
+}  // namespace manikind

@@ -1,0 +1,164 @@
+#pragma once
+// The trial database: one SQLite file per installation holding campaigns, cases, trials,
+// devices, channels, samples, events, results and twin versions (docs/recorder.md).
+//
+// One Database is one sqlite3 connection, used from one thread. Several connections (the
+// daemon's and the Recorder's writer thread) may share one file: WAL lets readers run beside
+// the one writer, and busy_timeout makes writers queue instead of failing.
+//
+// Every SQLite failure throws manikind::UserError naming the file and SQLite's message.
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace manikind::recorder {
+
+// Sample quality codes stored in samples.quality.
+enum class Quality : std::uint8_t { good = 0, stale = 1, out_of_range = 2, comm_error = 3 };
+
+struct SampleRow {
+    std::int64_t trial_id = 0;
+    std::int64_t channel_id = 0;
+    std::int64_t mono_ns = 0;  // CLOCK_MONOTONIC: orders samples within a trial
+    std::int64_t utc_ns = 0;   // wall clock, for people
+    double value = 0.0;        // NaN is stored as NULL and read back as NaN
+    std::uint8_t quality = 0;  // see Quality
+};
+
+struct CampaignRow {
+    std::int64_t id = 0;
+    std::string name;
+    std::string definition_json;
+    std::int64_t created_utc_ns = 0;
+    std::string state;  // "created" until the daemon says otherwise
+};
+
+struct CaseRow {
+    std::int64_t id = 0;
+    std::int64_t campaign_id = 0;
+    std::string name;
+    std::string conditions_json;
+    std::int64_t position = 0;
+};
+
+struct TrialRow {
+    std::int64_t id = 0;
+    std::int64_t campaign_id = 0;
+    std::int64_t case_id = 0;
+    std::int64_t replicate = 0;
+    std::string state;  // "pending" at creation; terminal: done, aborted, interrupted, failed
+    std::string reason;
+    std::optional<std::int64_t> started_utc_ns;       // first state change away from "pending"
+    std::optional<std::int64_t> ended_utc_ns;         // entry into a terminal state
+    std::optional<std::int64_t> steady_from_mono_ns;  // start of the steady-state window
+    std::int64_t quality_flags = 0;                   // OR of the flags added so far
+};
+
+struct ChannelRow {
+    std::int64_t id = 0;
+    std::int64_t device_id = 0;
+    std::string device_name;
+    std::string name;
+    std::string unit;
+};
+
+struct EventRow {
+    std::int64_t id = 0;
+    std::optional<std::int64_t> trial_id;  // empty: a daemon-wide event
+    std::int64_t mono_ns = 0;
+    std::int64_t utc_ns = 0;
+    std::string severity;  // "info", "warn", "error"
+    std::string kind;
+    std::string message;
+};
+
+struct ResultRow {
+    std::int64_t id = 0;
+    std::int64_t campaign_id = 0;
+    std::int64_t computed_utc_ns = 0;
+    std::string json;
+};
+
+// True for the states a trial never leaves: done, aborted, interrupted, failed.
+bool is_terminal_trial_state(std::string_view state);
+
+class Database {
+public:
+    // Opens (creating if absent) and migrates to the latest schema. Throws UserError if the
+    // file is not a database, cannot be put in WAL mode, or has a schema newer than this program.
+    static Database open(const std::filesystem::path& path);
+
+    Database(Database&&) noexcept;
+    Database& operator=(Database&&) noexcept;
+    Database(const Database&) = delete;
+    Database& operator=(const Database&) = delete;
+    ~Database();
+
+    // Migration i (0-based) takes the schema from version i to i + 1; PRAGMA user_version is
+    // the version. Exposed so a test can build an old database.
+    static std::span<const char* const> migrations();
+    static int latest_schema_version();
+
+    const std::filesystem::path& path() const;
+    int schema_version();
+    std::string journal_mode();
+    std::string integrity_check();  // "ok" when fine, else SQLite's findings one per line
+
+    // Campaigns, cases, trials.
+    std::int64_t create_campaign(const std::string& name, const std::string& definition_json);  // UserError if the name exists
+    std::optional<std::int64_t> find_campaign(const std::string& name);
+    void set_campaign_state(std::int64_t campaign_id, const std::string& state);
+    std::int64_t add_case(std::int64_t campaign_id, const std::string& name, const std::string& conditions_json,
+                          std::int64_t position);
+    std::int64_t create_trial(std::int64_t campaign_id, std::int64_t case_id, std::int64_t replicate);
+    void set_trial_state(std::int64_t trial_id, const std::string& state, const std::string& reason, std::int64_t utc_ns);
+    void set_trial_steady(std::int64_t trial_id, std::int64_t mono_ns);
+    void add_trial_flag(std::int64_t trial_id, std::int64_t flag_bits);
+    // After a crash: every trial not in a terminal state becomes "interrupted" with reason
+    // "daemon restarted" and ended_utc_ns = utc_ns. Returns how many.
+    int mark_interrupted_trials(std::int64_t utc_ns);
+
+    // Devices and channels: get-or-create. A device's kind and address are updated to the
+    // values given; a channel whose unit differs from the stored one is a UserError (its
+    // samples so far are in the old unit).
+    std::int64_t device_id(const std::string& name, const std::string& kind, const std::string& address);
+    std::int64_t channel_id(std::int64_t device_id, const std::string& name, const std::string& unit);
+
+    // Samples in one transaction (the Recorder's writer calls this; other callers may too).
+    // A row whose (trial_id, channel_id, mono_ns) is already stored is skipped, keeping the
+    // first; returns how many were skipped. A trial or channel id that does not exist fails
+    // the whole transaction (foreign keys), so ids must come from create_trial/channel_id.
+    std::size_t insert_samples(std::span<const SampleRow> rows);
+
+    std::int64_t add_event(std::optional<std::int64_t> trial_id, std::int64_t mono_ns, std::int64_t utc_ns,
+                           const std::string& severity, const std::string& kind, const std::string& message);
+    std::int64_t store_result(std::int64_t campaign_id, const std::string& json, std::int64_t utc_ns);
+    // Idempotent for the same text; a different text under an existing (name, version) is a UserError.
+    std::int64_t store_twin_version(const std::string& name, std::int64_t version, const std::string& toml);
+    std::optional<std::string> twin_version_toml(const std::string& name, std::int64_t version);
+
+    // Queries.
+    std::vector<CampaignRow> campaigns();
+    std::vector<CaseRow> cases(std::int64_t campaign_id);       // by position
+    std::vector<TrialRow> trials(std::int64_t campaign_id);     // by id
+    std::optional<TrialRow> trial(std::int64_t trial_id);
+    std::vector<ChannelRow> channels();                         // by device name, channel name
+    std::vector<SampleRow> samples(std::int64_t trial_id, std::int64_t channel_id);  // by mono_ns
+    std::int64_t sample_count(std::int64_t trial_id);
+    std::vector<EventRow> events(std::optional<std::int64_t> trial_id);  // empty: all events; by mono_ns
+    std::optional<ResultRow> latest_result(std::int64_t campaign_id);
+
+    struct Impl;
+
+private:
+    explicit Database(std::unique_ptr<Impl> impl);
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace manikind::recorder

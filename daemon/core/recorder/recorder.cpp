@@ -1,0 +1,168 @@
+#include "daemon/core/recorder/recorder.hpp"
+
+#include <algorithm>
+#include <exception>
+#include <future>
+#include <optional>
+#include <utility>
+
+#include <spdlog/spdlog.h>
+
+namespace manikind::recorder {
+
+using Clock = std::chrono::steady_clock;
+
+Recorder::Recorder(std::filesystem::path db_path, RecorderOptions options)
+    : path_(std::move(db_path)),
+      options_(options),
+      // Half the queue, so the writer is already busy well before push() starts dropping.
+      wake_rows_(std::max<std::size_t>(1, std::min(options.max_batch_rows, options.queue_capacity / 2))) {
+    queue_.reserve(options_.queue_capacity);
+    std::promise<void> opened;
+    auto opened_future = opened.get_future();
+    // The connection is opened, used and closed in the writer thread only.
+    writer_ = std::thread([this, opened = std::move(opened)]() mutable {
+        std::optional<Database> db;
+        try {
+            db.emplace(Database::open(path_));
+        } catch (...) {
+            opened.set_exception(std::current_exception());
+            return;
+        }
+        opened.set_value();
+        run(*db);
+    });
+    try {
+        opened_future.get();
+    } catch (...) {
+        writer_.join();
+        throw;
+    }
+}
+
+Recorder::~Recorder() {
+    {
+        std::lock_guard lock(mutex_);
+        stop_ = true;
+    }
+    wake_writer_.notify_one();
+    writer_.join();
+}
+
+bool Recorder::push(const SampleRow& row) noexcept {
+    std::size_t depth = 0;
+    {
+        std::lock_guard lock(mutex_);
+        if (queue_.size() >= options_.queue_capacity) {
+            ++stats_.dropped;
+            return false;
+        }
+        queue_.push_back(row);  // within the reserved capacity: no allocation
+        ++stats_.accepted;
+        ++stats_.queue_depth;
+        depth = queue_.size();
+    }
+    // Wake the writer only on the transitions it waits for, not per row.
+    if (depth == 1 || depth == wake_rows_) wake_writer_.notify_one();
+    return true;
+}
+
+void Recorder::flush() {
+    std::unique_lock lock(mutex_);
+    const std::uint64_t target = stats_.accepted;
+    if (resolved_ >= target) return;
+    ++flush_waiters_;
+    wake_writer_.notify_one();
+    progress_.wait(lock, [&] { return resolved_ >= target || writer_gone_; });
+    --flush_waiters_;
+}
+
+RecorderStats Recorder::stats() const {
+    std::lock_guard lock(mutex_);
+    return stats_;
+}
+
+void Recorder::run(Database& db) {
+    try {
+        write_loop(db);
+    } catch (const std::exception& e) {
+        spdlog::error("recorder {}: writer stopped: {}", path_.string(), e.what());
+    } catch (...) {
+        spdlog::error("recorder {}: writer stopped by an unknown exception", path_.string());
+    }
+    std::lock_guard lock(mutex_);
+    writer_gone_ = true;
+    progress_.notify_all();
+}
+
+void Recorder::write_loop(Database& db) {
+    const std::size_t chunk_rows = std::max<std::size_t>(1, options_.max_batch_rows);
+    std::vector<SampleRow> batch;
+    batch.reserve(options_.queue_capacity);
+    std::size_t done = 0;  // rows of batch committed or lost
+    int attempts = 0;      // failed attempts at the current chunk
+    Clock::time_point taken_at = Clock::now();
+
+    std::unique_lock lock(mutex_);
+    for (;;) {
+        if (done == batch.size()) {
+            batch.clear();
+            done = 0;
+            if (queue_.empty()) {
+                if (stop_) return;
+                wake_writer_.wait(lock, [&] { return stop_ || !queue_.empty(); });
+                if (queue_.empty()) continue;
+                taken_at = Clock::now();  // the first row just arrived
+            }
+            // Every row now queued arrived after taken_at, so none waits longer than the delay.
+            wake_writer_.wait_until(lock, taken_at + options_.max_batch_delay, [&] {
+                return stop_ || flush_waiters_ > 0 || queue_.size() >= wake_rows_;
+            });
+            std::swap(queue_, batch);  // both keep their reserved capacity
+            taken_at = Clock::now();
+        }
+        lock.unlock();
+
+        const std::size_t n = std::min(chunk_rows, batch.size() - done);
+        const auto t0 = Clock::now();
+        bool committed = false;
+        std::size_t duplicates = 0;
+        try {
+            duplicates = db.insert_samples(std::span<const SampleRow>(batch.data() + done, n));
+            committed = true;
+        } catch (const std::exception& e) {
+            spdlog::error("recorder: commit of {} rows failed (attempt {} of {}): {}", n, attempts + 1,
+                          options_.max_commit_attempts, e.what());
+        }
+        const double commit_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        if (!committed) ++attempts;
+        const bool give_up = !committed && attempts >= options_.max_commit_attempts;
+        // Logged before taking the lock: a slow stderr must not hold up push().
+        if (duplicates > 0) spdlog::warn("recorder: {} rows skipped, already stored (re-sent readings?)", duplicates);
+        if (give_up) spdlog::error("recorder: {} rows discarded after {} failed commits", n, attempts);
+
+        lock.lock();
+        if (committed) {
+            stats_.committed += n - duplicates;
+            stats_.duplicates += duplicates;
+            ++stats_.batches;
+            stats_.max_commit_ms = std::max(stats_.max_commit_ms, commit_ms);
+        } else {
+            ++stats_.failed_commits;
+            if (!give_up) {
+                // Keep the rows and retry after a pause (cut short at shutdown), since a full
+                // disk or a lock held elsewhere rarely clears in microseconds.
+                wake_writer_.wait_for(lock, options_.max_batch_delay, [&] { return stop_; });
+                continue;
+            }
+            stats_.lost += n;
+        }
+        attempts = 0;
+        done += n;
+        resolved_ += n;
+        stats_.queue_depth -= n;
+        progress_.notify_all();
+    }
+}
+
+}  // namespace manikind::recorder

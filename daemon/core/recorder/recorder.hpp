@@ -1,0 +1,77 @@
+#pragma once
+// Asynchronous sample writer: acquisition threads push() rows, a writer thread with its own
+// SQLite connection commits them in batches. push() never waits for the disk; when the queue
+// is full the row is dropped and counted, so a stalled disk shows up as a number, not as a
+// late sample on the manikin's control loop.
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "daemon/core/recorder/database.hpp"
+
+namespace manikind::recorder {
+
+struct RecorderOptions {
+    std::size_t queue_capacity = 1 << 16;  // rows waiting to be taken by the writer
+    std::size_t max_batch_rows = 4096;     // rows per transaction
+    // A row waits at most this long (plus one commit) before its transaction starts, which
+    // bounds what a crash of this process can lose.
+    std::chrono::milliseconds max_batch_delay{200};
+    int max_commit_attempts = 5;  // then the batch is discarded (counted in lost) and logged
+};
+
+struct RecorderStats {
+    std::uint64_t accepted = 0;        // push() returned true
+    std::uint64_t committed = 0;       // stored by a committed transaction
+    std::uint64_t duplicates = 0;      // skipped: (trial, channel, mono_ns) was already stored
+    std::uint64_t dropped = 0;         // push() returned false: queue full
+    std::uint64_t batches = 0;         // committed transactions
+    std::uint64_t failed_commits = 0;  // transactions that failed (then retried)
+    std::uint64_t lost = 0;            // accepted but discarded after max_commit_attempts failures
+    double max_commit_ms = 0.0;        // longest successful transaction, BEGIN to COMMIT
+    std::size_t queue_depth = 0;       // accepted, not yet committed or lost
+};
+
+class Recorder {
+public:
+    // Opens the database (its own connection, in the writer thread) before returning; throws
+    // UserError as Database::open does.
+    explicit Recorder(std::filesystem::path db_path, RecorderOptions options = {});
+    // Commits everything accepted, then joins the writer.
+    ~Recorder();
+    Recorder(const Recorder&) = delete;
+    Recorder& operator=(const Recorder&) = delete;
+
+    // Never waits for the writer: a short critical section and no allocation. False (and
+    // dropped + 1) when the queue is full.
+    bool push(const SampleRow& row) noexcept;
+    // Returns when every row accepted before the call is committed (or lost after retries).
+    void flush();
+    RecorderStats stats() const;
+
+private:
+    void run(Database& db);
+    void write_loop(Database& db);
+
+    const std::filesystem::path path_;
+    const RecorderOptions options_;
+    const std::size_t wake_rows_;  // queue depth at which push() wakes the writer early
+
+    mutable std::mutex mutex_;
+    std::condition_variable wake_writer_;  // rows ready, flush asked, or stop
+    std::condition_variable progress_;     // rows committed or lost, for flush()
+    std::vector<SampleRow> queue_;         // reserved to queue_capacity; swapped with the writer's batch
+    RecorderStats stats_;                  // queue_depth kept up to date under mutex_
+    std::uint64_t resolved_ = 0;           // committed + duplicates + lost: accepted rows done so far
+    int flush_waiters_ = 0;
+    bool stop_ = false;
+    bool writer_gone_ = false;
+    std::thread writer_;
+};
+
+}  // namespace manikind::recorder

@@ -1,0 +1,389 @@
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+#include <sqlite3.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <span>
+#include <string>
+#include <thread>
+
+#include <fmt/core.h>
+
+#include "daemon/core/recorder/database.hpp"
+#include "daemon/core/recorder/recorder.hpp"
+#include "daemon/core/user_error.hpp"
+
+using namespace manikind;
+using namespace manikind::recorder;
+namespace fs = std::filesystem;
+
+namespace {
+
+// A fresh directory per test, removed at the end whatever happens.
+struct TempDir {
+    fs::path path;
+    explicit TempDir(const std::string& name) {
+        static std::atomic<int> counter{0};
+        path = fs::temp_directory_path() / fmt::format("manikind-test-recorder-{}-{}-{}", name, ::getpid(), counter++);
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~TempDir() {
+        std::error_code ec;
+        fs::remove_all(path, ec);
+    }
+};
+
+// Raw SQLite, to build files the Database class would never write.
+void raw_exec(const fs::path& path, const std::string& sql) {
+    sqlite3* db = nullptr;
+    REQUIRE(sqlite3_open(path.c_str(), &db) == SQLITE_OK);
+    char* error = nullptr;
+    const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &error);
+    const std::string message = error ? error : "";
+    sqlite3_free(error);
+    sqlite3_close(db);
+    INFO(message);
+    REQUIRE(rc == SQLITE_OK);
+}
+
+struct Fixture {
+    std::int64_t campaign = 0, case_id = 0, trial = 0, channel_a = 0, channel_b = 0;
+};
+
+Fixture make_fixture(Database& db) {
+    Fixture f;
+    f.campaign = db.create_campaign("paper-2024", R"({"cases":1})");
+    f.case_id = db.add_case(f.campaign, "T20-RH50", R"({"t_air_c":20,"rh_pct":50})", 0);
+    f.trial = db.create_trial(f.campaign, f.case_id, 1);
+    const auto device = db.device_id("manikin", "newton-34", "can0");
+    f.channel_a = db.channel_id(device, "zone01.heat_flux", "W/m2");
+    f.channel_b = db.channel_id(device, "zone01.skin_temp", "degC");
+    return f;
+}
+
+}  // namespace
+
+TEST_CASE("database: a fresh file is at the latest schema, in WAL mode and sound", "[recorder]") {
+    TempDir dir("fresh");
+    auto db = Database::open(dir.path / "trials.db");
+    CHECK(db.schema_version() == Database::latest_schema_version());
+    CHECK(Database::latest_schema_version() == static_cast<int>(Database::migrations().size()));
+    CHECK(db.journal_mode() == "wal");
+    CHECK(db.integrity_check() == "ok");
+    // Reopening an up-to-date file changes nothing.
+    auto again = Database::open(dir.path / "trials.db");
+    CHECK(again.schema_version() == Database::latest_schema_version());
+}
+
+TEST_CASE("database: a version 1 file is upgraded and a newer one is refused", "[recorder]") {
+    TempDir dir("migrate");
+    const auto v1 = dir.path / "v1.db";
+    raw_exec(v1, std::string(Database::migrations()[0]) + "PRAGMA user_version = 1;");
+    raw_exec(v1, "INSERT INTO campaigns (name, definition_json, created_utc_ns) VALUES ('old', '{}', 1)");
+    {
+        auto db = Database::open(v1);
+        CHECK(db.schema_version() == 2);
+        CHECK(db.find_campaign("old").has_value());  // data survives the upgrade
+        CHECK(db.integrity_check() == "ok");
+    }
+    // Version 2's index is really there.
+    sqlite3* raw = nullptr;
+    REQUIRE(sqlite3_open(v1.c_str(), &raw) == SQLITE_OK);
+    sqlite3_stmt* s = nullptr;
+    REQUIRE(sqlite3_prepare_v2(raw, "SELECT count(*) FROM sqlite_master WHERE type = 'index' AND name = 'events_by_trial_time'",
+                               -1, &s, nullptr) == SQLITE_OK);
+    REQUIRE(sqlite3_step(s) == SQLITE_ROW);
+    CHECK(sqlite3_column_int(s, 0) == 1);
+    sqlite3_finalize(s);
+    sqlite3_close(raw);
+
+    const auto future = dir.path / "future.db";
+    raw_exec(future, "PRAGMA user_version = 999");
+    CHECK_THROWS_WITH(Database::open(future),
+                      Catch::Contains(future.string()) && Catch::Contains("999") && Catch::Contains("newer"));
+
+    const auto junk = dir.path / "junk.db";
+    std::ofstream(junk) << "this is a CSV file, not a database\n1,2,3\n";
+    CHECK_THROWS_WITH(Database::open(junk), Catch::Contains(junk.string()) && Catch::Contains("not a database"));
+    CHECK_THROWS_AS(Database::open(dir.path / "no-such-dir" / "x.db"), UserError);
+}
+
+TEST_CASE("database: campaigns, cases, trials, channels, events and results round-trip", "[recorder]") {
+    TempDir dir("roundtrip");
+    auto db = Database::open(dir.path / "trials.db");
+    const auto f = make_fixture(db);
+
+    CHECK(db.find_campaign("paper-2024") == f.campaign);
+    CHECK_FALSE(db.find_campaign("nope").has_value());
+    CHECK_THROWS_WITH(db.create_campaign("paper-2024", "{}"), Catch::Contains("already exists") &&
+                                                                  Catch::Contains("trials.db"));
+    db.set_campaign_state(f.campaign, "running");
+    const auto campaigns = db.campaigns();
+    REQUIRE(campaigns.size() == 1);
+    CHECK(campaigns[0].definition_json == R"({"cases":1})");
+    CHECK(campaigns[0].state == "running");
+    CHECK(campaigns[0].created_utc_ns > 0);
+
+    db.add_case(f.campaign, "T30-RH30", "{}", -1);
+    const auto cases = db.cases(f.campaign);
+    REQUIRE(cases.size() == 2);
+    CHECK(cases[0].name == "T30-RH30");  // ordered by position
+    CHECK(cases[1].conditions_json == R"({"t_air_c":20,"rh_pct":50})");
+
+    auto t = db.trial(f.trial);
+    REQUIRE(t);
+    CHECK(t->state == "pending");
+    CHECK_FALSE(t->started_utc_ns);
+    db.set_trial_state(f.trial, "acquiring", "", 1000);
+    db.set_trial_steady(f.trial, 5'000'000'000);
+    db.add_trial_flag(f.trial, 0b01);
+    db.add_trial_flag(f.trial, 0b100);
+    db.set_trial_state(f.trial, "done", "completed", 2000);
+    t = db.trial(f.trial);
+    CHECK(t->state == "done");
+    CHECK(t->reason == "completed");
+    CHECK(t->started_utc_ns == 1000);
+    CHECK(t->ended_utc_ns == 2000);
+    CHECK(t->steady_from_mono_ns == 5'000'000'000);
+    CHECK(t->quality_flags == 0b101);
+    CHECK(db.trials(f.campaign).size() == 1);
+    CHECK_FALSE(db.trial(9999));
+    CHECK_THROWS_AS(db.set_trial_state(9999, "done", "", 0), UserError);
+
+    // Get-or-create: same ids again; a changed unit is refused.
+    const auto device = db.device_id("manikin", "newton-34", "can1");
+    CHECK(db.channel_id(device, "zone01.heat_flux", "W/m2") == f.channel_a);
+    CHECK_THROWS_WITH(db.channel_id(device, "zone01.heat_flux", "W"), Catch::Contains("W/m2"));
+    const auto channels = db.channels();
+    REQUIRE(channels.size() == 2);
+    CHECK(channels[0].device_name == "manikin");
+    CHECK(channels[0].unit == "W/m2");
+
+    db.add_event(f.trial, 20, 200, "warn", "comm", "zone 3 timeout");
+    db.add_event(std::nullopt, 10, 100, "info", "daemon", "started");
+    CHECK(db.events(std::nullopt).size() == 2);
+    const auto trial_events = db.events(f.trial);
+    REQUIRE(trial_events.size() == 1);
+    CHECK(trial_events[0].message == "zone 3 timeout");
+    CHECK(db.events(std::nullopt)[0].kind == "daemon");  // ordered by mono_ns
+    CHECK_FALSE(db.events(std::nullopt)[0].trial_id);
+
+    CHECK_FALSE(db.latest_result(f.campaign));
+    db.store_result(f.campaign, R"({"v":1})", 10);
+    db.store_result(f.campaign, R"({"v":2})", 20);
+    CHECK(db.latest_result(f.campaign)->json == R"({"v":2})");
+
+    const auto id = db.store_twin_version("reconciled", 1, "name = \"reconciled\"\n");
+    CHECK(db.store_twin_version("reconciled", 1, "name = \"reconciled\"\n") == id);
+    CHECK_THROWS_AS(db.store_twin_version("reconciled", 1, "name = \"other\"\n"), UserError);
+    CHECK(db.twin_version_toml("reconciled", 1) == "name = \"reconciled\"\n");
+
+    const SampleRow rows[] = {{f.trial, f.channel_a, 2, 20, std::numeric_limits<double>::quiet_NaN(), 3},
+                              {f.trial, f.channel_a, 1, 10, 42.5, 0}};
+    CHECK(db.insert_samples(rows) == 0);
+    CHECK(db.insert_samples(std::span<const SampleRow>(rows, 1)) == 1);  // same trial, channel and time: kept once
+    const auto back = db.samples(f.trial, f.channel_a);
+    REQUIRE(back.size() == 2);
+    CHECK(back[0].value == 42.5);
+    CHECK(std::isnan(back[1].value));
+    CHECK(back[1].quality == 3);
+    CHECK(db.sample_count(f.trial) == 2);
+    CHECK(db.integrity_check() == "ok");
+}
+
+TEST_CASE("recorder: 100 000 rows from a producer thread are all committed in order", "[recorder]") {
+    TempDir dir("bulk");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path);
+        f = make_fixture(db);
+    }
+    const int rows = 100'000;
+    RecorderOptions options;
+    options.queue_capacity = 1 << 17;  // room for everything: this test is about order, not drops
+    Recorder recorder(path, options);
+    std::thread producer([&] {
+        for (int i = 0; i < rows; ++i) {
+            const auto t = static_cast<std::int64_t>(i / 2);
+            recorder.push({f.trial, i % 2 ? f.channel_b : f.channel_a, t * 1000, t * 1000 + 7, static_cast<double>(i),
+                           0});
+        }
+    });
+    producer.join();
+    recorder.flush();
+    const auto stats = recorder.stats();
+    CHECK(stats.accepted == rows);
+    CHECK(stats.committed == stats.accepted);
+    CHECK(stats.dropped == 0);
+    CHECK(stats.queue_depth == 0);
+    CHECK(stats.batches > 0);
+
+    auto db = Database::open(path);
+    CHECK(db.sample_count(f.trial) == rows);
+    const auto a = db.samples(f.trial, f.channel_a);
+    REQUIRE(a.size() == rows / 2);
+    bool ordered = true;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        ordered = ordered && a[i].mono_ns == static_cast<std::int64_t>(i) * 1000 && a[i].value == static_cast<double>(2 * i);
+    CHECK(ordered);
+}
+
+TEST_CASE("recorder: a full queue drops and counts rows instead of waiting", "[recorder]") {
+    TempDir dir("drop");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path);
+        f = make_fixture(db);
+    }
+    RecorderOptions options;
+    options.queue_capacity = 16;
+    Recorder recorder(path, options);
+    const std::uint64_t pushed = 10'000;
+    std::uint64_t refused = 0;
+    for (std::uint64_t i = 0; i < pushed; ++i)
+        if (!recorder.push({f.trial, f.channel_a, static_cast<std::int64_t>(i), 0, 1.0, 0})) ++refused;
+    recorder.flush();
+    const auto stats = recorder.stats();
+    CHECK(stats.dropped > 0);
+    CHECK(stats.dropped == refused);
+    CHECK(stats.accepted + stats.dropped == pushed);
+    CHECK(stats.committed + stats.dropped == pushed);
+    auto db = Database::open(path);
+    CHECK(db.sample_count(f.trial) == static_cast<std::int64_t>(stats.committed));
+}
+
+TEST_CASE("recorder: a re-sent reading is stored once and counted", "[recorder]") {
+    TempDir dir("duplicate");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path);
+        f = make_fixture(db);
+    }
+    {
+        Recorder recorder(path);
+        for (int i = 0; i < 3; ++i) CHECK(recorder.push({f.trial, f.channel_a, 1000, 1000, 1.5, 0}));
+        CHECK(recorder.push({f.trial, f.channel_b, 1000, 1000, 2.5, 0}));
+        recorder.flush();
+        const auto stats = recorder.stats();
+        CHECK(stats.accepted == 4);
+        CHECK(stats.committed == 2);
+        CHECK(stats.duplicates == 2);
+        CHECK(stats.queue_depth == 0);
+    }
+    CHECK(Database::open(path).sample_count(f.trial) == 2);
+}
+
+TEST_CASE("recorder: a batch that keeps failing is retried, then counted as lost", "[recorder]") {
+    TempDir dir("failing");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path);
+        f = make_fixture(db);
+    }
+    // A poison value makes every attempt at its transaction fail, as a full disk would.
+    raw_exec(path, "CREATE TRIGGER poison BEFORE INSERT ON samples WHEN NEW.value = 666"
+                   " BEGIN SELECT RAISE(ABORT, 'poisoned sample'); END");
+    RecorderOptions options;
+    options.max_batch_delay = std::chrono::milliseconds(1);  // also the pause between attempts
+    options.max_commit_attempts = 3;
+    Recorder recorder(path, options);
+    for (int i = 0; i < 10; ++i) recorder.push({f.trial, f.channel_a, i, 0, i == 4 ? 666.0 : 1.0, 0});
+    recorder.flush();
+    auto stats = recorder.stats();
+    CHECK(stats.failed_commits == 3);
+    CHECK(stats.lost == 10);  // the whole transaction: SQLite rolls it back
+    CHECK(stats.committed == 0);
+    CHECK(stats.queue_depth == 0);
+    // The writer carries on with the next rows.
+    for (int i = 10; i < 20; ++i) recorder.push({f.trial, f.channel_a, i, 0, 1.0, 0});
+    recorder.flush();
+    stats = recorder.stats();
+    CHECK(stats.committed == 10);
+    CHECK(stats.accepted == stats.committed + stats.lost);
+}
+
+TEST_CASE("recorder: an unopenable path throws from the constructor", "[recorder]") {
+    TempDir dir("unopenable");
+    CHECK_THROWS_WITH(Recorder(dir.path / "missing" / "trials.db"), Catch::Contains("missing"));
+}
+
+TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound file", "[recorder]") {
+    TempDir dir("crash");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path);
+        f = make_fixture(db);
+        db.set_trial_state(f.trial, "acquiring", "", 1);
+    }  // closed before fork(): an SQLite connection must not cross into a child
+
+    int fds[2];
+    REQUIRE(::pipe(fds) == 0);
+    const pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+        ::close(fds[0]);
+        int status = 0;
+        try {
+            Recorder recorder(path);
+            for (std::int64_t i = 1;; ++i) {
+                recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
+                if (i % 1000 == 0) {
+                    recorder.flush();
+                    const std::uint64_t committed = recorder.stats().committed;
+                    if (::write(fds[1], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
+                }
+            }
+        } catch (...) {
+            status = 1;
+        }
+        ::_exit(status);  // never return into Catch in the child
+    }
+    ::close(fds[1]);
+    const int wanted_reports = 20;
+    int reports = 0;
+    std::uint64_t last_committed = 0;
+    while (reports < wanted_reports) {
+        std::uint64_t committed = 0;
+        if (::read(fds[0], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
+        last_committed = committed;
+        ++reports;
+    }
+    ::kill(child, SIGKILL);  // while it is pushing the next thousand rows
+    int status = 0;
+    ::waitpid(child, &status, 0);
+    ::close(fds[0]);
+    REQUIRE(reports == wanted_reports);
+    CHECK(WIFSIGNALED(status));
+    CHECK(last_committed == wanted_reports * 1000);
+
+    auto db = Database::open(path);
+    CHECK(db.integrity_check() == "ok");
+    const auto count = db.sample_count(f.trial);
+    CHECK(count >= static_cast<std::int64_t>(last_committed));
+    const auto samples = db.samples(f.trial, f.channel_a);
+    REQUIRE(!samples.empty());
+    CHECK(samples.back().mono_ns == count * 1000);  // a prefix, no holes
+
+    CHECK(db.trial(f.trial)->state == "acquiring");
+    CHECK(db.mark_interrupted_trials(123) == 1);
+    const auto t = db.trial(f.trial);
+    CHECK(t->state == "interrupted");
+    CHECK(t->reason == "daemon restarted");
+    CHECK(t->ended_utc_ns == 123);
+    CHECK(db.mark_interrupted_trials(124) == 0);
+}
