@@ -66,6 +66,8 @@ public:
     std::optional<double> read(const std::string& channel);
 
     const ModbusOptions& options() const { return options_; }
+    // Before start_worker(): the simulated lab at N x real time polls N times as often.
+    void set_poll_period(double seconds) { options_.poll_period_s = seconds; }
 
 private:
     bool ensure_connected(std::int64_t now_ns);

@@ -15,6 +15,8 @@
 #include "analysis/plot.hpp"
 #include "analysis/recording.hpp"
 #include "daemon/cli/commands.hpp"
+#include "daemon/core/database_export.hpp"
+#include "daemon/core/recorder/database.hpp"
 #include "daemon/core/config.hpp"
 #include "daemon/core/user_error.hpp"
 
@@ -25,6 +27,7 @@ namespace an = manikind::analysis;
 
 struct AnalyzeOptions {
     std::string campaign;
+    std::string db;
     bool json = false;
     std::string csv_path;
     std::string svg_path;
@@ -52,6 +55,7 @@ an::InstrumentSpec to_analysis(const config::InstrumentSpec& s, const std::strin
 }
 
 void run(const AnalyzeOptions& o) {
+    if (o.campaign.empty()) throw UserError("give the campaign folder, or --db <file> --campaign <name>");
     const config::Config cfg = o.config_path.empty() ? config::default_config() : config::load_config(o.config_path);
     an::ReadOptions read;
     for (const auto& [channel, spec] : cfg.instruments) read.default_instruments[channel] = to_analysis(spec, channel);
@@ -72,7 +76,11 @@ void run(const AnalyzeOptions& o) {
 
     an::CampaignResult result;
     try {
-        const an::Campaign campaign = an::read_campaign(o.campaign, read);
+        const an::Campaign campaign = o.db.empty() ? an::read_campaign(o.campaign, read) : [&] {
+            if (!std::filesystem::exists(o.db)) throw UserError(fmt::format("{}: no such database", o.db));
+            auto db = recorder::Database::open(o.db);
+            return campaign_from_database(db, o.campaign);
+        }();
         result = an::analyze_campaign(campaign, a);
         if (!o.csv_path.empty()) {
             std::ofstream out(o.csv_path, std::ios::binary);
@@ -103,8 +111,10 @@ void add_analyze_command(CLI::App& app) {
     auto* cmd = app.add_subcommand(
         "analyze", "Heat fluxes with 95 % CIs from a recorded campaign: steady state, replicates, Type A + B (Eq. S7)");
     cmd->add_option("campaign", o->campaign,
-                    "Campaign folder in the manikin-recording/1 format: campaign.json + trials/<id>.csv")
-        ->required();
+                    "Campaign folder in the manikin-recording/1 format: campaign.json + trials/<id>.csv\n"
+                    "(with --db: the campaign's name in the database)");
+    cmd->add_option("--db", o->db, "Read the campaign from the daemon's SQLite database instead of a folder");
+    cmd->add_option("--campaign", o->campaign, "The campaign's name (same as the positional argument)");
     cmd->add_flag("--json", o->json, "Print one JSON document (the contract in FORMATS.md) instead of tables");
     cmd->add_option("--csv", o->csv_path, "Also write per-case whole-body, region and zone results to this CSV file");
     cmd->add_option("--plot", o->svg_path, "Also draw Q ± U per case (whole body and regions) as SVG to this file");

@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
     manikind::cli::add_reconcile_command(app);
     manikind::cli::add_demo_command(app);
     manikind::cli::add_thermoreg_command(app);
+    manikind::cli::add_daemon_commands(app);
 
     try {
         app.parse(argc, argv);

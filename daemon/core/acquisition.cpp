@@ -173,6 +173,10 @@ void Acquisition::step(double dt_s) {
 void Acquisition::start_realtime(double speed) {
     realtime_ = true;
     stop_ = false;
+    if (lab_) {  // keep the virtual poll rate when the simulated lab runs faster than the wall clock
+        chamber_->set_poll_period(poll_period_s_ / speed);
+        datalogger_->set_poll_period(poll_period_s_ / speed);
+    }
     chamber_->start_worker();
     datalogger_->start_worker();
     io_thread_ = std::thread([this] {

@@ -202,6 +202,11 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*s, "simulation", "step_s", c.simulation.step_s, 0.01, 60.0, "s");
         r.number(*s, "simulation", "manikin_period_s", c.simulation.manikin_period_s, 0.1, 60.0, "s");
     }
+    if (const auto* a = r.table(root, "", "api")) {
+        r.text(*a, "api", "socket", c.api.socket);
+        r.number(*a, "api", "tcp_port", c.api.tcp_port, 0, 65535, "");
+        r.text(*a, "api", "token", c.api.token);
+    }
     r.warn_unknown(root, "");
     return c;
 }

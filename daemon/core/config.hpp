@@ -66,6 +66,12 @@ struct SimulationConfig {
     double manikin_period_s = 5.0;            // the manikin's zone report interval (Text S3.2: 5 s)
 };
 
+struct ApiConfig {
+    std::string socket = "manikind.sock";   // Unix socket, mode 0660; relative: from the working directory
+    double tcp_port = 0;                     // 0: off; else listens on 127.0.0.1 only
+    std::string token;                       // empty: the daemon makes one and writes <socket>.token (0600)
+};
+
 struct Config {
     std::string lab_name = "simulated lab";
     std::string mode = "simulated";        // simulated | real
@@ -76,6 +82,7 @@ struct Config {
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)
     DeviceConfig devices;
     SimulationConfig simulation;
+    ApiConfig api;
     std::filesystem::path source_dir;      // relative paths in the file resolve from here
     std::vector<std::string> warnings;     // unknown keys and similar, with file:line
 };

@@ -287,7 +287,8 @@ void LabDaemon::tick_locked() {
         const auto it = gap_since_ns_.find(st.name);
         if (down && it == gap_since_ns_.end()) {
             gap_since_ns_[st.name] = now;
-            event("warn", "gap", fmt::format("{} lost: {}", st.name, st.last_error));
+            event("warn", "gap", fmt::format("{} lost ({}){}", st.name, st.connected ? "stale" : "disconnected",
+                                             st.last_error.empty() ? "" : ": " + st.last_error));
             if (trial_id_) db_.add_trial_flag(trial_id_, flag_device_gap);
         } else if (!down && it != gap_since_ns_.end()) {
             event("info", "gap", fmt::format("{} back after {:.0f} s", st.name, static_cast<double>(now - it->second) * 1e-9));
@@ -362,15 +363,19 @@ void LabDaemon::tick_locked() {
                 if (r.empty()) observed = false;
                 else worst = std::max(worst, r.range());
             }
-            const bool steady = observed && worst <= o_.config.steady_state.max_skin_fluctuation_c;
+            // Methods: "< 0.05 °C", strictly, as the analysis applies it.
+            const bool steady = observed && worst < o_.config.steady_state.max_skin_fluctuation_c;
             if (steady && !steady_since_ns_) {
                 steady_since_ns_ = now - static_cast<std::int64_t>(window_s * 1e9);
+                steady_seen_at_ns_ = now;
                 db_.set_trial_steady(trial_id_, *steady_since_ns_);
                 event("info", "steady", fmt::format("every zone within {:.3f} °C over the last {:.0f} min", worst, window_s / 60));
             } else if (!steady && steady_since_ns_) {
                 steady_since_ns_.reset();
             }
-            if (elapsed >= plan_->trial_duration_s && steady) {
+            // Stop once the duration is reached and the window has stayed steady for another minute,
+            // so the analysis (5-s bins, its own window alignment) sees the same steady window.
+            if (elapsed >= plan_->trial_duration_s && steady && now - steady_seen_at_ns_ >= 60'000'000'000LL) {
                 enter(Stage::stopping, "trial duration reached, steady");
             } else if (elapsed > plan_->acquire_timeout_s) {
                 db_.add_trial_flag(trial_id_, flag_never_steady);

@@ -133,6 +133,7 @@ private:
     SlidingRange enclosure_range_;
     std::int64_t acquiring_since_ns_ = 0;
     std::optional<std::int64_t> steady_since_ns_;
+    std::int64_t steady_seen_at_ns_ = 0;
     std::map<std::string, std::int64_t> gap_since_ns_;
     std::int64_t manikin_silent_since_ns_ = -1;
     std::uint64_t dropped_samples_ = 0;

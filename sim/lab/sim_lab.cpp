@@ -298,19 +298,22 @@ void SimLab::step(double dt_s) {
     can_frames_last_step_ = 0;
     // Manikin bus output.
     const double now = world_.time_s();
+    const bool silent = fault_active("manikin", "silent") || fault_active("manikin", "bus_off");
+    auto send = [&](const can_frame& fr) {
+        if (::send(manikin_fd_, &fr, sizeof fr, MSG_DONTWAIT) == static_cast<ssize_t>(sizeof fr)) ++can_frames_last_step_;
+    };
+    // The heartbeat goes out every step (the real one every 100 ms); zone reports at their period.
+    if (!silent) {
+        mc::Heartbeat hb;
+        hb.mode = world_.manikin_running() ? mc::ControlMode::constant_skin_temp : mc::ControlMode::idle;
+        hb.sequence = heartbeat_seq_++;
+        hb.error_bits = world_.watchdog_tripped() ? 1 : 0;
+        hb.shell_supply_v = 24.0;
+        send(mc::encode(hb));
+    }
     if (now + 1e-9 >= manikin_due_s_) {
         manikin_due_s_ = now + o_.manikin_period_s;
-        const bool silent = fault_active("manikin", "silent") || fault_active("manikin", "bus_off");
-        auto send = [&](const can_frame& fr) {
-            if (::send(manikin_fd_, &fr, sizeof fr, MSG_DONTWAIT) == static_cast<ssize_t>(sizeof fr)) ++can_frames_last_step_;
-        };
         if (!silent) {
-            mc::Heartbeat hb;
-            hb.mode = world_.manikin_running() ? mc::ControlMode::constant_skin_temp : mc::ControlMode::idle;
-            hb.sequence = heartbeat_seq_++;
-            hb.error_bits = world_.watchdog_tripped() ? 1 : 0;
-            hb.shell_supply_v = 24.0;
-            send(mc::encode(hb));
             for (int z = 1; z <= world_.zone_count(); ++z) {
                 mc::ZoneStatus st = world_.measure_zone(z);
                 if (const auto it = stuck_skin_.find(z); it != stuck_skin_.end()) st.skin_temp_c = it->second;

@@ -1,0 +1,112 @@
+// manikind: the data-acquisition and control daemon a lab leaves running.
+//   manikind --config config/real-lab.toml          the lab's devices, real time
+//   manikind                                        the simulated lab (built-in config), real time
+//   manikind --virtual --campaign builtin:table-s3  the simulated lab on the virtual clock
+// It serves the control API on a Unix socket until SIGINT/SIGTERM or a `shutdown` request.
+#include <csignal>
+#include <cstdio>
+#include <string>
+#include <sys/signalfd.h>
+#include <unistd.h>
+
+#include <poll.h>
+
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+#include <spdlog/spdlog.h>
+
+#include "daemon/core/control_api.hpp"
+#include "daemon/core/lab_daemon.hpp"
+#include "daemon/core/logging.hpp"
+#include "daemon/core/user_error.hpp"
+
+int main(int argc, char** argv) {
+    using namespace manikind;
+    CLI::App app{"manikind: sweating-manikin trials in a climate chamber (acquisition, control, recorder, API)"};
+    std::string config_file, socket, campaign, database;
+    bool virtual_clock = false, exit_when_done = false;
+    double speed = 1.0;
+    app.add_option("--config", config_file, "TOML configuration (default: the built-in simulated lab)");
+    app.add_option("--socket", socket, "Control socket path (overrides [api] socket)");
+    app.add_option("--database", database, "SQLite database (overrides [lab] database)");
+    app.add_flag("--virtual", virtual_clock, "Simulated lab only: run the virtual clock as fast as the CPU allows");
+    app.add_option("--speed", speed, "Simulated lab in real time: this many times the wall clock (faster: --virtual)")
+        ->check(CLI::Range(0.1, 10.0));
+    app.add_option("--campaign", campaign, "Start this campaign at once (a campaign TOML file, or builtin:table-s3)");
+    app.add_flag("--exit-when-done", exit_when_done, "Exit when the campaign given with --campaign has finished");
+    app.footer("Talk to it with `manikin status`, `manikin campaign run <file>`, `manikin trial watch`, `manikin results`.\n"
+               "Mutating API commands need the token ([api] token, or the <socket>.token file it writes).");
+    CLI11_PARSE(app, argc, argv);
+
+    // Signals arrive on a descriptor, so shutdown is an ordinary event, not an async handler.
+    sigset_t mask;
+    sigemptyset(&mask);
+    sigaddset(&mask, SIGINT);
+    sigaddset(&mask, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &mask, nullptr);
+    const int sig_fd = signalfd(-1, &mask, SFD_CLOEXEC | SFD_NONBLOCK);
+    std::signal(SIGPIPE, SIG_IGN);
+
+    try {
+        config::Config cfg = config_file.empty() ? config::default_config() : config::load_config(config_file);
+        for (const auto& w : cfg.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+        if (!database.empty()) cfg.database = database;
+        if (!socket.empty()) cfg.api.socket = socket;
+        set_log_level(cfg.log_level);
+        if (virtual_clock && cfg.mode != "simulated") throw UserError("--virtual needs mode = \"simulated\"");
+        LabDaemon daemon({cfg, virtual_clock, speed});
+        ControlOptions api;
+        api.socket_path = cfg.api.socket;
+        api.tcp_port = static_cast<int>(cfg.api.tcp_port);
+        api.token = load_or_create_token(cfg.api.token, api.socket_path);
+        ControlServer server(daemon, api);
+        server.start();
+        std::printf("manikind: %s lab, %s clock; database %s; control socket %s%s\n", cfg.mode.c_str(),
+                    virtual_clock ? "virtual" : "real", daemon.database_path().c_str(), api.socket_path.c_str(),
+                    api.tcp_port ? fmt::format(" and 127.0.0.1:{}", api.tcp_port).c_str() : "");
+        std::fflush(stdout);
+        if (!campaign.empty()) {
+            CampaignPlan plan = load_campaign_plan(campaign);
+            if (const auto why = daemon.start_campaign(plan); !why.empty()) throw UserError(why);
+        }
+        auto signalled = [&] {
+            signalfd_siginfo si{};
+            return ::read(sig_fd, &si, sizeof si) == static_cast<ssize_t>(sizeof si);
+        };
+        if (virtual_clock) {
+            const double dt = cfg.simulation.step_s;
+            std::string last_stage;
+            for (;;) {
+                if (signalled() || server.shutdown_requested()) break;
+                daemon.step_virtual(dt);
+                const auto st = daemon.status_json();
+                const std::string stage = st["stage"].get<std::string>() + (st.contains("trial") ? fmt::format(" trial {}", st["trial"]["id"].get<long>()) : "");
+                if (stage != last_stage) {
+                    std::printf("t=%.0f s %s committed=%llu\n", st["time_s"].get<double>(), stage.c_str(),
+                                static_cast<unsigned long long>(st["recorder"]["committed"].get<std::uint64_t>()));
+                    std::fflush(stdout);
+                    last_stage = stage;
+                }
+                if (exit_when_done && !daemon.campaign_active()) break;
+            }
+        } else {
+            daemon.start_realtime();
+            for (;;) {
+                pollfd p{sig_fd, POLLIN, 0};
+                ::poll(&p, 1, 500);
+                if (signalled() || server.shutdown_requested()) break;
+                if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;
+            }
+        }
+        std::printf("manikind: stopping\n");
+        server.stop();
+        daemon.stop();
+        return 0;
+    } catch (const UserError& e) {
+        std::fprintf(stderr, "manikind: %s\n", e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "manikind: internal error: %s\n", e.what());
+        return 1;
+    }
+}

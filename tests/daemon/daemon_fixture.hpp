@@ -1,0 +1,51 @@
+#pragma once
+// A LabDaemon on the simulated lab and the virtual clock, with its database in a fresh folder.
+#include <unistd.h>
+
+#include <atomic>
+#include <filesystem>
+#include <memory>
+
+#include "daemon/core/lab_daemon.hpp"
+
+namespace manikind::test {
+
+class DaemonFixture {
+public:
+    explicit DaemonFixture(std::function<void(config::Config&)> tweak = {}) {
+        static std::atomic<int> serial{0};
+        dir_ = std::filesystem::temp_directory_path() /
+               ("manikind-test-daemon-" + std::to_string(::getpid()) + "-" + std::to_string(serial++));
+        std::filesystem::create_directories(dir_);
+        config::Config c = config::default_config();
+        c.database = dir_ / "test.db";
+        c.simulation.runtime_dir = (dir_ / "sim").string();
+        c.log_level = "error";
+        c.devices.modbus_timeout_s = 0.05;
+        if (tweak) tweak(c);
+        daemon_ = std::make_unique<LabDaemon>(DaemonOptions{c, true, 1.0});
+    }
+    ~DaemonFixture() {
+        daemon_.reset();
+        std::error_code ec;
+        std::filesystem::remove_all(dir_, ec);
+    }
+    LabDaemon& daemon() { return *daemon_; }
+    const std::filesystem::path& dir() const { return dir_; }
+
+private:
+    std::filesystem::path dir_;
+    std::unique_ptr<LabDaemon> daemon_;
+};
+
+// One dry case, one replicate, a short trial: a whole campaign in a few virtual hours.
+inline CampaignPlan quick_plan(const std::string& name, double trial_min = 35.0) {
+    CampaignPlan p;
+    p.name = name;
+    p.replicates = 1;
+    p.trial_duration_s = trial_min * 60.0;
+    p.cases.push_back({1, 35.0, 27.0, 35.0, true, 300.0});
+    return p;
+}
+
+}  // namespace manikind::test

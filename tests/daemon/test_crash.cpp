@@ -1,0 +1,99 @@
+// kill -9 of the daemon mid-trial, then a restart: the trial is marked interrupted with its data
+// intact, no committed sample is lost, and the database passes PRAGMA integrity_check.
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "daemon/core/recorder/database.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Child {
+    pid_t pid = -1;
+    FILE* out = nullptr;
+};
+
+// Starts the real daemon binary with stdout on a pipe (reading it blocks on real events).
+Child spawn(const std::vector<std::string>& args) {
+    int fds[2];
+    REQUIRE(::pipe(fds) == 0);
+    const pid_t pid = ::fork();
+    REQUIRE(pid >= 0);
+    if (pid == 0) {
+        ::dup2(fds[1], STDOUT_FILENO);
+        ::close(fds[0]);
+        ::close(fds[1]);
+        std::vector<char*> argv;
+        for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+        argv.push_back(nullptr);
+        ::execv(argv[0], argv.data());
+        ::_exit(127);
+    }
+    ::close(fds[1]);
+    return {pid, ::fdopen(fds[0], "r")};
+}
+
+}  // namespace
+
+TEST_CASE("kill -9 mid-trial: restart marks the trial interrupted, committed samples intact", "[daemon][crash]") {
+    const fs::path dir = fs::temp_directory_path() / ("manikind-crash-" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    {
+        std::ofstream plan(dir / "plan.toml");
+        plan << "name = \"crash\"\nreplicates = 1\ntrial_duration_min = 40\n[[cases]]\nchamber_temp_c = 35\n"
+                "chamber_rh_pct = 27\nskin_setpoint_c = 35\nwet = true\n";
+    }
+    const std::string bin = std::string(MANIKIND_BIN_DIR) + "/manikind";
+    const std::string db_path = (dir / "crash.db").string();
+    const std::vector<std::string> common = {bin, "--virtual", "--database", db_path, "--socket", (dir / "d.sock").string()};
+    auto args = common;
+    args.insert(args.end(), {"--campaign", (dir / "plan.toml").string()});
+    Child child = spawn(args);
+
+    // Read the daemon's progress lines until the trial is acquiring, then kill it without warning.
+    long committed_before_kill = -1;
+    char line[512];
+    while (std::fgets(line, sizeof line, child.out)) {
+        const std::string s = line;
+        if (s.find("acquiring trial") != std::string::npos) {
+            committed_before_kill = std::stol(s.substr(s.find("committed=") + 10));
+            break;
+        }
+    }
+    REQUIRE(committed_before_kill > 0);
+    ::kill(child.pid, SIGKILL);
+    int status = 0;
+    ::waitpid(child.pid, &status, 0);
+    std::fclose(child.out);
+    CHECK(WIFSIGNALED(status));
+
+    // Restart: the daemon marks what was running as interrupted, then (no campaign) exits.
+    auto restart = common;
+    restart.push_back("--exit-when-done");
+    Child again = spawn(restart);
+    while (std::fgets(line, sizeof line, again.out)) {
+    }
+    ::waitpid(again.pid, &status, 0);
+    std::fclose(again.out);
+    CHECK(WEXITSTATUS(status) == 0);
+
+    auto db = manikind::recorder::Database::open(db_path);
+    CHECK(db.integrity_check() == "ok");
+    const auto id = db.find_campaign("crash");
+    REQUIRE(id);
+    const auto trials = db.trials(*id);
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "interrupted");
+    CHECK(trials[0].reason == "daemon restarted");
+    CHECK(db.sample_count(trials[0].id) >= committed_before_kill);
+    fs::remove_all(dir);
+}
