@@ -13,6 +13,8 @@ void add_simulate_command(CLI::App& app);    // cmd_simulate.cpp: `manikin simul
 void add_reconcile_command(CLI::App& app);   // cmd_reconcile.cpp: `manikin reconcile`
 void add_demo_command(CLI::App& app);        // cmd_demo.cpp: `manikin demo` (the README main job)
 void add_thermoreg_command(CLI::App& app);
-void add_daemon_commands(CLI::App& app);     // cmd_daemon.cpp: status, campaign, setpoint, trial watch, results, export   // cmd_thermoreg.cpp: `manikin thermoreg [sweep|speeds]`
+void add_daemon_commands(CLI::App& app);
+void add_sim_commands(CLI::App& app);        // cmd_sim.cpp: `manikin sim serve`, `manikin replay`
+void add_probe_command(CLI::App& app);       // cmd_sim.cpp: `manikin probe <device>`     // cmd_daemon.cpp: status, campaign, setpoint, trial watch, results, export   // cmd_thermoreg.cpp: `manikin thermoreg [sweep|speeds]`
 
 }  // namespace manikind::cli

@@ -33,6 +33,8 @@ int main(int argc, char** argv) {
     manikind::cli::add_demo_command(app);
     manikind::cli::add_thermoreg_command(app);
     manikind::cli::add_daemon_commands(app);
+    manikind::cli::add_sim_commands(app);
+    manikind::cli::add_probe_command(app);
 
     try {
         app.parse(argc, argv);
