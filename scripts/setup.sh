@@ -12,7 +12,7 @@ packages=(
   libmodbus-dev libboost-dev libsqlite3-dev sqlite3
   libspdlog-dev libfmt-dev catch2 libtomlplusplus-dev nlohmann-json3-dev libcli11-dev libeigen3-dev
   # Peers not written here, for the interoperability tests (tests/interop/).
-  mbpoll python3 python3-serial python3-pymodbus
+  mbpoll python3 python3-serial python3-pymodbus python3-serial-asyncio
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -1,0 +1,94 @@
+#!/usr/bin/python3
+"""Peer test: a Modbus TCP server written with Debian's python3-pymodbus (not written here) acts
+as the chamber controller with the shipped register map (Eurotherm 3200: unit 1 temperature,
+unit 2 humidity, x10 int16). Our Modbus driver (`manikin probe chamber`) must write setpoints
+scaled as documented, read the process values back, report an exception response, and survive
+the server going away. Exit 77 = skipped (only when pymodbus cannot be imported)."""
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+
+try:
+    from pymodbus.datastore import ModbusSequentialDataBlock, ModbusServerContext, ModbusSlaveContext
+    from pymodbus.server import StartTcpServer, ServerStop
+except ImportError as e:
+    print(f"SKIP: pymodbus is not importable ({e}); scripts/setup.sh installs python3-pymodbus and python3-serial-asyncio")
+    sys.exit(77)
+
+manikin = sys.argv[1]
+with socket.socket() as s:
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+
+# Register images: 40 holding registers per unit, addresses as in config/chamber_registers.toml.
+temp = ModbusSlaveContext(hr=ModbusSequentialDataBlock(0, [0] * 40), zero_mode=True)
+rh = ModbusSlaveContext(hr=ModbusSequentialDataBlock(0, [0] * 40), zero_mode=True)
+temp.setValues(3, 1, [231])   # PV 23.1 °C
+temp.setValues(3, 5, [231])
+rh.setValues(3, 1, [456])     # PV 45.6 %
+context = ModbusServerContext(slaves={1: temp, 2: rh}, single=False)
+server = threading.Thread(target=StartTcpServer, kwargs={"context": context, "address": ("127.0.0.1", port)}, daemon=True)
+server.start()
+# Wait until it accepts connections (a connect attempt, not a sleep).
+for _ in range(200):
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=0.1).close()
+        break
+    except OSError:
+        threading.Event().wait(0.05)
+
+failures = []
+
+
+def check(cond, what):
+    print(("ok   " if cond else "FAIL ") + what)
+    if not cond:
+        failures.append(what)
+
+
+def probe(*args, map_file=None):
+    cmd = [manikin, "probe", "chamber", "--port", str(port), "--timeout", "1", "--json"] + list(args)
+    if map_file:
+        cmd += ["--map", map_file]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    if out.returncode != 0:
+        print(out.stderr)
+    return json.loads(out.stdout)
+
+
+r = probe("--write", "air_temp_remote_setpoint_c=35.5", "--write", "air_rh_remote_setpoint_pct=40")
+check(all(w["ok"] for w in r["writes"]), "setpoints written")
+check(temp.getValues(3, 26, 1) == [355], f"Rm.SP arrived x10 at unit 1 address 26 (got {temp.getValues(3, 26, 1)})")
+check(rh.getValues(3, 26, 1) == [400], f"RH Rm.SP arrived x10 at unit 2 address 26 (got {rh.getValues(3, 26, 1)})")
+pv = {s["channel"]: s for s in r["samples"]}
+check(abs(pv["air_temp_pv_c"]["value"] - 23.1) < 1e-9, "temperature PV read back as 23.1 °C")
+check(abs(pv["air_rh_pv_pct"]["value"] - 45.6) < 1e-9, "humidity PV read back as 45.6 %")
+
+r = probe("--write", "air_temp_remote_setpoint_c=80")
+check(not r["writes"][0]["ok"] and "55" in r["writes"][0]["error"], "80 °C refused by the map's limit before sending")
+check(temp.getValues(3, 26, 1) == [355], "the refused setpoint never reached the controller")
+
+# An exception response: a register the controller does not have (address 500).
+with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as f:
+    f.write('family = "test"\n[units]\ntemperature = 1\n[[registers]]\nname = "missing_c"\nunit_id = "temperature"\n'
+            'address = 500\ntype = "int16"\nscale = 0.1\naccess = "read"\n')
+    bad_map = f.name
+r = probe(map_file=bad_map)
+check(r["status"]["exceptions"] == 1, f"exception response counted (got {r['status']})")
+check(r["samples"][0]["quality"] == "comm_error", "the sample is flagged comm_error")
+os.unlink(bad_map)
+
+# The server goes away: connection refused is a comm error, not a crash.
+ServerStop()
+server.join(timeout=5)
+r = probe()
+check(r["status"]["comm_errors"] >= 1 and all(s["quality"] == "comm_error" for s in r["samples"]),
+      "server gone: every point comm_error, counted")
+
+if failures:
+    sys.exit(1)
+print("PASS: our Modbus driver against a pymodbus controller")
