@@ -30,8 +30,10 @@ if mbpoll -m tcp -p "$port" -a 1 -t 4 -r 27 -1 127.0.0.1 700 >/dev/null 2>&1; th
   echo "FAIL: a 70.0 °C setpoint was accepted"; exit 1
 fi
 # The world follows: poll the PV every 200 ms until it passes 34.0 °C (time constant 5 min, 100x).
-set +o pipefail  # awk ends the pipeline as soon as it has its answer; mbpoll then gets SIGPIPE
-if timeout 60 mbpoll -m tcp -p "$port" -a 1 -t 4 -r 2 -c 1 -l 200 127.0.0.1 |
+# stdbuf: mbpoll block-buffers a pipe. awk ends the pipeline as soon as it has its answer and
+# mbpoll then gets SIGPIPE, so the pipeline status is awk's.
+set +o pipefail
+if timeout 60 stdbuf -oL mbpoll -m tcp -p "$port" -a 1 -t 4 -r 2 -c 1 -l 200 127.0.0.1 |
      awk -F'\t' '/^\[/ { if ($2 + 0 >= 340) { print "PV reached " $2; found = 1; exit 0 } } END { exit !found }'; then
   echo "PASS: mbpoll read the PV, wrote the setpoint, and the simulated chamber followed"
 else
