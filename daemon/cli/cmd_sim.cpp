@@ -25,6 +25,7 @@
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/acquisition.hpp"
 #include "daemon/core/config.hpp"
+#include "daemon/core/recorder/database.hpp"
 #include "daemon/core/register_map.hpp"
 #include "daemon/core/user_error.hpp"
 #include "drivers/anemometers.hpp"
@@ -166,39 +167,76 @@ void add_sim_commands(CLI::App& app) {
     struct ReplayOptions {
         std::string file;
         bool json = false;
+        std::string db, campaign;
     };
     auto r = std::make_shared<ReplayOptions>();
     auto* rep = app.add_subcommand("replay", "Feed a manikin bus capture (can-utils `candump -l` format) through the driver");
     rep->add_option("file", r->file, "candump -l log: (1718000000.123456) can0 123#11223344")->required();
     rep->add_flag("--json", r->json, "Print the last value of every channel as JSON");
+    rep->add_option("--db", r->db, "Also record the replayed samples into this database (a trial of --campaign)");
+    rep->add_option("--campaign", r->campaign, "Campaign name for the replayed trial (default: replay-<file name>)");
     rep->callback([r] {
         std::ifstream in(r->file);
         if (!in) throw UserError(fmt::format("{}: cannot open the capture", r->file));
-        drivers::ManualClock clock(0);
+        // Parse everything first: a bad line stops the replay before anything is recorded.
+        std::vector<std::pair<std::int64_t, can_frame>> captured;
+        {
+            std::string text;
+            int line_no = 0;
+            while (std::getline(in, text)) {
+                ++line_no;
+                if (text.empty() || text[0] == '#') continue;
+                const auto parsed = protocol::manikin_can::parse_candump_line(text);
+                if (!parsed)
+                    throw UserError(fmt::format("{}:{}: not a candump -l line (expected \"(seconds.micro) can0 ID#HEX\")",
+                                                r->file, line_no));
+                captured.emplace_back(static_cast<std::int64_t>(parsed->first * 1e9), parsed->second);
+            }
+        }
+        if (captured.empty()) throw UserError(fmt::format("{}: no frames", r->file));
+        const std::int64_t t0 = captured.front().first;
+        drivers::ManualClock clock(t0);  // replay time is the capture's own: UTC of the first frame
         std::map<std::string, drivers::Sample> last;
         std::size_t samples = 0;
+        // Into the recorder: one campaign, one case, one trial holding the whole capture.
+        std::optional<recorder::Database> db;
+        std::int64_t trial_id = 0, device_id = 0;
+        std::map<std::string, std::int64_t> channel_ids;
+        std::vector<recorder::SampleRow> rows;
+        if (!r->db.empty()) {
+            db.emplace(recorder::Database::open(r->db));
+            const std::string name =
+                r->campaign.empty() ? "replay-" + std::filesystem::path(r->file).filename().string() : r->campaign;
+            const auto campaign = db->create_campaign(name, nlohmann::json{{"replayed_from", r->file}}.dump());
+            trial_id = db->create_trial(campaign, db->add_case(campaign, "replay", "{}", 0), 1);
+            db->set_trial_state(trial_id, "acquiring", "replay of " + r->file, 0);
+            device_id = db->device_id("manikin", "can", "replay " + r->file);
+        }
         boost::asio::io_context io;
         drivers::ManikinCanDriver driver(io, -1, {}, clock, [&](const drivers::Sample& sample) {
             last[sample.channel] = sample;
             ++samples;
+            if (!db) return;
+            auto it = channel_ids.find(sample.channel);
+            if (it == channel_ids.end()) {
+                const auto us = sample.channel.rfind('_');
+                it = channel_ids.emplace(sample.channel, db->channel_id(device_id, sample.channel,
+                                                                         sample.channel.substr(us + 1))).first;
+            }
+            rows.push_back({trial_id, it->second, sample.mono_ns, sample.utc_ns, sample.value,
+                            static_cast<std::uint8_t>(sample.quality)});
         });
-        std::string line;
-        int line_no = 0;
-        std::int64_t t0 = -1;
         std::size_t frames = 0;
-        while (std::getline(in, line)) {
-            ++line_no;
-            if (line.empty() || line[0] == '#') continue;
-            const auto parsed = protocol::manikin_can::parse_candump_line(line);
-            if (!parsed)
-                throw UserError(fmt::format("{}:{}: not a candump -l line (expected \"(seconds.micro) can0 ID#HEX\")", r->file, line_no));
-            const auto t_ns = static_cast<std::int64_t>(parsed->first * 1e9);
-            if (t0 < 0) t0 = t_ns;
-            clock.advance_ns(t_ns - t0 - clock.mono_ns());  // replay time: the capture's own
-            driver.ingest(parsed->second);
+        for (const auto& [t_ns, frame] : captured) {
+            clock.advance_ns(t_ns - t0 - clock.mono_ns());
+            driver.ingest(frame);
             ++frames;
         }
         const auto st = driver.status();
+        if (db) {
+            db->insert_samples(rows);
+            db->set_trial_state(trial_id, "done", "replayed", clock.utc_ns());
+        }
         if (r->json) {
             nlohmann::json j = {{"frames", frames}, {"samples", samples}, {"malformed", st.malformed}, {"channels", nlohmann::json::object()}};
             for (const auto& [ch, v] : last) j["channels"][ch] = {{"value", v.value}, {"quality", drivers::to_string(v.quality)}};

@@ -112,6 +112,7 @@ void Acquisition::build_drivers(const config::Config& config, const drivers::Clo
     mo.stale_after_s = d.stale_after_s;
     mo.max_skin_temp_c = config.safety.max_skin_temp_c;
     manikin_ = std::make_unique<drivers::ManikinCanDriver>(io_, manikin_fd, mo, clock, sink_);
+    if (!d.manikin_capture.empty()) manikin_->capture_to(d.manikin_capture);  // candump -l, for `manikin replay`
     windsonic_ = std::make_unique<drivers::WindSonicDriver>(
         io_, drivers::SerialOptions{"windsonic", windsonic_path, static_cast<unsigned>(d.windsonic_baud), d.stale_after_s},
         clock, sink_);

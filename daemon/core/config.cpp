@@ -187,7 +187,10 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
             r.text(*t, "devices.csat3b", "path", dc.csat3b_path);
             r.number(*t, "devices.csat3b", "baud", dc.csat3b_baud, 1200, 921600, "baud");
         }
-        if (const auto* t = r.table(*d, "devices", "manikin")) r.text(*t, "devices.manikin", "interface", dc.manikin_interface);
+        if (const auto* t = r.table(*d, "devices", "manikin")) {
+            r.text(*t, "devices.manikin", "interface", dc.manikin_interface);
+            r.text(*t, "devices.manikin", "capture", dc.manikin_capture);
+        }
         r.number(*d, "devices", "modbus_timeout_s", dc.modbus_timeout_s, 0.01, 30.0, "s");
         r.number(*d, "devices", "poll_period_s", dc.poll_period_s, 0.05, 3600.0, "s");
         r.number(*d, "devices", "stale_after_s", dc.stale_after_s, 0.1, 3600.0, "s");

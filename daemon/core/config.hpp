@@ -51,6 +51,7 @@ struct DeviceConfig {
     std::string csat3b_path = "/dev/ttyUSB1";
     double csat3b_baud = 115200;     // CSAT3B RS-485/USB default
     std::string manikin_interface = "can0";
+    std::string manikin_capture;     // record every bus frame to this candump -l log (empty: off)
     double modbus_timeout_s = 0.5;
     double poll_period_s = 1.0;
     double stale_after_s = 3.0;
