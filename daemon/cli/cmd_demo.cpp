@@ -38,7 +38,8 @@ void add_demo_command(CLI::App& app) {
     auto o = std::make_shared<Opts>();
     auto* cmd = app.add_subcommand("demo", "Simulated validation campaign (Table S3 x 3) -> heat fluxes with 95 % CIs -> "
                                            "what the twin is missing");
-    cmd->add_option("--out", o->out, "Folder for the recordings, results and plots")->capture_default_str();
+    cmd->add_option("--out", o->out, "Folder for the database, recordings, results and plots (its database is replaced)")
+        ->capture_default_str();
     cmd->add_option("--seed", o->seed, "Random seed of the simulated lab")->capture_default_str();
     cmd->add_flag("--json", o->json, "Print the analysis and reconcile JSON documents");
     cmd->add_option("--cases", o->cases, "Run only the first N cases of Table S3")->check(CLI::Range(1, 15))->capture_default_str();
@@ -52,6 +53,8 @@ void add_demo_command(CLI::App& app) {
         std::filesystem::create_directories(out);
         config::Config cfg = config::default_config();
         cfg.database = out / "manikind.db";
+        // The demo's folder is its own scratch space: each run starts a fresh database (~300 MB).
+        for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(out / (std::string("manikind.db") + suffix));
         cfg.simulation.seed = o->seed;
         cfg.simulation.runtime_dir = (out / "sim").string();
         cfg.log_level = "warn";
