@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -163,9 +164,20 @@ void LabDaemon::enter(Stage s, const std::string& why) {
 
 std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
     std::lock_guard lk(lock_);
-    if (plan_) return fmt::format("campaign '{}' is still running; abort it first", plan_->name);
     if (const auto why = check_plan_against_limits(plan, o_.config.safety); !why.empty()) return why;
-    if (db_.find_campaign(plan.name)) return fmt::format("a campaign named '{}' is already in {}", plan.name, db_path_.string());
+    if (db_.find_campaign(plan.name) || (plan_ && plan_->name == plan.name) ||
+        std::any_of(waiting_.begin(), waiting_.end(), [&](const CampaignPlan& p) { return p.name == plan.name; }))
+        return fmt::format("a campaign named '{}' is already in {} or queued", plan.name, db_path_.string());
+    if (plan_) {
+        waiting_.push_back(plan);
+        event("info", "campaign", fmt::format("'{}' queued behind '{}' ({} waiting)", plan.name, plan_->name, waiting_.size()));
+        return {};
+    }
+    begin_campaign(plan);
+    return {};
+}
+
+void LabDaemon::begin_campaign(const CampaignPlan& plan) {
     nlohmann::json def = {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
     campaign_id_ = db_.create_campaign(plan.name, def.dump());
     queue_.clear();
@@ -182,11 +194,9 @@ std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
     trials_done_ = 0;
     plan_ = plan;
     safety_tripped_ = false;
-    trial_summaries_.clear();
     last_campaign_ = plan.name;
     db_.set_campaign_state(campaign_id_, "running");
     event("info", "campaign", fmt::format("'{}' started: {} cases x {} replicates", plan.name, plan.cases.size(), plan.replicates));
-    return {};
 }
 
 std::string LabDaemon::abort(const std::string& reason) {
@@ -194,6 +204,7 @@ std::string LabDaemon::abort(const std::string& reason) {
     if (!plan_) return "no campaign is running";
     acq_->manikin().set_run(false);
     if (trial_id_) finish_trial("aborted", reason);
+    waiting_.clear();  // an operator's abort stops what was queued too
     finish_campaign("aborted");
     return {};
 }
@@ -241,6 +252,7 @@ void LabDaemon::safety_stop(const std::string& why) {
         db_.add_trial_flag(trial_id_, flag_safety_stop);
         finish_trial("failed", "safety stop: " + why);
     }
+    waiting_.clear();
     if (plan_) finish_campaign("aborted");
 }
 
@@ -276,6 +288,11 @@ void LabDaemon::finish_campaign(const std::string& state) {
     plan_.reset();
     paused_ = false;
     stage_ = Stage::idle;
+    if (!waiting_.empty()) {
+        const CampaignPlan next = waiting_.front();
+        waiting_.pop_front();
+        begin_campaign(next);
+    }
 }
 
 // The trial state machine: one transition check per call (every tick of the clock).
@@ -456,6 +473,8 @@ nlohmann::json LabDaemon::status_json() {
     j["database"] = db_path_.string();
     j["time_s"] = static_cast<double>(clock_->mono_ns()) * 1e-9;
     j["campaign"] = plan_ ? nlohmann::json(plan_->name) : nlohmann::json(nullptr);
+    j["queued_campaigns"] = nlohmann::json::array();
+    for (const auto& p : waiting_) j["queued_campaigns"].push_back(p.name);
     j["stage"] = to_string(stage_);
     j["paused"] = paused_;
     j["trials_done"] = trials_done_;

@@ -58,7 +58,8 @@ public:
     explicit LabDaemon(DaemonOptions options);
     ~LabDaemon();
 
-    // Commands: an empty string when accepted, else why not (the limit or state named).
+    // Commands: an empty string when accepted, else why not (the limit or state named). A campaign
+    // started while another runs is queued behind it; abort ends the running one and the queue.
     std::string start_campaign(const CampaignPlan& plan);
     std::string abort(const std::string& reason);
     std::string pause();
@@ -95,6 +96,7 @@ private:
     void event(const std::string& severity, const std::string& kind, const std::string& message);
     void finish_trial(const std::string& state, const std::string& reason);
     void finish_campaign(const std::string& state);
+    void begin_campaign(const CampaignPlan& plan);
     void safety_stop(const std::string& why);
     double stage_elapsed_s() const;
     std::int64_t channel_id(const std::string& device, const std::string& channel);
@@ -113,6 +115,7 @@ private:
 
     // Campaign state.
     std::optional<CampaignPlan> plan_;
+    std::deque<CampaignPlan> waiting_;   // campaigns queued behind the running one
     std::int64_t campaign_id_ = 0;
     std::deque<TrialJob> queue_;
     std::optional<TrialJob> current_;

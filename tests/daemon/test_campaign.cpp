@@ -11,8 +11,11 @@ using manikind::test::quick_plan;
 TEST_CASE("a campaign runs through every stage, records, and stores results", "[daemon]") {
     DaemonFixture f;
     REQUIRE(f.daemon().start_campaign(quick_plan("quick")).empty());
-    CHECK_FALSE(f.daemon().start_campaign(quick_plan("second")).empty());  // one at a time
+    REQUIRE(f.daemon().start_campaign(quick_plan("second")).empty());  // queued behind the first
+    CHECK(f.daemon().status_json()["queued_campaigns"] == nlohmann::json::array({"second"}));
+    CHECK_FALSE(f.daemon().start_campaign(quick_plan("second")).empty());  // names are unique
     f.daemon().run_virtual();
+    CHECK(f.daemon().db().trials(*f.daemon().db().find_campaign("second")).at(0).state == "done");
     auto& db = f.daemon().db();
     const auto id = db.find_campaign("quick");
     REQUIRE(id);
