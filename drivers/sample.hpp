@@ -16,6 +16,10 @@ enum class Quality : std::uint8_t {
 };
 const char* to_string(Quality q);
 
+// The unit a channel's name carries in its suffix (names say their unit: skin_temp_c,
+// air_rh_pct, air_speed_m_s, heat_flux_w_m2, sweat_rate_g_m2_h); the suffix itself otherwise.
+std::string unit_of_channel(const std::string& channel);
+
 struct Sample {
     std::string device;      // "windsonic", "manikin", "chamber", "datalogger"
     std::string channel;     // "air_speed_m_s", "z05.skin_temp_c", ...

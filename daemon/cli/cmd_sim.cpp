@@ -219,9 +219,8 @@ void add_sim_commands(CLI::App& app) {
             if (!db) return;
             auto it = channel_ids.find(sample.channel);
             if (it == channel_ids.end()) {
-                const auto us = sample.channel.rfind('_');
                 it = channel_ids.emplace(sample.channel, db->channel_id(device_id, sample.channel,
-                                                                         sample.channel.substr(us + 1))).first;
+                                                                         drivers::unit_of_channel(sample.channel))).first;
             }
             rows.push_back({trial_id, it->second, sample.mono_ns, sample.utc_ns, sample.value,
                             static_cast<std::uint8_t>(sample.quality)});

@@ -70,7 +70,7 @@ LabDaemon::LabDaemon(DaemonOptions options)
     }
     acq_->start();
     for (const auto& st : acq_->status())
-        db_.device_id(st.name, st.name == "manikin" ? "can" : (st.name == "chamber" || st.name == "datalogger") ? "modbus" : "serial",
+        device_ids_[st.name] = db_.device_id(st.name, st.name == "manikin" ? "can" : (st.name == "chamber" || st.name == "datalogger") ? "modbus" : "serial",
                       st.transport);
     event("info", "daemon", fmt::format("started ({} lab, database {})", o_.config.mode, db_path_.string()));
 }
@@ -84,14 +84,11 @@ LabDaemon::~LabDaemon() {
 std::int64_t LabDaemon::channel_id(const std::string& device, const std::string& channel) {
     const std::string key = device + "/" + channel;
     if (const auto it = channel_ids_.find(key); it != channel_ids_.end()) return it->second;
-    const auto dot = channel.rfind('_');
-    std::string unit = dot == std::string::npos ? "" : channel.substr(dot + 1);
-    if (unit == "c") unit = "°C";
-    else if (unit == "pct") unit = "%";
-    else if (unit == "s" && channel.find("_m_s") != std::string::npos) unit = "m/s";
-    else if (unit == "m2") unit = "W/m²";
-    else if (unit == "h") unit = "g/(m² h)";
-    const std::int64_t id = db_.channel_id(db_.device_id(device, "", ""), channel, unit);
+    // Devices were registered with their kind and transport at start; device_id() would
+    // overwrite those, so look the id up rather than calling it again.
+    const auto dev = device_ids_.find(device);
+    const std::int64_t device_id = dev != device_ids_.end() ? dev->second : db_.device_id(device, "unknown", "");
+    const std::int64_t id = db_.channel_id(device_id, channel, drivers::unit_of_channel(channel));
     channel_ids_[key] = id;
     return id;
 }

@@ -132,6 +132,7 @@ private:
     // Live values and detectors.
     std::map<std::string, drivers::Sample> live_;
     std::map<std::string, std::int64_t> channel_ids_;
+    std::map<std::string, std::int64_t> device_ids_;
     std::vector<SlidingRange> skin_range_;
     SlidingRange enclosure_range_;
     std::int64_t acquiring_since_ns_ = 0;

@@ -26,6 +26,11 @@ TEST_CASE("manikin replay --db records the capture as a trial, and refuses a bad
     const auto dir = std::filesystem::temp_directory_path() / ("manikind-replay-" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
     const auto db_path = (dir / "replay.db").string();
+    {
+        // A database the daemon already wrote: the replay must use the same channel units.
+        auto daemon_db = manikind::recorder::Database::open(db_path);
+        daemon_db.channel_id(daemon_db.device_id("manikin", "can", "socketcan can0"), "z05.skin_temp_c", "°C");
+    }
     const auto r = run_manikin(std::string("replay --db ") + db_path + " --campaign bus " + MANIKIND_TEST_DATA_DIR
                                "/devices/manikin_capture.log");
     REQUIRE(r.exit_code == 0);

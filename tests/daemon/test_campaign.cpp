@@ -2,6 +2,8 @@
 // results; a device dropping out for 60 s mid-trial; the daemon's own safety stops.
 #include <catch2/catch.hpp>
 
+#include <map>
+
 #include "daemon/core/database_export.hpp"
 #include "daemon_fixture.hpp"
 
@@ -38,6 +40,14 @@ TEST_CASE("a campaign runs through every stage, records, and stores results", "[
     REQUIRE(results["cases"].size() == 1);
     CHECK(std::isfinite(results["cases"][0]["whole_body"]["q_w_m2"].get<double>()));
     CHECK(db.integrity_check() == "ok");
+    std::map<std::string, std::string> units;
+    for (const auto& ch : db.channels()) units[ch.device_name + "/" + ch.name] = ch.unit;
+    CHECK(units["manikin/z01.skin_temp_c"] == "°C");
+    CHECK(units["manikin/z01.heat_flux_w_m2"] == "W/m²");
+    CHECK(units["manikin/z01.sweat_rate_g_m2_h"] == "g/(m² h)");
+    CHECK(units["datalogger/ee181_1.air_rh_pct"] == "%");
+    CHECK(units["windsonic/air_speed_m_s"] == "m/s");
+    CHECK(units["csat3b/sonic_temp_c"] == "°C");
 }
 
 TEST_CASE("a device dropping out for 60 s mid-trial: the others go on, the gap is recorded, the trial flagged",
