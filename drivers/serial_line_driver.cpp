@@ -21,13 +21,16 @@ void SerialLineDriver::start() {
     if (!open_port()) backoff_.failed(clock_.mono_ns());
 }
 
+void SerialLineDriver::release_port() {
+    if (!port_) return;
+    boost::system::error_code ignored;
+    port_->close(ignored);
+    port_.reset();
+}
+
 void SerialLineDriver::stop() {
     running_ = false;
-    if (port_) {
-        boost::system::error_code ignored;
-        port_->close(ignored);
-        port_.reset();
-    }
+    release_port();
     std::lock_guard lk(lock_);
     status_.connected = false;
 }
@@ -72,11 +75,7 @@ void SerialLineDriver::start_read() {
 }
 
 void SerialLineDriver::close_port(const std::string& why) {
-    if (port_) {
-        boost::system::error_code ignored;
-        port_->close(ignored);
-        port_.reset();
-    }
+    release_port();
     {
         std::lock_guard lk(lock_);
         status_.connected = false;

@@ -56,7 +56,8 @@ protected:
 private:
     bool open_port();
     void start_read();
-    void close_port(const std::string& why);
+    void close_port(const std::string& why);  // after a read error: counted, degraded, retried
+    void release_port();
 
     boost::asio::io_context& io_;
     SerialOptions options_;

@@ -8,16 +8,10 @@
 #include <string_view>
 
 #include "protocol/csat3b.hpp"
+#include "fuzz/fuzz_check.hpp"
 
 using namespace manikind::protocol::csat3b;
 
-#define FUZZ_CHECK(cond)                                                        \
-    do {                                                                        \
-        if (!(cond)) {                                                          \
-            std::fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond); \
-            std::abort();                                                       \
-        }                                                                       \
-    } while (0)
 
 namespace {
 

@@ -9,16 +9,10 @@
 #include <string>
 
 #include "protocol/manikin_can.hpp"
+#include "fuzz/fuzz_check.hpp"
 
 using namespace manikind::protocol::manikin_can;
 
-#define FUZZ_CHECK(cond)                                                        \
-    do {                                                                        \
-        if (!(cond)) {                                                          \
-            std::fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond); \
-            std::abort();                                                       \
-        }                                                                       \
-    } while (0)
 
 namespace {
 

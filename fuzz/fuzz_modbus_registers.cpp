@@ -11,16 +11,10 @@
 #include <vector>
 
 #include "protocol/modbus_registers.hpp"
+#include "fuzz/fuzz_check.hpp"
 
 using namespace manikind::protocol::modbus_registers;
 
-#define FUZZ_CHECK(cond)                                                        \
-    do {                                                                        \
-        if (!(cond)) {                                                          \
-            std::fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond); \
-            std::abort();                                                       \
-        }                                                                       \
-    } while (0)
 
 namespace {
 

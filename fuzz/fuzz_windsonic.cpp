@@ -7,16 +7,10 @@
 #include <string_view>
 
 #include "protocol/windsonic.hpp"
+#include "fuzz/fuzz_check.hpp"
 
 using namespace manikind::protocol::windsonic;
 
-#define FUZZ_CHECK(cond)                                                        \
-    do {                                                                        \
-        if (!(cond)) {                                                          \
-            std::fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond); \
-            std::abort();                                                       \
-        }                                                                       \
-    } while (0)
 
 namespace {
 
