@@ -47,6 +47,7 @@ ManikinCanDriver::ManikinCanDriver(boost::asio::io_context& io, int fd, ManikinB
     : io_(io), options_(std::move(options)), clock_(clock), sink_(std::move(sink)) {
     status_.name = options_.device_name;
     status_.transport = fd >= 0 ? "socketcan " + options_.interface : "replay";
+    status_.last_error = options_.open_error;
     if (fd >= 0) stream_ = std::make_unique<boost::asio::posix::stream_descriptor>(io_, fd);
 }
 

@@ -30,6 +30,7 @@ struct ManikinBusOptions {
     std::string interface = "can0";   // for the capture log and for open_socketcan
     double stale_after_s = 3.0;
     double max_skin_temp_c = 45.0;    // a zone above this is flagged out-of-range (safety is the daemon's)
+    std::string open_error;           // why there is no bus (from open_socketcan), shown in status
 };
 
 // Opens a PF_CAN raw socket bound to `interface`; returns -1 and sets `error` where the kernel

@@ -79,12 +79,10 @@ Acquisition::Acquisition(const config::Config& config, drivers::ManualClock& clo
 
 Acquisition::Acquisition(const config::Config& config, const drivers::Clock& clock, drivers::SampleSink sink)
     : sink_(std::move(sink)) {
-    std::string error;
-    const int fd = drivers::open_socketcan(config.devices.manikin_interface, error);
+    const int fd = drivers::open_socketcan(config.devices.manikin_interface, manikin_open_error_);
     const auto& d = config.devices;
     build_drivers(config, clock, fd, d.windsonic_path, d.csat3b_path, d.chamber.host, static_cast<int>(d.chamber.port),
                   d.datalogger.host, static_cast<int>(d.datalogger.port));
-    if (fd < 0) sink_(drivers::Sample{"manikin", "bus", 0.0, drivers::Quality::comm_error, clock.mono_ns(), clock.utc_ns()});
 }
 
 void Acquisition::build_drivers(const config::Config& config, const drivers::Clock& clock, int manikin_fd,
@@ -111,6 +109,7 @@ void Acquisition::build_drivers(const config::Config& config, const drivers::Clo
     mo.interface = d.manikin_interface;
     mo.stale_after_s = d.stale_after_s;
     mo.max_skin_temp_c = config.safety.max_skin_temp_c;
+    mo.open_error = manikin_open_error_;
     manikin_ = std::make_unique<drivers::ManikinCanDriver>(io_, manikin_fd, mo, clock, sink_);
     if (!d.manikin_capture.empty()) manikin_->capture_to(d.manikin_capture);  // candump -l, for `manikin replay`
     windsonic_ = std::make_unique<drivers::WindSonicDriver>(

@@ -79,6 +79,7 @@ private:
     std::atomic<bool> stop_{false};
     std::thread io_thread_, pacer_thread_;
     double lockstep_stalls_ = 0;
+    std::string manikin_open_error_;   // real mode: why can0 could not be opened
 };
 
 }  // namespace manikind
