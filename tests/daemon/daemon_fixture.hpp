@@ -21,7 +21,6 @@ public:
         c.database = dir_ / "test.db";
         c.simulation.runtime_dir = (dir_ / "sim").string();
         c.log_level = "error";
-        c.devices.modbus_timeout_s = 0.05;
         if (tweak) tweak(c);
         daemon_ = std::make_unique<LabDaemon>(DaemonOptions{c, true, 1.0});
     }
