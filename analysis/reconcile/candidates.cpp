@@ -6,32 +6,69 @@
 
 namespace manikind::analysis::reconcile {
 
+std::vector<physics::twin::Term> to_twin_terms(const std::vector<CandidateTerm>& terms, const std::vector<double>& values) {
+    std::vector<physics::twin::Term> out;
+    std::size_t k = 0;
+    for (const auto& c : terms) {
+        physics::twin::Term t;
+        t.name = c.term;
+        t.region = c.region;
+        t.zones = c.zones;
+        for (const auto& p : c.parameters) t.parameters[p.name] = values.at(k++);
+        out.push_back(std::move(t));
+    }
+    return out;
+}
+
 std::vector<CandidateTerm> candidate_library(const std::vector<std::string>& wet_regions) {
     std::vector<CandidateTerm> lib = {
         {"humidity_buoyancy", "",
          "water vapour from wet skin lightens near-skin air, adding buoyancy: dT -> dT + gamma w dC (Eq. 7)",
-         {{"gamma", "K m3/kg", 0.0, 400.0, 100.0, 0.0, 146.0, 40.0, 300.0}}},
+         {{"gamma", "K m3/kg", 0.0, 400.0, 100.0, 0.0, 146.0, 40.0, 300.0}}, {}},
         {"diffusion_floor", "",
          "with opposing buoyancies cancelling, heat still diffuses: h_c -> h0 + A|.|^(1/4) (Eq. 5, Nu0)",
-         {{"h0", "W/m2K", 0.0, 3.0, 0.3, 0.0, 0.3, 0.0, 1.5}}},
+         {{"h0", "W/m2K", 0.0, 3.0, 0.3, 0.0, 0.3, 0.0, 1.5}}, {}},
         {"mixed_convection", "",
          "recorded air motion adds forced convection: h = (h_c^3 + (s 10.4 v^0.56)^3)^(1/3) (Eq. 9)",
-         {{"scale", "", 0.0, 5.0, 1.0, 0.0, 1.0, 0.2, 3.0}}},
+         {{"scale", "", 0.0, 5.0, 1.0, 0.0, 1.0, 0.2, 3.0}}, {}},
         {"wall_offset", "",
          "the walls radiate at a temperature other than the recorded one (T_w + delta)",
-         {{"delta_c", "degC", -10.0, 10.0, 0.5, 0.0, 0.0, -5.0, 5.0}}},
+         {{"delta_c", "degC", -10.0, 10.0, 0.5, 0.0, 0.0, -5.0, 5.0}}, {}},
         {"air_temp_bias", "",
          "the air probe reads the true air temperature plus a bias",
-         {{"bias_c", "degC", -3.0, 3.0, 0.2, 0.0, 0.0, -1.5, 1.5}}},
+         {{"bias_c", "degC", -3.0, 3.0, 0.2, 0.0, 0.0, -0.2, 0.2}}, {}},  // EE181 +-0.2 degC (Table S2)
         {"textile_resistance", "",
          "the textile skin's resistance cools the evaporating surface: T_surface = T_skin - R q (Text S2.4)",
-         {{"r_m2k_w", "m2K/W", 0.0, 0.05, 0.005, 0.0, 0.0054, 0.0, 0.03}}},
+         {{"r_m2k_w", "m2K/W", 0.0, 0.05, 0.005, 0.0, 0.0054, 0.0, 0.03}}, {}},
     };
     for (const auto& region : wet_regions)
         lib.push_back({"partial_wettedness", region,
                        "part of this region is dry (e.g. clogged sweat pores): w -> f w there (Text S3.4)",
-                       {{"fraction", "", 0.0, 1.0, 0.7, 1.0, std::nullopt, 0.02, 1.0}}});
+                       {{"fraction", "", 0.0, 1.0, 0.7, 1.0, std::nullopt, 0.02, 1.0}}, {}});
     return lib;
+}
+
+std::vector<std::string> plausibility_advice(const CandidateTerm& c, const std::vector<double>& v,
+                                             const std::vector<double>& u) {
+    std::vector<std::string> out;
+    for (std::size_t i = 0; i < c.parameters.size() && i < v.size(); ++i) {
+        const auto& p = c.parameters[i];
+        const double ui = i < u.size() ? u[i] : 0.0;
+        const bool unusual = v[i] < p.plausible_lo || v[i] > p.plausible_hi;
+        if (c.term == "air_temp_bias" && unusual)
+            out.push_back(fmt::format("the air temperature probe reads {:.2f} °C {}, beyond a calibrated EE181's "
+                                      "±0.2 °C (Table S2): check the probe and its calibration",
+                                      std::abs(v[i]), v[i] > 0 ? "high" : "low"));
+        else if (c.term == "wall_offset" && unusual)
+            out.push_back(fmt::format("the walls radiate {:+.1f} °C from the recorded wall temperature: check the wall "
+                                      "thermocouples' contact and the enclosure lining's emissivity", v[i]));
+        else if (unusual)
+            out.push_back(fmt::format("{} = {:.4g} {} is unusual (expected {:g}..{:g}): check the set-up before "
+                                      "trusting it", p.name, v[i], p.unit, p.plausible_lo, p.plausible_hi));
+        else if (p.theory && std::isfinite(ui) && ui > 0.0 && std::abs(v[i] - *p.theory) > 3.0 * ui)
+            out.push_back(fmt::format("{} = {:.4g} ± {:.2g} differs from the {:g} theory predicts", p.name, v[i], ui, *p.theory));
+    }
+    return out;
 }
 
 std::string plain_statement(const CandidateTerm& c, const std::vector<double>& v, const std::vector<double>& u) {

@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "physics/twin/twin.hpp"
+
 namespace manikind::analysis::reconcile {
 
 struct ParameterSpec {
@@ -15,7 +17,7 @@ struct ParameterSpec {
     double start = 0.0;                             // first guess
     double null_value = 0.0;                        // the baseline (no effect)
     std::optional<double> theory;                   // expectation from theory, if any
-    double plausible_lo = 0.0, plausible_hi = 0.0;  // outside: rejected as implausible
+    double plausible_lo = 0.0, plausible_hi = 0.0;  // outside: named with advice, never refused
 };
 
 struct CandidateTerm {
@@ -23,12 +25,28 @@ struct CandidateTerm {
     std::string region;         // partial_wettedness: which region
     std::string rationale;      // one line of physics
     std::vector<ParameterSpec> parameters;
-    std::string label() const { return region.empty() ? term : term + ":" + region; }
+    std::vector<int> zones;     // heat_leak: the zone(s) it applies to (local anomalies)
+    std::string label() const {
+        if (!zones.empty()) {
+            std::string z;
+            for (int id : zones) z += (z.empty() ? "" : ",") + std::to_string(id);
+            return term + ":zone " + z;
+        }
+        return region.empty() ? term : term + ":" + region;
+    }
 };
+
+// Candidate terms with their parameter values (in order) as twin terms.
+std::vector<physics::twin::Term> to_twin_terms(const std::vector<CandidateTerm>& terms, const std::vector<double>& values);
 
 // The whole library. `regions` are the zone-map regions present (partial wettedness is offered
 // once per region that is wet in at least one case).
 std::vector<CandidateTerm> candidate_library(const std::vector<std::string>& wet_regions);
+
+// Advice where a fitted value is unusual (outside the plausible range, or unlike theory). It
+// never removes a candidate: the best term is named with the warning.
+std::vector<std::string> plausibility_advice(const CandidateTerm& c, const std::vector<double>& values,
+                                             const std::vector<double>& uncertainties);
 
 // A plain-language statement of what the fitted term says physically.
 std::string plain_statement(const CandidateTerm& c, const std::vector<double>& values,

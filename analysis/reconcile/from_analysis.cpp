@@ -47,6 +47,20 @@ std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, co
             in.sides.push_back(zone.side);
             in.heights_m.push_back(zone.centroid_height_m);
         }
+        // The replicates, each with its own recorded conditions (the noise model's random part).
+        for (const auto& t : c.trials) {
+            if (!t.included || t.zone_q_w_m2.size() != map.size() || t.zone_skin_temp_c.size() != map.size()) continue;
+            if (!std::isfinite(t.air_temp_c) || !std::isfinite(t.air_rh_pct)) continue;
+            TrialInput trial;
+            trial.conditions = cond;
+            trial.conditions.air_temp_c = t.air_temp_c;
+            trial.conditions.air_rh_pct = t.air_rh_pct;
+            if (std::isfinite(t.wall_temp_c)) trial.conditions.wall_temp_c = t.wall_temp_c;
+            if (std::isfinite(t.air_speed_m_s)) trial.conditions.air_speed_m_s = t.air_speed_m_s;
+            for (std::size_t z = 0; z < trial.conditions.zones.size(); ++z) trial.conditions.zones[z].skin_temp_c = t.zone_skin_temp_c[z];
+            trial.q_w_m2.assign(t.zone_q_w_m2.begin(), t.zone_q_w_m2.begin() + static_cast<long>(trial.conditions.zones.size()));
+            in.trials.push_back(std::move(trial));
+        }
         out.push_back(std::move(in));
     }
     return out;

@@ -5,155 +5,25 @@
 #include <future>
 #include <limits>
 #include <numeric>
+#include <random>
 #include <set>
 #include <stdexcept>
 
+#include <Eigen/Dense>
+#include <boost/math/distributions/chi_squared.hpp>
+#include <boost/math/distributions/normal.hpp>
+#include <boost/math/distributions/students_t.hpp>
 #include <fmt/core.h>
 
+#include "analysis/reconcile/evidence.hpp"
 #include "analysis/reconcile/least_squares.hpp"
-#include "physics/psychrometrics.hpp"
 
 namespace manikind::analysis::reconcile {
 namespace tw = physics::twin;
+namespace ev = evidence;
 namespace {
 
-// ---- Forward models ----------------------------------------------------------------------
-
-class TwinModel final : public ForwardModel {
-public:
-    TwinModel(std::vector<CaseInput> cases, tw::TwinVersion base) : cases_(std::move(cases)), base_(std::move(base)) {
-        for (std::size_t c = 0; c < cases_.size(); ++c) {
-            const CaseInput& in = cases_[c];
-            const auto& cond = in.conditions;
-            const double p_air = physics::vapour_pressure_pa(cond.air_temp_c, cond.air_rh_pct);
-            const double c_air = physics::vapour_concentration_kg_m3(p_air, cond.air_temp_c);
-            for (std::size_t z = 0; z < cond.zones.size(); ++z) {
-                const double q = in.q_exp_w_m2.at(z);
-                const double u = in.expanded_u_w_m2.at(z);
-                if (!std::isfinite(q) || !std::isfinite(u) || u <= 0.0) continue;
-                Point p;
-                p.case_id = in.case_id;
-                p.zone = cond.zones[z].zone;
-                p.zone_name = z < in.zone_names.size() ? in.zone_names[z] : std::to_string(p.zone);
-                p.region = cond.zones[z].region;
-                p.q_exp = q;
-                p.expanded_u = u;
-                p.coverage_k = z < in.coverage_k.size() && in.coverage_k[z] > 0.0 ? in.coverage_k[z] : 2.0;
-                const double ts = cond.zones[z].skin_temp_c;
-                p.drivers["skin-air temperature difference"] = ts - cond.air_temp_c;
-                p.drivers["vapour concentration difference"] =
-                    cond.wettedness * (physics::saturation_concentration_kg_m3(ts) - c_air);
-                p.drivers["relative humidity"] = cond.air_rh_pct;
-                p.drivers["air speed"] = cond.air_speed_m_s.value_or(0.0);
-                p.drivers["wall-air temperature difference"] = cond.wall_temp_c.value_or(cond.air_temp_c) - cond.air_temp_c;
-                p.drivers["wettedness"] = cond.wettedness;
-                if (z < in.heights_m.size()) p.drivers["zone height"] = in.heights_m[z];
-                if (z < in.sides.size()) p.drivers["side (left -1, right +1)"] = in.sides[z] == "l" ? -1.0 : in.sides[z] == "r" ? 1.0 : 0.0;
-                points_.push_back(std::move(p));
-                index_.emplace_back(c, z);
-            }
-        }
-    }
-    const std::vector<Point>& points() const override { return points_; }
-    bool supports(const std::string&) const override { return true; }
-    std::string base_name() const override { return base_.name; }
-    std::vector<tw::Term> base_terms() const override { return base_.terms; }
-
-    std::vector<double> predict(const std::vector<tw::Term>& extra) const override {
-        tw::TwinVersion v = base_;
-        v.terms.insert(v.terms.end(), extra.begin(), extra.end());
-        std::vector<std::vector<tw::ZoneFlux>> per_case(cases_.size());
-        for (std::size_t c = 0; c < cases_.size(); ++c) per_case[c] = tw::predict(v, cases_[c].conditions);
-        std::vector<double> out(points_.size());
-        for (std::size_t i = 0; i < points_.size(); ++i) out[i] = per_case[index_[i].first][index_[i].second].q_total_w_m2;
-        return out;
-    }
-
-private:
-    std::vector<CaseInput> cases_;
-    tw::TwinVersion base_;
-    std::vector<Point> points_;
-    std::vector<std::pair<std::size_t, std::size_t>> index_;
-};
-
-class WholeBodyHModel final : public ForwardModel {
-public:
-    WholeBodyHModel(std::vector<HObservation> obs, double a, double exponent) : a_(a), exponent_(exponent) {
-        for (const auto& o : obs) {
-            Point p;
-            p.case_id = o.case_id;
-            p.zone_name = "whole body";
-            p.region = "whole_body";
-            p.q_exp = o.h_w_m2k;
-            p.expanded_u = o.expanded_u_w_m2k;
-            p.coverage_k = o.coverage_k;
-            const double c_air = physics::vapour_concentration_kg_m3(physics::vapour_pressure_pa(o.air_temp_c, o.air_rh_pct), o.air_temp_c);
-            dt_.push_back(o.skin_temp_c - o.air_temp_c);
-            dc_.push_back(physics::saturation_concentration_kg_m3(o.skin_temp_c) - c_air);
-            p.drivers["skin-air temperature difference"] = dt_.back();
-            p.drivers["vapour concentration difference"] = dc_.back();
-            p.drivers["relative humidity"] = o.air_rh_pct;
-            points_.push_back(std::move(p));
-        }
-    }
-    const std::vector<Point>& points() const override { return points_; }
-    bool supports(const std::string& term) const override {
-        return term == "humidity_buoyancy" || term == "diffusion_floor";
-    }
-    std::string base_name() const override { return fmt::format("h = {} |dT|^{}", a_, exponent_); }
-    std::vector<tw::Term> base_terms() const override { return {}; }
-    std::vector<double> predict(const std::vector<tw::Term>& extra) const override {
-        double gamma = 0.0, h0 = 0.0;
-        for (const auto& t : extra) {
-            if (t.name == "humidity_buoyancy") gamma = t.parameters.at("gamma");
-            else if (t.name == "diffusion_floor") h0 = t.parameters.at("h0");
-            else throw std::invalid_argument("whole-body h model does not support " + t.name);
-        }
-        std::vector<double> out(points_.size());
-        for (std::size_t i = 0; i < points_.size(); ++i)
-            out[i] = h0 + a_ * std::pow(std::abs(dt_[i] + gamma * dc_[i]), exponent_);
-        return out;
-    }
-
-private:
-    double a_, exponent_;
-    std::vector<Point> points_;
-    std::vector<double> dt_, dc_;
-};
-
-// ---- Statistics ----------------------------------------------------------------------------
-
-FitStats stats_of(const std::vector<Point>& pts, const std::vector<double>& pred, int n_params,
-                  const std::vector<std::size_t>* subset = nullptr) {
-    FitStats s;
-    double sum_sq = 0.0, chi2 = 0.0;
-    auto add = [&](std::size_t i) {
-        const double r = pts[i].q_exp - pred[i];
-        sum_sq += r * r;
-        chi2 += (r / pts[i].standard_u()) * (r / pts[i].standard_u());
-        s.outside_ci += std::abs(r) > pts[i].expanded_u ? 1 : 0;
-        ++s.n_points;
-    };
-    if (subset) for (auto i : *subset) add(i);
-    else for (std::size_t i = 0; i < pts.size(); ++i) add(i);
-    if (s.n_points == 0) return s;
-    s.rmse = std::sqrt(sum_sq / s.n_points);
-    s.chi2_per_dof = chi2 / std::max(1, s.n_points - n_params);
-    return s;
-}
-
-std::vector<tw::Term> to_terms(const std::vector<CandidateTerm>& terms, const std::vector<double>& values) {
-    std::vector<tw::Term> out;
-    std::size_t k = 0;
-    for (const auto& c : terms) {
-        tw::Term t;
-        t.name = c.term;
-        t.region = c.region;
-        for (const auto& p : c.parameters) t.parameters[p.name] = values.at(k++);
-        out.push_back(std::move(t));
-    }
-    return out;
-}
+constexpr int kGridSteps = 120;  // per single-parameter candidate, across its bounds
 
 std::string compress_ids(std::vector<int> ids) {
     std::sort(ids.begin(), ids.end());
@@ -233,167 +103,255 @@ std::string locate_where(const std::vector<Point>& pts, const std::vector<double
     return fmt::format("{}, {}", case_text, region_text);
 }
 
+// Generalised fit statistics of a prediction over a subset.
+FitStats stats_of(const std::vector<Point>& pts, const ev::Subset& s, const std::vector<double>& pred, int n_params) {
+    FitStats out;
+    double sum_sq = 0.0;
+    for (std::size_t i : s.idx) {
+        const double r = pts[i].q_exp - pred[i];
+        sum_sq += r * r;
+        out.outside_ci += std::abs(r) > pts[i].expanded_u ? 1 : 0;
+        ++out.n_points;
+    }
+    if (out.n_points == 0) return out;
+    out.rmse = std::sqrt(sum_sq / out.n_points);
+    out.chi2_per_dof = s.chi2(pred) / std::max(1, out.n_points - n_params);
+    return out;
+}
+
 struct Fitted {
-    FitResult fit;
+    std::vector<double> values;
+    std::vector<double> model_se;
+    double chi2 = 0.0;
     std::vector<double> prediction;
 };
 
-Fitted fit_terms(const ForwardModel& model, const std::vector<CandidateTerm>& terms, const std::vector<bool>& use,
-                 const std::vector<double>* start = nullptr) {
-    const auto& pts = model.points();
-    std::vector<double> x0;
+// Generalised least squares from a start (bounded Levenberg-Marquardt on whitened residuals).
+Fitted fit_gls(const ForwardModel& model, const ev::Subset& s, const std::vector<CandidateTerm>& terms,
+               const std::vector<std::vector<double>>& starts) {
+    const auto n_points = model.points().size();
     std::vector<Bounds> bounds;
     for (const auto& t : terms)
-        for (const auto& p : t.parameters) {
-            x0.push_back(p.start);
-            bounds.push_back({p.lo, p.hi});
-        }
+        for (const auto& p : t.parameters) bounds.push_back({p.lo, p.hi});
     auto residuals = [&](const std::vector<double>& x) {
-        std::vector<double> r;
         std::vector<double> pred;
         try {
-            pred = model.predict(to_terms(terms, x));
+            pred = model.predict(to_twin_terms(terms, x));
         } catch (const std::exception&) {
-            // A parameter set the physics cannot evaluate (e.g. a surface driven out of range)
-            // is as bad as a fit can be; the search steps away from it.
-            pred.assign(pts.size(), std::numeric_limits<double>::quiet_NaN());
+            pred.clear();
         }
-        r.reserve(pts.size());
-        for (std::size_t i = 0; i < pts.size(); ++i)
-            if (use[i]) r.push_back(std::isfinite(pred[i]) ? (pts[i].q_exp - pred[i]) / pts[i].standard_u() : 1e6);
+        std::vector<double> r(static_cast<std::size_t>(s.size()), 1e6);
+        if (pred.size() != n_points) return r;
+        for (double v : pred)
+            if (!std::isfinite(v)) return r;
+        const Eigen::VectorXd w = s.y - s.whiten(pred);
+        for (Eigen::Index i = 0; i < w.size(); ++i) r[static_cast<std::size_t>(i)] = w(i);
         return r;
     };
-    if (start) {
-        x0 = *start;
-    } else {
-        // |dT|^(1/4) is not smooth where dT crosses zero, so a local search can stall on a
-        // ridge: start from the best point of a scan across the bounds (25 points for one
-        // parameter, 9 x 9 for two), keeping the library's own start if it is better.
-        const int steps = x0.size() == 1 ? 24 : 8;
-        auto chi2_at = [&](const std::vector<double>& x) {
-            double chi2 = 0.0;
-            for (double v : residuals(x)) chi2 += v * v;
-            return chi2;
-        };
-        double best = chi2_at(x0);
-        std::vector<int> idx(x0.size(), 0);
-        for (bool more = x0.size() <= 2; more;) {
-            std::vector<double> x(x0.size());
-            for (std::size_t d = 0; d < x.size(); ++d) x[d] = bounds[d].lo + (bounds[d].hi - bounds[d].lo) * idx[d] / steps;
-            const double chi2 = chi2_at(x);
-            if (chi2 < best) {
-                best = chi2;
-                x0 = x;
-            }
-            std::size_t d = 0;
-            while (d < idx.size() && ++idx[d] > steps) idx[d++] = 0;
-            more = d < idx.size();
+    Fitted best;
+    best.chi2 = std::numeric_limits<double>::infinity();
+    for (const auto& start : starts) {
+        const FitResult f = fit_weighted_least_squares(residuals, start, bounds);
+        if (f.chi2 < best.chi2) {
+            best.values = f.parameters;
+            best.model_se = f.standard_errors;
+            best.chi2 = f.chi2;
         }
     }
-    Fitted f;
-    f.fit = fit_weighted_least_squares(residuals, x0, bounds);
-    f.prediction = model.predict(to_terms(terms, f.fit.parameters));
-    return f;
+    best.prediction = model.predict(to_twin_terms(terms, best.values));
+    return best;
 }
 
-CandidateResult evaluate(const ForwardModel& model, const std::vector<CandidateTerm>& terms, double base_bic,
-                         const Options& opt, bool consistent_before) {
+double t_quantile(double dof, double p) {
+    if (!(dof > 0.0)) return std::numeric_limits<double>::infinity();
+    return boost::math::quantile(boost::math::students_t(dof), p);
+}
+
+double chi2_upper_p(double x, double dof) {
+    if (dof <= 0.0 || !std::isfinite(x)) return 0.0;
+    return boost::math::cdf(boost::math::complement(boost::math::chi_squared(dof), std::max(0.0, x)));
+}
+
+// A candidate's fit, its case-level statistics and intervals.
+CandidateResult describe(const ForwardModel& model, const ev::Subset& s, const std::vector<CandidateTerm>& terms,
+                         const Fitted& f, double base_chi2, double evidence) {
     const auto& pts = model.points();
-    const std::vector<bool> all(pts.size(), true);
-    const Fitted f = fit_terms(model, terms, all);
     CandidateResult r;
     r.terms = terms;
     for (const auto& t : terms) {
         r.label += (r.label.empty() ? "" : " + ") + t.label();
         for (const auto& p : t.parameters) r.parameter_names.push_back(p.name);
     }
-    r.values = f.fit.parameters;
-    r.uncertainties = f.fit.standard_errors;
-    r.chi2 = f.fit.chi2;
-    const double n = static_cast<double>(pts.size());
-    r.bic = r.chi2 + static_cast<double>(r.values.size()) * std::log(n);
-    r.delta_bic = r.bic - base_bic;
-    r.after = stats_of(pts, f.prediction, static_cast<int>(r.values.size()));
-
-    // Verdict, in the order a reviewer would ask.
-    std::size_t k = 0;
-    std::string problem;
-    for (const auto& t : terms)
-        for (const auto& p : t.parameters) {
-            const double v = r.values[k], u = r.uncertainties[k];
-            ++k;
-            const double span = p.hi - p.lo;
-            if (v <= p.lo + 1e-3 * span || v >= p.hi - 1e-3 * span) {
-                problem = fmt::format("{} = {:.4g} sits at its bound [{}, {}]", p.name, v, p.lo, p.hi);
-                break;
-            }
-            if (!std::isfinite(u) || std::abs(v - p.null_value) < 2.0 * u) {
-                problem = fmt::format("{} = {:.4g} ± {:.2g} is not distinguishable from no effect ({})", p.name, v, u, p.null_value);
-                break;
-            }
-            if (v < p.plausible_lo || v > p.plausible_hi) {
-                problem = fmt::format("{} = {:.4g} is physically implausible (expected {}..{} {})", p.name, v,
-                                      p.plausible_lo, p.plausible_hi, p.unit);
-                break;
-            }
-        }
-    if (consistent_before) r.reason = "not needed: the twin already agrees with the recordings within their CIs";
-    else if (!problem.empty()) r.reason = problem;
-    else if (r.delta_bic > opt.min_delta_bic)
-        r.reason = fmt::format("too little improvement (delta BIC {:.1f}, need <= {:.0f})", r.delta_bic, opt.min_delta_bic);
-    else if (r.after.chi2_per_dof > opt.max_chi2_per_dof_after)
-        r.reason = fmt::format("improves the fit but leaves it outside the CIs (chi2/dof {:.2f} after)", r.after.chi2_per_dof);
-    else {
-        r.accepted = true;
-        r.reason = "explains the residual";
+    r.values = f.values;
+    r.chi2 = f.chi2;
+    r.evidence = evidence;
+    const double cases = static_cast<double>(s.case_rows.size());
+    const double p = static_cast<double>(f.values.size());
+    r.bic = r.chi2 + p * std::log(std::max(2.0, cases));
+    r.delta_bic = r.bic - base_chi2;
+    const ev::CaseLevel cl = ev::case_level(model, s, terms, f.values);
+    r.loo_score = cl.loo_score;
+    r.loo_rmse = cl.loo_rmse;
+    // Intervals: the larger of the model-based and the case-robust standard error, with
+    // Student's t on cases - p degrees of freedom (cases are the independent units).
+    const double k = t_quantile(cases - p, 0.975);
+    for (std::size_t j = 0; j < f.values.size(); ++j) {
+        const double u = std::max(f.model_se.at(j), std::isfinite(cl.robust_se[j]) ? cl.robust_se[j] : 0.0);
+        r.uncertainties.push_back(u);
+        r.interval_lo.push_back(f.values[j] - k * u);
+        r.interval_hi.push_back(f.values[j] + k * u);
+    }
+    r.after = stats_of(pts, s, f.prediction, static_cast<int>(f.values.size()));
+    std::size_t j = 0;
+    for (const auto& t : terms) {
+        const std::vector<double> v(f.values.begin() + static_cast<long>(j), f.values.begin() + static_cast<long>(j + t.parameters.size()));
+        const std::vector<double> u(r.uncertainties.begin() + static_cast<long>(j), r.uncertainties.begin() + static_cast<long>(j + t.parameters.size()));
+        for (auto& a : plausibility_advice(t, v, u)) r.advice.push_back(std::move(a));
+        j += t.parameters.size();
     }
     return r;
 }
 
-// Leave one case out: refit without it (from the full fit), predict it; RMSE over all points.
-void leave_one_case_out(const ForwardModel& model, CandidateResult& r) {
-    const auto& pts = model.points();
-    std::set<int> case_ids;
-    for (const auto& p : pts) case_ids.insert(p.case_id);
-    if (case_ids.size() < 2) return;
-    double sum_sq = 0.0;
-    int count = 0;
-    for (int c : case_ids) {
-        std::vector<bool> use(pts.size());
-        for (std::size_t i = 0; i < pts.size(); ++i) use[i] = pts[i].case_id != c;
-        const Fitted g = fit_terms(model, r.terms, use, &r.values);
-        for (std::size_t i = 0; i < pts.size(); ++i)
-            if (!use[i]) {
-                const double e = pts[i].q_exp - g.prediction[i];
-                sum_sq += e * e;
-                ++count;
-            }
+// One pass of the evidence over a set of points.
+struct Stage {
+    ev::Subset subset;
+    std::vector<ev::WhitenedGrid> grids;
+    double base_chi2 = 0.0;
+    std::vector<double> base_grid_chi2;       // per single: profile minimum on the observed data
+    std::vector<double> null_max;             // simulated best-single evidence under the twin
+    double threshold = 0.0;
+    std::vector<CandidateResult> singles;     // aligned with grids
+    std::vector<Fitted> single_fits;
+};
+
+Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::vector<ev::Grid>& grids,
+                std::vector<std::size_t> idx, const std::vector<double>& base_pred, const Options& opt) {
+    Stage st;
+    st.subset = ev::make_subset(model, noise.covariance, std::move(idx), base_pred);
+    const auto& s = st.subset;
+    st.base_chi2 = (s.y - s.w_base).squaredNorm();
+    st.grids.resize(grids.size());
+    {
+        auto work = [&](std::size_t begin) {
+            for (std::size_t k = begin; k < grids.size(); k += 2) st.grids[k] = ev::whiten_grid(s, grids[k]);
+        };
+        auto other = std::async(std::launch::async, work, 1);
+        work(0);
+        other.get();
     }
-    if (count > 0) r.loo_rmse = std::sqrt(sum_sq / count);
+    std::vector<const ev::WhitenedGrid*> all;
+    for (const auto& g : st.grids) all.push_back(&g);
+    // Observed evidence per single, and its null distribution (the best single's evidence in
+    // campaigns simulated from the twin as given and the noise model).
+    const Eigen::MatrixXd observed = ev::profile_chi2(all, s.y);
+    std::mt19937_64 rng(opt.seed);
+    const Eigen::MatrixXd sim = ev::simulate(s.w_base, opt.null_simulations, rng);
+    const Eigen::MatrixXd prof = ev::profile_chi2(all, sim);
+    st.null_max.resize(static_cast<std::size_t>(sim.cols()));
+    for (Eigen::Index b = 0; b < sim.cols(); ++b) {
+        const double base = (sim.col(b) - s.w_base).squaredNorm();
+        st.null_max[static_cast<std::size_t>(b)] = prof.rows() > 0 ? base - prof.col(b).minCoeff() : 0.0;
+    }
+    st.threshold = ev::upper_quantile(st.null_max, opt.alpha);
+    // Fit every single from its grid optimum (the report lists them all).
+    st.singles.resize(grids.size());
+    st.single_fits.resize(grids.size());
+    st.base_grid_chi2.resize(grids.size());
+    auto work = [&](std::size_t begin) {
+        for (std::size_t k = begin; k < grids.size(); k += 2) {
+            const ev::ProfileMin pm = ev::profile_min(
+                (st.grids[k].norm2.array() - 2.0 * (st.grids[k].w.transpose() * s.y).array() + s.y.squaredNorm()).matrix(),
+                grids[k]);
+            st.base_grid_chi2[k] = observed(static_cast<Eigen::Index>(k), 0);
+            st.single_fits[k] = fit_gls(model, s, {grids[k].term}, {{pm.theta}});
+            st.singles[k] = describe(model, s, {grids[k].term}, st.single_fits[k], st.base_chi2,
+                                     st.base_chi2 - observed(static_cast<Eigen::Index>(k), 0));
+        }
+    };
+    auto other = std::async(std::launch::async, work, 1);
+    work(0);
+    other.get();
+    return st;
+}
+
+// Zones whose steady offset stands out, chosen greedily: at each step the zone with the largest
+// GLS z-score given the offsets already chosen, while it passes Bonferroni over the zones. An
+// empty result with `too_many` set means the mismatch is not local.
+std::vector<int> local_zones(const ForwardModel& model, const ev::Subset& s, const std::vector<double>& pred, double alpha,
+                             int max_zones, bool* too_many) {
+    const auto& pts = model.points();
+    std::vector<int> zone_ids;
+    std::map<int, Eigen::Index> column;
+    for (std::size_t i : s.idx)
+        if (column.emplace(pts[i].zone, static_cast<Eigen::Index>(column.size())).second) zone_ids.push_back(pts[i].zone);
+    const auto z_count = static_cast<Eigen::Index>(column.size());
+    Eigen::MatrixXd a = Eigen::MatrixXd::Zero(s.size(), z_count);
+    for (Eigen::Index i = 0; i < s.size(); ++i) a(i, column[pts[s.idx[static_cast<std::size_t>(i)]].zone]) = 1.0;
+    a = s.llt.matrixL().solve(a);
+    std::vector<double> resid(pts.size());
+    for (std::size_t i = 0; i < pts.size(); ++i) resid[i] = pts[i].q_exp - pred[i];
+    const Eigen::VectorXd r = s.whiten(resid);
+    const double limit = boost::math::quantile(
+        boost::math::complement(boost::math::normal(), alpha / (2.0 * static_cast<double>(std::max<Eigen::Index>(1, z_count)))));
+    std::vector<Eigen::Index> chosen;
+    *too_many = false;
+    while (true) {
+        Eigen::MatrixXd x(s.size(), static_cast<Eigen::Index>(chosen.size()));
+        for (std::size_t k = 0; k < chosen.size(); ++k) x.col(static_cast<Eigen::Index>(k)) = a.col(chosen[k]);
+        auto project_out = [&](const Eigen::VectorXd& v) -> Eigen::VectorXd {
+            if (chosen.empty()) return v;
+            return v - x * (x.transpose() * x).ldlt().solve(x.transpose() * v);
+        };
+        const Eigen::VectorXd rr = project_out(r);
+        double best_z = 0.0;
+        Eigen::Index best = -1;
+        for (Eigen::Index z = 0; z < z_count; ++z) {
+            if (std::find(chosen.begin(), chosen.end(), z) != chosen.end()) continue;
+            const Eigen::VectorXd az = project_out(a.col(z));
+            const double info = az.squaredNorm();
+            if (info <= 1e-12) continue;
+            const double score = std::abs(az.dot(rr)) / std::sqrt(info);
+            if (score > best_z) {
+                best_z = score;
+                best = z;
+            }
+        }
+        if (best < 0 || best_z <= limit) break;
+        if (static_cast<int>(chosen.size()) >= max_zones) {
+            *too_many = true;
+            return {};
+        }
+        chosen.push_back(best);
+    }
+    std::vector<int> out;
+    for (auto c : chosen) out.push_back(zone_ids[static_cast<std::size_t>(c)]);
+    return out;
+}
+
+// One heat_leak term per zone: a steady offset, in W/m² (positive = more heat lost than the twin says).
+std::vector<CandidateTerm> offset_terms(const std::vector<int>& zones) {
+    std::vector<CandidateTerm> out;
+    for (int z : zones)
+        out.push_back({"heat_leak", "", "a steady offset on one zone: a heat leak, a loose sensor or a bad zone",
+                       {{"q_w_m2", "W/m2", -200.0, 200.0, 0.0, 0.0, std::nullopt, -200.0, 200.0}}, {z}});
+    return out;
 }
 
 }  // namespace
-
-std::unique_ptr<ForwardModel> make_twin_model(std::vector<CaseInput> cases, tw::TwinVersion base) {
-    return std::make_unique<TwinModel>(std::move(cases), std::move(base));
-}
-
-std::unique_ptr<ForwardModel> make_whole_body_h_model(std::vector<HObservation> obs, double a, double exponent) {
-    return std::make_unique<WholeBodyHModel>(std::move(obs), a, exponent);
-}
 
 Report reconcile(const ForwardModel& model, const Options& opt) {
     const auto& pts = model.points();
     if (pts.empty()) throw std::invalid_argument("reconcile: no observations with a finite value and uncertainty");
     Report rep;
     rep.twin_name = model.base_name();
+    rep.alpha = opt.alpha;
+    rep.null_simulations = opt.null_simulations;
+    rep.noise = model.noise_model(opt.instruments, opt.probe_shared_fraction);
     rep.predicted_before = model.predict({});
-    rep.before = stats_of(pts, rep.predicted_before, 0);
-    const double n = static_cast<double>(pts.size());
-    // Consistent: chi2/dof near 1 and no more points outside than a 95 % CI allows (+2 slack).
-    rep.consistent_before = rep.before.chi2_per_dof <= 1.5 && rep.before.outside_ci <= 0.05 * n + 2;
+    std::vector<std::size_t> all_idx(pts.size());
+    std::iota(all_idx.begin(), all_idx.end(), 0);
 
-    // Locate.
+    // Locate: drivers of the normalised residual and where the points outside their CI are.
     std::vector<double> s(pts.size());
     for (std::size_t i = 0; i < pts.size(); ++i) s[i] = (pts[i].q_exp - rep.predicted_before[i]) / pts[i].standard_u();
     std::vector<std::pair<double, std::string>> drivers;
@@ -417,7 +375,7 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     if (rep.located.empty()) rep.located.push_back({where, "none", 0.0});
     rep.best_driver = rep.located.front().driver;
 
-    // Explain: every supported candidate, then pairs of the promising ones.
+    // The library and its grids (computed once; a subset only re-whitens them).
     std::set<std::string> wet_regions;
     for (const auto& p : pts) {
         const auto it = p.drivers.find("wettedness");
@@ -425,114 +383,280 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     }
     std::vector<CandidateTerm> library;
     for (auto& c : candidate_library({wet_regions.begin(), wet_regions.end()}))
-        if (model.supports(c.term)) library.push_back(std::move(c));
-    const double base_bic = rep.before.chi2_per_dof * std::max(1, rep.before.n_points);  // chi2, no parameters
-
-    // Two cores: evaluate candidates in two halves concurrently (each fit is independent).
-    auto run = [&](const std::vector<std::vector<CandidateTerm>>& sets) {
-        std::vector<CandidateResult> results(sets.size());
-        auto worker = [&](std::size_t begin, std::size_t step) {
-            for (std::size_t i = begin; i < sets.size(); i += step)
-                results[i] = evaluate(model, sets[i], base_bic, opt, rep.consistent_before);
-        };
-        auto other = std::async(std::launch::async, worker, 1, 2);
-        worker(0, 2);
-        other.get();
-        return results;
-    };
-    std::vector<std::vector<CandidateTerm>> singles;
-    for (const auto& c : library) singles.push_back({c});
-    std::vector<CandidateResult> results = run(singles);
-
-    if (opt.try_pairs) {
-        std::vector<std::size_t> promising;
-        for (std::size_t i = 0; i < results.size(); ++i)
-            if (results[i].delta_bic < -2.0) promising.push_back(i);
-        std::sort(promising.begin(), promising.end(), [&](auto a, auto b) { return results[a].bic < results[b].bic; });
-        if (promising.size() > 5) promising.resize(5);
-            // Pairs among the promising singles, and the best single with every other term (a term
-        // can only help in company, as the diffusion floor does beside humidity buoyancy).
-        std::set<std::pair<std::size_t, std::size_t>> chosen;
-        for (std::size_t a = 0; a < promising.size(); ++a)
-            for (std::size_t b = a + 1; b < promising.size(); ++b)
-                chosen.insert(std::minmax(promising[a], promising[b]));
-        std::size_t best = 0;
-        for (std::size_t i = 1; i < results.size(); ++i)
-            if (results[i].bic < results[best].bic) best = i;
-        if (!results.empty() && results[best].delta_bic < 0.0)
-            for (std::size_t i = 0; i < singles.size(); ++i)
-                if (i != best && singles[i][0].term != "partial_wettedness") chosen.insert(std::minmax(best, i));
-        std::vector<std::vector<CandidateTerm>> pairs;
-        for (const auto& [a, b] : chosen)
-            if (singles[a][0].term != singles[b][0].term || singles[a][0].region != singles[b][0].region)
-                pairs.push_back({singles[a][0], singles[b][0]});
-        const auto pair_results = run(pairs);
-        results.insert(results.end(), pair_results.begin(), pair_results.end());
-    }
-    std::sort(results.begin(), results.end(), [](const auto& a, const auto& b) { return a.bic < b.bic; });
-    // Leave-one-case-out error for the leading candidates that improve on the twin (it costs a
-    // refit per case, so the long tail of weak candidates is not cross-validated).
+        if (model.supports(c.term) && c.parameters.size() == 1) library.push_back(std::move(c));
+    std::vector<ev::Grid> grids(library.size());
     {
-        std::vector<std::size_t> top;
-        for (std::size_t i = 0; i < results.size() && top.size() < 6; ++i)
-            if (results[i].delta_bic < 0.0) top.push_back(i);
-        auto worker = [&](std::size_t begin) {
-            for (std::size_t i = begin; i < top.size(); i += 2) leave_one_case_out(model, results[top[i]]);
+        auto work = [&](std::size_t begin) {
+            for (std::size_t k = begin; k < library.size(); k += 2) grids[k] = ev::make_grid(model, library[k], kGridSteps);
         };
-        auto other = std::async(std::launch::async, worker, 1);
-        worker(0);
+        auto other = std::async(std::launch::async, work, 1);
+        work(0);
         other.get();
     }
 
-    // The winner: lowest BIC among accepted; a pair must beat its best accepted single by 6.
-    const CandidateResult* winner = nullptr;
-    for (const auto& r : results)
-        if (r.accepted) {
-            winner = &r;
-            break;
-        }
-    if (winner && winner->terms.size() > 1) {
-        for (const auto& r : results)
-            if (r.accepted && r.terms.size() == 1 && r.bic - winner->bic < 6.0) {
-                winner = &r;
-                break;
-            }
+    Stage st = run_stage(model, rep.noise, grids, all_idx, rep.predicted_before, opt);
+    {
+        const ev::Subset& all = st.subset;
+        rep.before = stats_of(pts, all, rep.predicted_before, 0);
+        rep.gof_p_before = chi2_upper_p(st.base_chi2, static_cast<double>(all.size()));
     }
+    auto best_passing = [&](const Stage& x) -> std::optional<std::size_t> {
+        std::optional<std::size_t> best;
+        for (std::size_t k = 0; k < x.singles.size(); ++k)
+            if (x.singles[k].evidence > x.threshold && (!best || *x.singles[k].loo_score < *x.singles[*best].loo_score)) best = k;
+        return best;
+    };
+
+    // Local anomalies compete with physics: a few zones with a steady offset (one parameter per
+    // zone) against the best single term, out of sample by case. Checked on the twin's residual
+    // and again on the residual of the physics that wins.
+    std::set<int> excluded;
+    auto exclude = [&](const std::vector<int>& zones) {
+        excluded.insert(zones.begin(), zones.end());
+        std::vector<std::size_t> keep;
+        for (std::size_t i = 0; i < pts.size(); ++i)
+            if (!excluded.count(pts[i].zone)) keep.push_back(i);
+        st = run_stage(model, rep.noise, grids, keep, rep.predicted_before, opt);
+    };
+    for (int pass = 0; pass < 2 && model.supports("heat_leak"); ++pass) {
+        const auto b = best_passing(st);
+        if (pass == 1 && !b) break;
+        const auto& ref = pass == 1 ? st.single_fits[*b].prediction : rep.predicted_before;
+        bool too_many = false;
+        const auto zones = local_zones(model, st.subset, ref, opt.alpha, opt.max_anomalous_zones, &too_many);
+        if (zones.empty()) continue;
+        const auto terms = offset_terms(zones);
+        std::vector<double> start(terms.size(), 0.0);
+        const Fitted f = fit_gls(model, st.subset, terms, {start});
+        CandidateResult local = describe(model, st.subset, terms, f, st.base_chi2, st.base_chi2 - f.chi2);
+        if (pass == 0 && b && *local.loo_score >= *st.singles[*b].loo_score) continue;  // physics explains more
+        for (std::size_t k = 0; k < zones.size(); ++k) {
+            ZoneAnomaly an;
+            an.zone = zones[k];
+            for (std::size_t i : st.subset.idx)
+                if (pts[i].zone == zones[k]) {
+                    an.zone_name = pts[i].zone_name;
+                    ++an.cases;
+                    an.cases_outside += std::abs(pts[i].q_exp - ref[i]) > pts[i].expanded_u ? 1 : 0;
+                }
+            an.offset_w_m2 = f.values[k];
+            an.u_w_m2 = local.uncertainties[k];
+            an.z = an.u_w_m2 > 0.0 ? an.offset_w_m2 / an.u_w_m2 : 0.0;
+            rep.anomalies.push_back(an);
+        }
+        exclude(zones);
+    }
+    // The noise model again, with the sensitivities of the leading physics (when a term leads):
+    // under it the rivals, pairs and intervals are judged.
+    if (const auto b = best_passing(st)) {
+        const double claim_threshold = st.threshold;
+        std::vector<std::size_t> keep = st.subset.idx;
+        rep.noise = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms({library[*b]}, st.single_fits[*b].values));
+        st = run_stage(model, rep.noise, grids, keep, rep.predicted_before, opt);
+        st.threshold = std::max(st.threshold, claim_threshold);
+    }
+    rep.null_threshold = st.threshold;
+    const ev::Subset& sub = st.subset;
+    std::vector<CandidateResult> results = st.singles;
+    const auto winner_single = best_passing(st);
+
+    std::optional<CandidateResult> claim;
+    std::string why_not;
+    if (winner_single) {
+        const std::size_t x = *winner_single;
+        CandidateResult chosen = st.singles[x];
+        // Pairs: the winner with every other term, and pairs among the strongest singles. A pair
+        // must beat each of its singles beyond chance (chi2_1 with Bonferroni over the pairs
+        // tried) and the best single out of sample.
+        if (opt.try_pairs) {
+            std::vector<std::size_t> strong;
+            for (std::size_t k = 0; k < st.singles.size(); ++k)
+                if (st.singles[k].evidence > st.threshold) strong.push_back(k);
+            std::sort(strong.begin(), strong.end(), [&](auto a, auto b) { return st.singles[a].chi2 < st.singles[b].chi2; });
+            if (strong.size() > 4) strong.resize(4);
+            std::set<std::pair<std::size_t, std::size_t>> chosen_pairs;
+            for (std::size_t k = 0; k < library.size(); ++k)
+                if (k != x) chosen_pairs.insert(std::minmax(x, k));
+            for (std::size_t a = 0; a < strong.size(); ++a)
+                for (std::size_t b = a + 1; b < strong.size(); ++b) chosen_pairs.insert(std::minmax(strong[a], strong[b]));
+            std::vector<std::pair<std::size_t, std::size_t>> pairs(chosen_pairs.begin(), chosen_pairs.end());
+            std::vector<CandidateResult> pair_results(pairs.size());
+            auto work = [&](std::size_t begin) {
+                for (std::size_t i = begin; i < pairs.size(); i += 2) {
+                    const auto [a, b] = pairs[i];
+                    const double va = st.single_fits[a].values[0], vb = st.single_fits[b].values[0];
+                    const double na = library[a].parameters[0].null_value, nb = library[b].parameters[0].null_value;
+                    // |dT + gamma w dC|^(1/4) has a kink, so a pair's surface can hold more than one
+                    // valley: start from the singles and from the best point of a 13 x 13 scan.
+                    std::vector<std::vector<double>> starts = {{va, vb}, {va, nb}, {na, vb}};
+                    double best_scan = std::numeric_limits<double>::infinity();
+                    std::vector<double> scan_start;
+                    for (std::size_t ga = 0; ga < grids[a].theta.size(); ga += 10)
+                        for (std::size_t gb = 0; gb < grids[b].theta.size(); gb += 10) {
+                            const std::vector<double> xy = {grids[a].theta[ga], grids[b].theta[gb]};
+                            try {
+                                const double c2 = sub.chi2(model.predict(to_twin_terms({library[a], library[b]}, xy)));
+                                if (std::isfinite(c2) && c2 < best_scan) {
+                                    best_scan = c2;
+                                    scan_start = xy;
+                                }
+                            } catch (const std::exception&) {
+                            }
+                        }
+                    if (!scan_start.empty()) starts.push_back(scan_start);
+                    const Fitted f = fit_gls(model, sub, {library[a], library[b]}, starts);
+                    pair_results[i] = describe(model, sub, {library[a], library[b]}, f, st.base_chi2, st.base_chi2 - f.chi2);
+                }
+            };
+            auto other = std::async(std::launch::async, work, 1);
+            work(0);
+            other.get();
+            const double pair_threshold = boost::math::quantile(
+                boost::math::complement(boost::math::chi_squared(1.0), opt.alpha / static_cast<double>(std::max<std::size_t>(1, pairs.size()))));
+            const CandidateResult* best_pair = nullptr;
+            for (std::size_t i = 0; i < pairs.size(); ++i) {
+                auto& pr = pair_results[i];
+                const auto [a, b] = pairs[i];
+                const double gain_a = st.singles[a].chi2 - pr.chi2, gain_b = st.singles[b].chi2 - pr.chi2;
+                const bool needed = gain_a > pair_threshold && gain_b > pair_threshold;
+                const bool out_of_sample = *pr.loo_score < *chosen.loo_score;
+                if (needed && out_of_sample) {
+                    pr.reason = fmt::format("both terms needed (chi2 {:.1f} and {:.1f} below each single, need {:.1f}) "
+                                            "and better than {} out of sample", gain_a, gain_b, pair_threshold, chosen.label);
+                    if (!best_pair || pr.chi2 < best_pair->chi2) best_pair = &pr;
+                } else if (!needed) {
+                    pr.reason = fmt::format("one term is enough: the pair lowers chi2 by {:.1f} and {:.1f} below its "
+                                            "singles (need {:.1f} each)", gain_a, gain_b, pair_threshold);
+                } else {
+                    pr.reason = fmt::format("no better than {} out of sample (leave-one-case-out {:.1f} vs {:.1f})",
+                                            chosen.label, *pr.loo_score, *chosen.loo_score);
+                }
+            }
+            if (best_pair) {
+                // Another valid pair nearly as good: the campaign cannot say which pair it is.
+                const double margin = boost::math::quantile(boost::math::complement(boost::math::chi_squared(1.0), opt.alpha));
+                for (const auto& pr : pair_results)
+                    if (&pr != best_pair && pr.reason.rfind("both terms needed", 0) == 0 && pr.chi2 - best_pair->chi2 < margin)
+                        rep.ambiguous_with.push_back(pr.label);
+                chosen = *best_pair;
+            }
+            results.insert(results.end(), pair_results.begin(), pair_results.end());
+        }
+        // A single must be told apart from every other term that also explains the mismatch:
+        // simulate campaigns from the rival at its own best fit and see how often it would look
+        // as much worse than the winner as it does here.
+        if (chosen.terms.size() == 1 && rep.ambiguous_with.empty()) {
+            std::mt19937_64 rng(opt.seed + 1);
+            for (std::size_t y = 0; y < st.singles.size(); ++y) {
+                if (y == x || st.singles[y].evidence <= st.threshold) continue;
+                const Eigen::VectorXd source = sub.whiten(st.single_fits[y].prediction);
+                const Eigen::MatrixXd sim = ev::simulate(source, opt.selection_simulations, rng);
+                const Eigen::MatrixXd prof = ev::profile_chi2({&st.grids[y], &st.grids[x]}, sim);
+                std::vector<double> d(static_cast<std::size_t>(sim.cols()));
+                for (Eigen::Index b = 0; b < sim.cols(); ++b) d[static_cast<std::size_t>(b)] = prof(0, b) - prof(1, b);
+                const double observed = st.base_grid_chi2[y] - st.base_grid_chi2[x];
+                if (observed <= ev::upper_quantile(d, opt.alpha)) rep.ambiguous_with.push_back(st.singles[y].label);
+            }
+        }
+        const double n_used = static_cast<double>(sub.size());
+        if (!rep.ambiguous_with.empty()) {
+            std::string rivals;
+            for (const auto& r : rep.ambiguous_with) rivals += (rivals.empty() ? "" : ", ") + r;
+            why_not = fmt::format("{} fits best, but this campaign cannot tell it from {}", chosen.label, rivals);
+        } else if (chosen.after.chi2_per_dof > opt.max_chi2_per_dof_after &&
+                   chi2_upper_p(chosen.chi2, n_used - static_cast<double>(chosen.values.size())) < 1e-3) {
+            why_not = fmt::format("{} improves the fit but leaves it beyond the noise (chi2/dof {:.2f} after)",
+                                  chosen.label, chosen.after.chi2_per_dof);
+        } else {
+            chosen.accepted = true;
+            chosen.reason = fmt::format("explains the residual: evidence {:.1f} beyond the null's {:.1f} ({:.0f} % level)",
+                                        chosen.evidence, st.threshold, 100.0 * (1.0 - opt.alpha));
+            claim = chosen;
+        }
+    }
+    for (auto& r : results) {
+        if (claim && r.label == claim->label) {
+            r = *claim;
+            continue;
+        }
+        if (!r.reason.empty()) continue;
+        if (r.evidence <= st.threshold)
+            r.reason = fmt::format("evidence {:.1f} within what noise alone gives ({:.1f} at the {:.0f} % level)", r.evidence,
+                                   st.threshold, 100.0 * (1.0 - opt.alpha));
+        else if (winner_single && r.label != st.singles[*winner_single].label)
+            r.reason = fmt::format("explains less out of sample than {}", st.singles[*winner_single].label);
+        else if (!why_not.empty())
+            r.reason = why_not;
+    }
+    std::sort(results.begin(), results.end(), [](const auto& a, const auto& b) { return a.chi2 < b.chi2; });
     rep.candidates = results;
 
     rep.new_version.name = opt.new_version_name;
     rep.new_version.terms = model.base_terms();
-    if (winner) {
-        rep.explanation = *winner;
-        const auto terms = to_terms(winner->terms, winner->values);
+    std::string anomaly_text;
+    if (!rep.anomalies.empty()) {
+        std::string zones;
+        for (const auto& a : rep.anomalies)
+            zones += fmt::format("{}{} ({}) {:+.1f} ± {:.1f} W/m², outside its CI in {} of {} cases", zones.empty() ? "" : "; ",
+                                 a.zone, a.zone_name, a.offset_w_m2, a.u_w_m2, a.cases_outside, a.cases);
+        anomaly_text = fmt::format("A local anomaly, not missing physics: zone{} {}. A steady offset on so few zones "
+                                   "looks like a heat leak, a loose sensor or a bad zone; these zones were left out of "
+                                   "the physics fit.", rep.anomalies.size() > 1 ? "s" : "", zones);
+    }
+    if (claim) {
+        rep.explanation = claim;
+        const auto terms = to_twin_terms(claim->terms, claim->values);
         rep.new_version.terms.insert(rep.new_version.terms.end(), terms.begin(), terms.end());
         rep.predicted_after = model.predict(terms);
-        rep.after = stats_of(pts, rep.predicted_after, static_cast<int>(winner->values.size()));
         std::size_t k = 0;
-        for (const auto& t : winner->terms) {
-            const std::vector<double> v(winner->values.begin() + static_cast<long>(k), winner->values.begin() + static_cast<long>(k + t.parameters.size()));
-            const std::vector<double> u(winner->uncertainties.begin() + static_cast<long>(k), winner->uncertainties.begin() + static_cast<long>(k + t.parameters.size()));
+        for (const auto& t : claim->terms) {
+            const std::vector<double> v(claim->values.begin() + static_cast<long>(k), claim->values.begin() + static_cast<long>(k + t.parameters.size()));
+            const std::vector<double> u(claim->uncertainties.begin() + static_cast<long>(k), claim->uncertainties.begin() + static_cast<long>(k + t.parameters.size()));
             rep.statement += (rep.statement.empty() ? "" : " ") + plain_statement(t, v, u);
             k += t.parameters.size();
         }
+        for (const auto& a : claim->advice) rep.statement += " Note: " + a;
+        if (!anomaly_text.empty()) rep.statement += " " + anomaly_text;
     } else {
         rep.new_version.name = model.base_name();
         rep.predicted_after = rep.predicted_before;
-        rep.after = rep.before;
-        rep.statement = rep.consistent_before
-                            ? "The twin agrees with the recordings within their 95 % CIs; no physics is missing."
-                            : fmt::format("No candidate term explains the mismatch. It is at {}; it correlates most "
-                                          "with {} (|r| = {:.2f}). No explanation is claimed.",
-                                          where, rep.located.front().driver, rep.located.front().strength);
+        if (!anomaly_text.empty()) {
+            rep.statement = anomaly_text + (why_not.empty() ? " No physics term is needed for the rest." : " " + why_not + ".");
+        } else if (!why_not.empty()) {
+            rep.statement = fmt::format("The mismatch is real, but no term is claimed: {}. It is at {}; it correlates most "
+                                        "with {} (|r| = {:.2f}).", why_not, where, rep.located.front().driver,
+                                        rep.located.front().strength);
+        } else if (rep.gof_p_before >= 1e-3) {
+            rep.consistent_before = true;
+            rep.statement = fmt::format("The twin agrees with the recordings within their noise; no physics is missing "
+                                        "(the best candidate's evidence {:.1f} is within the {:.1f} that noise alone "
+                                        "reaches in {:.0f} % of simulated campaigns).",
+                                        st.singles.empty() ? 0.0 : std::max_element(st.singles.begin(), st.singles.end(),
+                                            [](const auto& a, const auto& b) { return a.evidence < b.evidence; })->evidence,
+                                        st.threshold, 100.0 * (1.0 - opt.alpha));
+        } else {
+            rep.statement = fmt::format("No candidate term explains the mismatch. It is at {}; it correlates most with "
+                                        "{} (|r| = {:.2f}). No explanation is claimed.",
+                                        where, rep.located.front().driver, rep.located.front().strength);
+        }
+    }
+    {
+        const ev::Subset all = ev::make_subset(model, rep.noise.covariance, all_idx, rep.predicted_before);
+        rep.after = stats_of(pts, all, rep.predicted_after, claim ? static_cast<int>(claim->values.size()) : 0);
     }
 
     std::set<int> case_ids;
     for (const auto& p : pts) case_ids.insert(p.case_id);
+    auto group_stats = [&](const std::vector<std::size_t>& idx) {
+        const ev::Subset g = ev::make_subset(model, rep.noise.covariance, idx, rep.predicted_before);
+        return std::make_pair(stats_of(pts, g, rep.predicted_before, 0), stats_of(pts, g, rep.predicted_after, 0));
+    };
     for (int id : case_ids) {
         std::vector<std::size_t> idx;
         for (std::size_t i = 0; i < pts.size(); ++i)
             if (pts[i].case_id == id) idx.push_back(i);
-        rep.by_case.push_back({id, {"", stats_of(pts, rep.predicted_before, 0, &idx), stats_of(pts, rep.predicted_after, 0, &idx)}});
+        const auto [b, a] = group_stats(idx);
+        rep.by_case.push_back({id, {"", b, a}});
     }
     std::set<std::string> regions;
     for (const auto& p : pts) regions.insert(p.region);
@@ -540,10 +664,28 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
         std::vector<std::size_t> idx;
         for (std::size_t i = 0; i < pts.size(); ++i)
             if (pts[i].region == region) idx.push_back(i);
-        rep.by_region.push_back({region, stats_of(pts, rep.predicted_before, 0, &idx),
-                                 stats_of(pts, rep.predicted_after, 0, &idx)});
+        const auto [b, a] = group_stats(idx);
+        rep.by_region.push_back({region, b, a});
     }
     return rep;
+}
+
+CandidateResult fit_candidate(const ForwardModel& model, const std::vector<CandidateTerm>& terms, const Options& opt) {
+    const auto& pts = model.points();
+    std::vector<std::size_t> idx(pts.size());
+    std::iota(idx.begin(), idx.end(), 0);
+    const auto base = model.predict({});
+    std::vector<double> start;
+    for (const auto& t : terms)
+        for (const auto& p : t.parameters) start.push_back(p.start);
+    NoiseModel noise = model.noise_model(opt.instruments, opt.probe_shared_fraction);
+    ev::Subset s = ev::make_subset(model, noise.covariance, idx, base);
+    Fitted f = fit_gls(model, s, terms, {start});
+    noise = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms(terms, f.values));
+    s = ev::make_subset(model, noise.covariance, idx, base);
+    f = fit_gls(model, s, terms, {f.values});
+    const double base_chi2 = (s.y - s.w_base).squaredNorm();
+    return describe(model, s, terms, f, base_chi2, base_chi2 - f.chi2);
 }
 
 }  // namespace manikind::analysis::reconcile

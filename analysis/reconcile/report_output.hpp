@@ -13,6 +13,8 @@ namespace manikind::analysis::reconcile {
 
 nlohmann::json report_to_json(const Report& report, const ForwardModel& model);
 std::string report_to_text(const Report& report);
+nlohmann::json power_to_json(const PowerReport& plan);
+std::string power_to_text(const PowerReport& plan);
 
 // Writes parity.svg (Q_sim vs Q_exp with 95 % error bars, before and after) and
 // residual_vs_driver.svg into `dir` (created if missing); returns the paths written.

@@ -52,7 +52,15 @@ inline std::vector<CaseSpec> table_s3_cases() {
 struct SyntheticOptions {
     unsigned seed = 7;
     int replicates = 3;
-    double replicate_sd_w_m2 = 1.5;       // trial-to-trial scatter
+    // A lab's scatter (docs/reconcile.md): per trial and zone, relative and absolute flux scatter;
+    // per trial, the enclosure's actual air differs from nominal (setpoint error) and the probes
+    // read the actual air with an error of their own; one calibration gain and offset per
+    // campaign. Distributions are deliberately not all normal (uniform probe errors).
+    double replicate_rel_sd = 0.015;      // 1.5 % of the flux between replicates
+    double replicate_sd_w_m2 = 0.4;       // plus an absolute part
+    double setpoint_air_sd_c = 0.1, setpoint_rh_sd_pct = 0.8;
+    double probe_air_halfwidth_c = 0.1, probe_rh_halfwidth_pct = 1.0, probe_wall_halfwidth_c = 0.2;
+    double calibration_gain_sd = 0.01, calibration_offset_sd_w_m2 = 0.3;
     double flux_accuracy_w_m2 = 1.0;      // Type B: a + b |q|, rectangular
     double flux_accuracy_of_reading = 0.03;
     bool vary_air_speed = true;           // recorded air speed 0.02..0.30 m/s across cases
@@ -62,37 +70,66 @@ inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::
                                                                  const SyntheticOptions& o = {}) {
     std::mt19937 rng(o.seed);
     std::normal_distribution<double> noise(0.0, 1.0);
+    std::uniform_real_distribution<double> uniform(-1.0, 1.0);
     const auto zones = zone_map();
+    const double gain = 1.0 + o.calibration_gain_sd * noise(rng);
+    const double offset = o.calibration_offset_sd_w_m2 * noise(rng);
     std::vector<analysis::reconcile::CaseInput> out;
     int index = 0;
     for (const auto& c : table_s3_cases()) {
         analysis::reconcile::CaseInput in;
         in.case_id = c.case_id;
-        auto& cond = in.conditions;
-        cond.air_temp_c = c.air_temp_c;
-        cond.air_rh_pct = c.air_rh_pct;
-        cond.wettedness = c.wettedness;
-        cond.wall_temp_c = c.air_temp_c - 0.4 - 0.1 * (index % 3);          // walls a little cooler (Text S3.3)
-        cond.air_speed_m_s = o.vary_air_speed ? 0.02 + 0.02 * index : 0.01;  // 0.02 .. 0.30 m/s
+        physics::twin::TrialConditions nominal;
+        nominal.air_temp_c = c.air_temp_c;
+        nominal.air_rh_pct = c.air_rh_pct;
+        nominal.wettedness = c.wettedness;
+        nominal.wall_temp_c = c.air_temp_c - 0.4 - 0.1 * (index % 3);          // walls a little cooler (Text S3.3)
+        nominal.air_speed_m_s = o.vary_air_speed ? 0.02 + 0.02 * index : 0.01;  // 0.02 .. 0.30 m/s
         for (const auto& z : zones) {
-            cond.zones.push_back({z.zone, z.segment, z.region, z.area_m2, c.skin_temp_c});
+            nominal.zones.push_back({z.zone, z.segment, z.region, z.area_m2, c.skin_temp_c});
             in.zone_names.push_back(z.name);
             in.sides.push_back(z.side);
             in.heights_m.push_back(z.height_m);
         }
-        const auto truth = physics::twin::predict(world, cond);
-        for (const auto& f : truth) {
+        const std::size_t nz = zones.size();
+        std::vector<std::vector<double>> reps(nz);
+        double air_sum = 0.0, rh_sum = 0.0, wall_sum = 0.0;
+        for (int r = 0; r < o.replicates; ++r) {
+            physics::twin::TrialConditions actual = nominal;
+            actual.air_temp_c += o.setpoint_air_sd_c * noise(rng);
+            actual.air_rh_pct += o.setpoint_rh_sd_pct * noise(rng);
+            *actual.wall_temp_c += actual.air_temp_c - nominal.air_temp_c;
+            const auto truth = physics::twin::predict(world, actual);
+            physics::twin::TrialConditions recorded = actual;
+            recorded.air_temp_c += o.probe_air_halfwidth_c * uniform(rng);
+            recorded.air_rh_pct += o.probe_rh_halfwidth_pct * uniform(rng);
+            *recorded.wall_temp_c += o.probe_wall_halfwidth_c * uniform(rng);
+            analysis::reconcile::TrialInput trial;
+            trial.conditions = recorded;
+            for (std::size_t z = 0; z < nz; ++z) {
+                const double q = truth[z].q_total_w_m2 * (1.0 + o.replicate_rel_sd * noise(rng)) + o.replicate_sd_w_m2 * noise(rng);
+                trial.q_w_m2.push_back(gain * q + offset);
+                reps[z].push_back(trial.q_w_m2.back());
+            }
+            air_sum += recorded.air_temp_c;
+            rh_sum += recorded.air_rh_pct;
+            wall_sum += *recorded.wall_temp_c;
+            in.trials.push_back(std::move(trial));
+        }
+        in.conditions = nominal;
+        in.conditions.air_temp_c = air_sum / o.replicates;
+        in.conditions.air_rh_pct = rh_sum / o.replicates;
+        in.conditions.wall_temp_c = wall_sum / o.replicates;
+        for (std::size_t z = 0; z < nz; ++z) {
             double sum = 0.0, sum_sq = 0.0;
-            std::vector<double> reps;
-            for (int r = 0; r < o.replicates; ++r) reps.push_back(f.q_total_w_m2 + o.replicate_sd_w_m2 * noise(rng));
-            for (double v : reps) sum += v;
+            for (double v : reps[z]) sum += v;
             const double mean = sum / o.replicates;
-            for (double v : reps) sum_sq += (v - mean) * (v - mean);
-            const double u_a = std::sqrt(sum_sq / (o.replicates - 1) / o.replicates);
+            for (double v : reps[z]) sum_sq += (v - mean) * (v - mean);
+            const double u_a = o.replicates > 1 ? std::sqrt(sum_sq / (o.replicates - 1) / o.replicates) : 0.0;
             const double u_b = (o.flux_accuracy_w_m2 + o.flux_accuracy_of_reading * std::abs(mean)) / std::sqrt(3.0);
             const double u_c = std::hypot(u_a, u_b);
             // Welch-Satterthwaite: Type A with n-1 dof, Type B infinite.
-            const double nu = std::pow(u_c, 4) / (std::pow(u_a, 4) / (o.replicates - 1));
+            const double nu = o.replicates > 1 ? std::pow(u_c, 4) / (std::pow(u_a, 4) / (o.replicates - 1)) : 1e6;
             const double k = boost::math::quantile(boost::math::complement(boost::math::students_t(std::min(nu, 1e6)), 0.025));
             in.q_exp_w_m2.push_back(mean);
             in.expanded_u_w_m2.push_back(k * u_c);

@@ -1,10 +1,18 @@
-// Proof of reconcile (issue 7): campaigns whose world has an effect the baseline twin lacks, at
-// a parameter value chosen here (not the theoretical one). reconcile() receives only the case
-// list (conditions, Q_exp, U, k), never the world's terms.
+// Proof of reconcile's likelihood (issue 13): campaigns whose world has an effect the baseline
+// twin lacks, with a lab's replicate scatter (relative and absolute flux scatter, setpoint and
+// probe errors per trial, a calibration gain and offset per campaign: synthetic_campaign.hpp).
+// reconcile() receives only the case list (conditions, replicates, Q_exp, U, k), never the world.
+//
+// The claims checked: no more false claims than the rule allows on null campaigns; at three
+// magnitudes per candidate, one near its detection limit, the right term or nothing and never a
+// wrong one; a two-zone leak located as a local anomaly with no physics; a concealed pair named as
+// the pair; intervals that cover.
 #include <catch2/catch.hpp>
 
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
+#include <set>
 
 #include "tests/reconcile/synthetic_campaign.hpp"
 
@@ -14,42 +22,11 @@ namespace tw = manikind::physics::twin;
 
 namespace {
 
-rc::Report reconcile_world(const tw::TwinVersion& world, unsigned seed = 7) {
+rc::Report reconcile_world(const tw::TwinVersion& world, unsigned seed) {
     test::SyntheticOptions o;
     o.seed = seed;
     const auto model = rc::make_twin_model(test::make_campaign(world, o), tw::TwinVersion{});
     return rc::reconcile(*model);
-}
-
-void check_recovers(const std::string& term, const std::string& region, const std::string& parameter, double truth,
-                    const tw::TwinVersion& world) {
-    const auto rep = reconcile_world(world);
-    INFO("world: " << term << " " << parameter << " = " << truth);
-    CHECK_FALSE(rep.consistent_before);
-    REQUIRE(rep.explanation.has_value());
-    REQUIRE(rep.explanation->terms.size() == 1);
-    CHECK(rep.explanation->terms[0].term == term);
-    CHECK(rep.explanation->terms[0].region == region);
-    REQUIRE(rep.explanation->parameter_names.at(0) == parameter);
-    const double value = rep.explanation->values.at(0);
-    const double u = rep.explanation->uncertainties.at(0);
-    INFO("fitted " << value << " +- " << u);
-    std::printf("recovered %s%s%s: %s = %.5g +- %.2g (truth %.5g), chi2/dof %.2f -> %.2f, RMSE %.2f -> %.2f W/m2\n",
-                term.c_str(), region.empty() ? "" : ":", region.c_str(), parameter.c_str(), value, u, truth,
-                rep.before.chi2_per_dof, rep.after.chi2_per_dof, rep.before.rmse, rep.after.rmse);
-    CHECK(std::abs(value - truth) <= 2.0 * u);  // within its expanded (k = 2) uncertainty
-    CHECK(u < 0.1 * std::abs(truth));           // and identified, not merely consistent
-    // After the fit the twin is consistent with the CIs, and much better than before.
-    CHECK(rep.after.chi2_per_dof < 1.5);
-    CHECK(rep.after.outside_ci <= 0.05 * rep.after.n_points + 2);
-    CHECK(rep.after.rmse < 0.3 * rep.before.rmse);
-    CHECK(rep.explanation->loo_rmse.has_value());
-    CHECK(*rep.explanation->loo_rmse < rep.before.rmse);
-    CHECK_FALSE(rep.statement.empty());
-    // The new twin version carries the term with its fitted value.
-    REQUIRE(rep.new_version.terms.size() == 1);
-    CHECK(rep.new_version.terms[0].name == term);
-    CHECK(rep.new_version.terms[0].parameters.at(parameter) == value);
 }
 
 tw::TwinVersion world_with(const std::string& term, const std::string& parameter, double value,
@@ -57,66 +34,150 @@ tw::TwinVersion world_with(const std::string& term, const std::string& parameter
     return {"world", {{term, {{parameter, value}}, region, {}}}};
 }
 
+struct Magnitude {
+    std::string term, parameter, region;
+    double value;
+};
+
 }  // namespace
 
-TEST_CASE("reconcile: hidden humidity buoyancy (gamma = 120, theory 146) is named and recovered", "[reconcile]") {
-    check_recovers("humidity_buoyancy", "", "gamma", 120.0, world_with("humidity_buoyancy", "gamma", 120.0));
-}
-
-TEST_CASE("reconcile: hidden diffusion floor (h0 = 0.8 W/m2K) is named and recovered", "[reconcile]") {
-    check_recovers("diffusion_floor", "", "h0", 0.8, world_with("diffusion_floor", "h0", 0.8));
-}
-
-TEST_CASE("reconcile: hidden mixed convection with the recorded air speed (scale 1.3) is named and recovered", "[reconcile]") {
-    check_recovers("mixed_convection", "", "scale", 1.3, world_with("mixed_convection", "scale", 1.3));
-}
-
-TEST_CASE("reconcile: walls radiating 1.5 C above the recorded wall temperature are found", "[reconcile]") {
-    check_recovers("wall_offset", "", "delta_c", 1.5, world_with("wall_offset", "delta_c", 1.5));
-}
-
-TEST_CASE("reconcile: an air probe reading 0.6 C high is found", "[reconcile]") {
-    check_recovers("air_temp_bias", "", "bias_c", 0.6, world_with("air_temp_bias", "bias_c", 0.6));
-}
-
-TEST_CASE("reconcile: a textile skin resistance of 0.012 m2K/W is found (Text S2.4 measured 0.0054)", "[reconcile]") {
-    check_recovers("textile_resistance", "", "r_m2k_w", 0.012, world_with("textile_resistance", "r_m2k_w", 0.012));
-}
-
-TEST_CASE("reconcile: a head only 30 % wet (clogged pores, Text S3.4) is found and placed on the head", "[reconcile]") {
-    check_recovers("partial_wettedness", "head", "fraction", 0.3, world_with("partial_wettedness", "fraction", 0.3, "head"));
-}
-
-TEST_CASE("reconcile: no hidden effect, no explanation claimed (no false discovery)", "[reconcile]") {
-    for (unsigned seed : {1u, 2u, 3u}) {
+TEST_CASE("reconcile: 20 seeded campaigns with no concealed physics give at most 1 claim (alpha = 1 %)", "[reconcile][null]") {
+    int claims = 0, anomalies = 0;
+    for (unsigned seed = 101; seed <= 120; ++seed) {
         const auto rep = reconcile_world(tw::TwinVersion{"world", {}}, seed);
-        INFO("seed " << seed);
-        CHECK(rep.consistent_before);
+        if (rep.explanation) {
+            ++claims;
+            std::printf("null seed %u: claimed %s\n", seed, rep.explanation->label.c_str());
+        }
+        anomalies += rep.anomalies.empty() ? 0 : 1;
+        // The noise model is honest: chi2/dof of the twin as given is near 1 under the null.
+        CHECK(rep.before.chi2_per_dof > 0.7);
+        CHECK(rep.before.chi2_per_dof < 1.4);
+    }
+    std::printf("null campaigns: %d claims and %d local anomalies in 20\n", claims, anomalies);
+    CHECK(claims <= 1);
+    CHECK(anomalies <= 1);
+}
+
+TEST_CASE("reconcile: each candidate at three magnitudes, the smallest near its detection limit: the right term or "
+          "nothing, never a wrong one", "[reconcile][magnitudes]") {
+    // The smallest of each row is about 1.2x the 80 %-power limit `manikin reconcile --power`
+    // prints for this design (n = 3): there "nothing" is an allowed answer.
+    const std::vector<Magnitude> magnitudes = {
+        {"humidity_buoyancy", "gamma", "", 146.0}, {"humidity_buoyancy", "gamma", "", 40.0},
+        {"humidity_buoyancy", "gamma", "", 12.0},
+        {"diffusion_floor", "h0", "", 0.8}, {"diffusion_floor", "h0", "", 0.2}, {"diffusion_floor", "h0", "", 0.06},
+        {"mixed_convection", "scale", "", 1.3}, {"mixed_convection", "scale", "", 0.6},
+        {"mixed_convection", "scale", "", 0.25},
+        {"wall_offset", "delta_c", "", 3.0}, {"wall_offset", "delta_c", "", 1.5}, {"wall_offset", "delta_c", "", 0.5},
+        {"air_temp_bias", "bias_c", "", 1.5}, {"air_temp_bias", "bias_c", "", 0.6}, {"air_temp_bias", "bias_c", "", 0.3},
+        {"textile_resistance", "r_m2k_w", "", 0.012}, {"textile_resistance", "r_m2k_w", "", 0.0054},
+        {"textile_resistance", "r_m2k_w", "", 0.0008},
+        {"partial_wettedness", "fraction", "head", 0.3}, {"partial_wettedness", "fraction", "head", 0.8},
+        {"partial_wettedness", "fraction", "head", 0.99},
+    };
+    int named = 0, misses = 0;
+    unsigned seed = 200;
+    for (const auto& m : magnitudes) {
+        const auto rep = reconcile_world(world_with(m.term, m.parameter, m.value, m.region), ++seed);
+        const std::string truth = m.region.empty() ? m.term : m.term + ":" + m.region;
+        INFO("world " << truth << " " << m.parameter << " = " << m.value << "; " << rep.statement);
+        if (!rep.explanation) {
+            std::printf("%-28s %s = %-8g -> nothing claimed\n", truth.c_str(), m.parameter.c_str(), m.value);
+            continue;
+        }
+        const auto& e = *rep.explanation;
+        REQUIRE(e.terms.size() == 1);     // never a pair where one term is concealed
+        CHECK(e.label == truth);          // never a wrong term
+        ++named;
+        const bool covered = e.interval_lo[0] <= m.value && m.value <= e.interval_hi[0];
+        misses += covered ? 0 : 1;
+        std::printf("%-28s %s = %-8g -> %.5g +- %.2g, 95 %% [%.5g, %.5g]%s; chi2/dof %.2f -> %.2f\n", truth.c_str(),
+                    m.parameter.c_str(), m.value, e.values[0], e.uncertainties[0], e.interval_lo[0], e.interval_hi[0],
+                    covered ? "" : " MISSES", rep.before.chi2_per_dof, rep.after.chi2_per_dof);
+        // The fit is then within the noise, and the twin version carries the term.
+        CHECK(rep.after.chi2_per_dof < 1.5);
+        REQUIRE(rep.new_version.terms.size() == 1);
+        CHECK(rep.new_version.terms[0].parameters.at(m.parameter) == e.values[0]);
+    }
+    std::printf("named %d of %zu, %d intervals missed the truth\n", named, magnitudes.size(), misses);
+    // The large and middle magnitudes are all named.
+    CHECK(named >= 14);
+    // 95 % intervals: about one miss in twenty is expected.
+    CHECK(misses <= 2);
+}
+
+TEST_CASE("reconcile: an air probe 1.5 C high is named with advice, not refused as implausible", "[reconcile]") {
+    const auto rep = reconcile_world(world_with("air_temp_bias", "bias_c", 1.5), 7);
+    REQUIRE(rep.explanation.has_value());
+    CHECK(rep.explanation->label == "air_temp_bias");
+    REQUIRE_FALSE(rep.explanation->advice.empty());
+    CHECK_THAT(rep.statement, Catch::Contains("beyond a calibrated EE181"));
+    CHECK_THAT(rep.statement, Catch::Contains("check the probe"));
+}
+
+TEST_CASE("reconcile: a 5 W/m2 heat leak on zones 5 and 23 is a local anomaly on exactly those zones, no physics", "[reconcile]") {
+    for (unsigned seed : {7u, 8u}) {
+        const tw::TwinVersion world{"world", {{"heat_leak", {{"q_w_m2", 5.0}}, "", {5, 23}}}};
+        const auto rep = reconcile_world(world, seed);
+        INFO(rep.statement);
+        CHECK_FALSE(rep.consistent_before);
         CHECK_FALSE(rep.explanation.has_value());
-        CHECK_THAT(rep.statement, Catch::Contains("no physics is missing"));
-        for (const auto& c : rep.candidates) CHECK_FALSE(c.accepted);
+        REQUIRE(rep.anomalies.size() == 2);
+        std::set<int> zones;
+        for (const auto& a : rep.anomalies) {
+            zones.insert(a.zone);
+            CHECK(std::abs(a.offset_w_m2 - 5.0) <= 3.0 * a.u_w_m2 + 0.3);
+        }
+        CHECK(zones == std::set<int>{5, 23});
+        CHECK_THAT(rep.statement, Catch::Contains("local anomaly"));
+        CHECK(rep.new_version.terms.empty());
     }
 }
 
-TEST_CASE("reconcile: a heat leak on zones 5 and 23 (outside the library) is located, no term claimed", "[reconcile]") {
-    const tw::TwinVersion world{"world", {{"heat_leak", {{"q_w_m2", 25.0}}, "", {5, 23}}}};
-    const auto rep = reconcile_world(world);
-    CHECK_FALSE(rep.consistent_before);
-    CHECK_FALSE(rep.explanation.has_value());
-    REQUIRE_FALSE(rep.located.empty());
-    CHECK_THAT(rep.located[0].where, Catch::Contains("zones 5 (abdomen), 23 (thigh_front_l) only"));
-    CHECK_THAT(rep.statement, Catch::Contains("No candidate term explains"));
-    CHECK(rep.new_version.terms.empty());
-    // The best candidates improve chi2 but are refused for leaving the fit outside the CIs.
-    CHECK_THAT(rep.candidates.at(0).reason, Catch::Contains("outside the CIs") || Catch::Contains("implausible"));
+TEST_CASE("reconcile: a concealed pair (Eq. 8's physics: humidity buoyancy 146 with a diffusion floor 0.3) is named as "
+          "the pair", "[reconcile]") {
+    const tw::TwinVersion world{"world", {{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}},
+                                          {"diffusion_floor", {{"h0", 0.3}}, "", {}}}};
+    const auto rep = reconcile_world(world, 9);
+    INFO(rep.statement);
+    REQUIRE(rep.explanation.has_value());
+    REQUIRE(rep.explanation->terms.size() == 2);
+    std::set<std::string> terms;
+    for (const auto& t : rep.explanation->terms) terms.insert(t.term);
+    CHECK(terms == std::set<std::string>{"humidity_buoyancy", "diffusion_floor"});
+    for (std::size_t i = 0; i < rep.explanation->values.size(); ++i) {
+        const double truth = rep.explanation->parameter_names[i] == "gamma" ? 146.0 : 0.3;
+        CHECK(rep.explanation->interval_lo[i] <= truth);
+        CHECK(truth <= rep.explanation->interval_hi[i]);
+    }
+}
+
+TEST_CASE("reconcile: 95 % intervals cover the truth in 90-100 % of simulated campaigns (humidity buoyancy, wall offset)",
+          "[reconcile][coverage]") {
+    for (const auto& m : std::vector<Magnitude>{{"humidity_buoyancy", "gamma", "", 100.0}, {"wall_offset", "delta_c", "", 1.0}}) {
+        const auto lib = rc::candidate_library({});
+        const auto it = std::find_if(lib.begin(), lib.end(), [&](const auto& c) { return c.term == m.term; });
+        REQUIRE(it != lib.end());
+        int covered = 0;
+        const int runs = 20;
+        for (int i = 0; i < runs; ++i) {
+            test::SyntheticOptions o;
+            o.seed = 500u + static_cast<unsigned>(i);
+            const auto model = rc::make_twin_model(test::make_campaign(world_with(m.term, m.parameter, m.value), o), tw::TwinVersion{});
+            const auto r = rc::fit_candidate(*model, {*it});
+            covered += r.interval_lo[0] <= m.value && m.value <= r.interval_hi[0] ? 1 : 0;
+        }
+        std::printf("coverage %s: %d of %d\n", m.term.c_str(), covered, runs);
+        CHECK(covered >= 18);
+    }
 }
 
 TEST_CASE("reconcile: locate names vapour concentration among the drivers of a missing humidity term", "[reconcile]") {
-    const auto rep = reconcile_world(world_with("humidity_buoyancy", "gamma", 120.0));
+    const auto rep = reconcile_world(world_with("humidity_buoyancy", "gamma", 120.0), 7);
     bool named = false;
     for (const auto& l : rep.located) named = named || l.driver == "vapour concentration difference";
     CHECK(named);
     CHECK(rep.before.outside_ci > 0.3 * rep.before.n_points);
-    // by region: every region with a residual improves
     for (const auto& r : rep.by_region) CHECK(r.after.rmse <= r.before.rmse + 1e-9);
 }

@@ -1,0 +1,249 @@
+#include "analysis/reconcile/evidence.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <future>
+#include <limits>
+#include <map>
+#include <stdexcept>
+
+#include <Eigen/Dense>
+#include <fmt/core.h>
+
+#include "analysis/reconcile/least_squares.hpp"
+
+namespace manikind::analysis::reconcile::evidence {
+namespace tw = physics::twin;
+namespace {
+
+}  // namespace
+
+Eigen::VectorXd Subset::select(const std::vector<double>& v) const {
+    Eigen::VectorXd out(size());
+    for (Eigen::Index i = 0; i < size(); ++i) out(i) = v[idx[static_cast<std::size_t>(i)]];
+    return out;
+}
+
+Eigen::VectorXd Subset::whiten(const std::vector<double>& v) const { return llt.matrixL().solve(select(v)); }
+
+double Subset::chi2(const std::vector<double>& prediction) const { return (y - whiten(prediction)).squaredNorm(); }
+
+Subset make_subset(const ForwardModel& model, const Eigen::MatrixXd& covariance, std::vector<std::size_t> idx,
+                   const std::vector<double>& base_prediction) {
+    Subset s;
+    s.idx = std::move(idx);
+    const auto& pts = model.points();
+    const Eigen::Index n = s.size();
+    Eigen::MatrixXd sub(n, n);
+    for (Eigen::Index a = 0; a < n; ++a)
+        for (Eigen::Index b = 0; b < n; ++b)
+            sub(a, b) = covariance(static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(a)]),
+                                   static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(b)]));
+    s.llt.compute(sub);
+    if (s.llt.info() != Eigen::Success) throw std::runtime_error("reconcile: the noise covariance is not positive definite");
+    std::map<int, std::size_t> case_pos;
+    for (Eigen::Index i = 0; i < n; ++i) {
+        const int id = pts[s.idx[static_cast<std::size_t>(i)]].case_id;
+        auto [it, fresh] = case_pos.emplace(id, s.case_ids.size());
+        if (fresh) {
+            s.case_ids.push_back(id);
+            s.case_rows.emplace_back();
+        }
+        s.case_rows[it->second].push_back(i);
+    }
+    for (const auto& rows : s.case_rows) {
+        const auto m = static_cast<Eigen::Index>(rows.size());
+        Eigen::MatrixXd block(m, m);
+        for (Eigen::Index a = 0; a < m; ++a)
+            for (Eigen::Index b = 0; b < m; ++b) block(a, b) = sub(rows[static_cast<std::size_t>(a)], rows[static_cast<std::size_t>(b)]);
+        s.case_llt.emplace_back(block);
+    }
+    std::vector<double> q(pts.size());
+    for (std::size_t i = 0; i < pts.size(); ++i) q[i] = pts[i].q_exp;
+    s.y = s.whiten(q);
+    s.w_base = s.whiten(base_prediction);
+    return s;
+}
+
+Grid make_grid(const ForwardModel& model, const CandidateTerm& term, int steps) {
+    Grid g;
+    g.term = term;
+    const auto& p = term.parameters.at(0);
+    for (int i = 0; i <= steps; ++i) g.theta.push_back(p.lo + (p.hi - p.lo) * i / steps);
+    g.raw.resize(g.theta.size());
+    g.valid.assign(g.theta.size(), true);
+    for (std::size_t i = 0; i < g.theta.size(); ++i) {
+        try {
+            g.raw[i] = model.predict(to_twin_terms({term}, {g.theta[i]}));
+            for (double v : g.raw[i])
+                if (!std::isfinite(v)) g.valid[i] = false;
+        } catch (const std::exception&) {
+            g.valid[i] = false;  // a parameter the physics cannot evaluate is never the best
+        }
+        if (!g.valid[i]) g.raw[i].assign(model.points().size(), 0.0);
+    }
+    return g;
+}
+
+WhitenedGrid whiten_grid(const Subset& s, const Grid& g) {
+    WhitenedGrid out;
+    out.grid = &g;
+    const auto cols = static_cast<Eigen::Index>(g.theta.size());
+    Eigen::MatrixXd raw(s.size(), cols);
+    for (Eigen::Index c = 0; c < cols; ++c) raw.col(c) = s.select(g.raw[static_cast<std::size_t>(c)]);
+    out.w = s.llt.matrixL().solve(raw);
+    out.norm2 = out.w.colwise().squaredNorm().transpose();
+    return out;
+}
+
+ProfileMin profile_min(const Eigen::Ref<const Eigen::VectorXd>& chi2, const Grid& g) {
+    const auto n = chi2.size();
+    Eigen::Index best = -1;
+    for (Eigen::Index i = 0; i < n; ++i)
+        if (g.valid[static_cast<std::size_t>(i)] && (best < 0 || chi2(i) < chi2(best))) best = i;
+    ProfileMin out;
+    if (best < 0) {
+        out.chi2 = std::numeric_limits<double>::infinity();
+        return out;
+    }
+    out.chi2 = chi2(best);
+    out.theta = g.theta[static_cast<std::size_t>(best)];
+    if (best > 0 && best + 1 < n && g.valid[static_cast<std::size_t>(best - 1)] && g.valid[static_cast<std::size_t>(best + 1)]) {
+        const double a = chi2(best - 1), b = chi2(best), d = chi2(best + 1);
+        const double curvature = a - 2.0 * b + d;
+        if (curvature > 0.0) {
+            const double x = std::clamp((a - d) / (2.0 * curvature), -1.0, 1.0);
+            out.chi2 = std::min(b, b - (d - a) * (d - a) / (8.0 * curvature));
+            out.theta += x * (g.theta[1] - g.theta[0]);
+        }
+    }
+    return out;
+}
+
+Eigen::MatrixXd profile_chi2(const std::vector<const WhitenedGrid*>& grids, const Eigen::MatrixXd& y) {
+    const auto k_count = static_cast<Eigen::Index>(grids.size());
+    Eigen::MatrixXd out(k_count, y.cols());
+    const Eigen::RowVectorXd y_norm2 = y.colwise().squaredNorm();
+    auto work = [&](Eigen::Index begin, Eigen::Index end) {
+        for (Eigen::Index k = 0; k < k_count; ++k) {
+            const auto& wg = *grids[static_cast<std::size_t>(k)];
+            const Eigen::MatrixXd cross = wg.w.transpose() * y.middleCols(begin, end - begin);  // G x B
+            Eigen::VectorXd chi2(cross.rows());
+            for (Eigen::Index b = 0; b < cross.cols(); ++b) {
+                chi2 = (wg.norm2 - 2.0 * cross.col(b)).array() + y_norm2(begin + b);
+                out(k, begin + b) = profile_min(chi2, *wg.grid).chi2;
+            }
+        }
+    };
+    const Eigen::Index half = y.cols() / 2;
+    if (half >= 32) {  // two cores: split the simulated campaigns
+        auto other = std::async(std::launch::async, work, half, y.cols());
+        work(0, half);
+        other.get();
+    } else {
+        work(0, y.cols());
+    }
+    return out;
+}
+
+Eigen::MatrixXd simulate(const Eigen::VectorXd& mean, int count, std::mt19937_64& rng) {
+    std::normal_distribution<double> normal(0.0, 1.0);
+    Eigen::MatrixXd y(mean.size(), count);
+    for (Eigen::Index b = 0; b < count; ++b)
+        for (Eigen::Index i = 0; i < mean.size(); ++i) y(i, b) = mean(i) + normal(rng);
+    return y;
+}
+
+double upper_quantile(std::vector<double> sample, double alpha) {
+    if (sample.empty()) return std::numeric_limits<double>::infinity();
+    std::sort(sample.begin(), sample.end());
+    const double pos = (1.0 - alpha) * static_cast<double>(sample.size() - 1);
+    const auto lo = static_cast<std::size_t>(std::floor(pos));
+    const std::size_t hi = std::min(lo + 1, sample.size() - 1);
+    return sample[lo] + (pos - static_cast<double>(lo)) * (sample[hi] - sample[lo]);
+}
+
+CaseLevel case_level(const ForwardModel& model, const Subset& s, const std::vector<CandidateTerm>& terms,
+                     const std::vector<double>& theta) {
+    const auto& pts = model.points();
+    std::vector<Bounds> bounds;
+    for (const auto& t : terms)
+        for (const auto& p : t.parameters) bounds.push_back({p.lo, p.hi});
+    const auto p_count = static_cast<Eigen::Index>(theta.size());
+    const auto f0 = model.predict(to_twin_terms(terms, theta));
+    std::vector<std::vector<double>> df(theta.size());
+    std::vector<double> steps(theta.size());
+    for (std::size_t j = 0; j < theta.size(); ++j) {
+        double h = 1e-4 * (bounds[j].hi - bounds[j].lo);
+        if (theta[j] + h > bounds[j].hi) h = -h;
+        auto t = theta;
+        t[j] += h;
+        df[j] = model.predict(to_twin_terms(terms, t));
+        steps[j] = h;
+    }
+    CaseLevel out;
+    const auto cases = s.case_rows.size();
+    std::vector<Eigen::VectorXd> r(cases);          // whitened residual per case
+    std::vector<Eigen::MatrixXd> d(cases);          // whitened derivative of the prediction
+    std::vector<Eigen::VectorXd> raw_r(cases);
+    std::vector<Eigen::MatrixXd> raw_d(cases);
+    Eigen::MatrixXd a_total = Eigen::MatrixXd::Zero(p_count, p_count);
+    Eigen::VectorXd g_total = Eigen::VectorXd::Zero(p_count);
+    std::vector<Eigen::MatrixXd> a_case(cases);
+    std::vector<Eigen::VectorXd> g_case(cases);
+    for (std::size_t c = 0; c < cases; ++c) {
+        const auto& rows = s.case_rows[c];
+        const auto m = static_cast<Eigen::Index>(rows.size());
+        raw_r[c].resize(m);
+        raw_d[c].resize(m, p_count);
+        for (Eigen::Index i = 0; i < m; ++i) {
+            const std::size_t point = s.idx[static_cast<std::size_t>(rows[static_cast<std::size_t>(i)])];
+            raw_r[c](i) = pts[point].q_exp - f0[point];
+            for (Eigen::Index j = 0; j < p_count; ++j)
+                raw_d[c](i, j) = (df[static_cast<std::size_t>(j)][point] - f0[point]) / steps[static_cast<std::size_t>(j)];
+        }
+        r[c] = s.case_llt[c].matrixL().solve(raw_r[c]);
+        d[c] = s.case_llt[c].matrixL().solve(raw_d[c]);
+        a_case[c] = d[c].transpose() * d[c];
+        g_case[c] = d[c].transpose() * r[c];
+        a_total += a_case[c];
+        g_total += g_case[c];
+    }
+    double sum_sq = 0.0;
+    int count = 0;
+    for (std::size_t c = 0; c < cases; ++c) {
+        Eigen::VectorXd delta = Eigen::VectorXd::Zero(p_count);
+        if (p_count > 0 && cases > 1) {
+            delta = (a_total - a_case[c]).ldlt().solve(g_total - g_case[c]);
+            for (Eigen::Index j = 0; j < p_count; ++j) {
+                const auto& b = bounds[static_cast<std::size_t>(j)];
+                const double t = theta[static_cast<std::size_t>(j)];
+                delta(j) = std::clamp(t + delta(j), b.lo, b.hi) - t;
+            }
+        }
+        out.loo_score += (r[c] - d[c] * delta).squaredNorm();
+        const Eigen::VectorXd e = raw_r[c] - raw_d[c] * delta;
+        sum_sq += e.squaredNorm();
+        count += static_cast<int>(e.size());
+    }
+    out.loo_rmse = count > 0 ? std::sqrt(sum_sq / count) : 0.0;
+    out.robust_se.assign(theta.size(), std::numeric_limits<double>::infinity());
+    const auto c_count = static_cast<double>(cases);
+    if (p_count > 0 && c_count > static_cast<double>(p_count)) {
+        Eigen::MatrixXd meat = Eigen::MatrixXd::Zero(p_count, p_count);
+        const Eigen::VectorXd g_mean = g_total / c_count;
+        for (std::size_t c = 0; c < cases; ++c) {
+            const Eigen::VectorXd g = g_case[c] - g_mean;
+            meat += g * g.transpose();
+        }
+        Eigen::FullPivLU<Eigen::MatrixXd> lu(a_total);
+        if (lu.isInvertible()) {
+            const Eigen::MatrixXd bread = lu.inverse();
+            const Eigen::MatrixXd v = bread * meat * bread * (c_count / (c_count - static_cast<double>(p_count)));
+            for (Eigen::Index j = 0; j < p_count; ++j) out.robust_se[static_cast<std::size_t>(j)] = std::sqrt(std::max(0.0, v(j, j)));
+        }
+    }
+    return out;
+}
+
+}  // namespace manikind::analysis::reconcile::evidence

@@ -1,0 +1,79 @@
+#pragma once
+// The statistics under reconcile (docs/reconcile.md): generalised least squares against the
+// noise model's covariance, single terms profiled on a grid so that thousands of simulated
+// campaigns cost matrix products rather than fits, and case-level cross-validation and
+// robust intervals (cases are the independent units, not zone points).
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include "analysis/reconcile/reconcile.hpp"
+
+namespace manikind::analysis::reconcile::evidence {
+
+// The points a fit is judged on, whitened by the covariance: chi2 = |L^-1 (y - f)|².
+struct Subset {
+    std::vector<std::size_t> idx;                       // into model.points()
+    Eigen::LLT<Eigen::MatrixXd> llt;                    // of the covariance restricted to idx
+    std::vector<int> case_ids;
+    std::vector<std::vector<Eigen::Index>> case_rows;   // positions in idx, per case
+    std::vector<Eigen::LLT<Eigen::MatrixXd>> case_llt;  // each case's own block
+    Eigen::VectorXd y;                                   // whitened observations
+    Eigen::VectorXd w_base;                              // whitened twin-as-given prediction
+
+    Eigen::VectorXd select(const std::vector<double>& v) const;
+    Eigen::VectorXd whiten(const std::vector<double>& v) const;
+    double chi2(const std::vector<double>& prediction) const;
+    Eigen::Index size() const { return static_cast<Eigen::Index>(idx.size()); }
+};
+// Throws std::runtime_error when the covariance is not positive definite.
+Subset make_subset(const ForwardModel& model, const Eigen::MatrixXd& covariance, std::vector<std::size_t> idx,
+                   const std::vector<double>& base_prediction);
+
+// One single-parameter candidate evaluated on a uniform grid across its bounds.
+struct Grid {
+    CandidateTerm term;
+    std::vector<double> theta;
+    std::vector<std::vector<double>> raw;   // predictions of every point, per grid value
+    std::vector<bool> valid;                // false where the physics could not be evaluated
+};
+Grid make_grid(const ForwardModel& model, const CandidateTerm& term, int steps);
+
+// The grid whitened for one subset.
+struct WhitenedGrid {
+    const Grid* grid = nullptr;
+    Eigen::MatrixXd w;                      // n x G
+    Eigen::VectorXd norm2;
+};
+WhitenedGrid whiten_grid(const Subset& s, const Grid& g);
+
+// Minimum of chi2 over a grid, refined by a parabola through the neighbours.
+struct ProfileMin {
+    double chi2 = 0.0;
+    double theta = 0.0;
+};
+ProfileMin profile_min(const Eigen::Ref<const Eigen::VectorXd>& chi2, const Grid& g);
+
+// Profile-minimum chi2 of each grid for each column of whitened data Y (n x B): K x B.
+Eigen::MatrixXd profile_chi2(const std::vector<const WhitenedGrid*>& grids, const Eigen::MatrixXd& y);
+
+// B campaigns simulated around a whitened mean: mean + N(0, I).
+Eigen::MatrixXd simulate(const Eigen::VectorXd& mean, int count, std::mt19937_64& rng);
+
+// The (1 - alpha) quantile of a sample.
+double upper_quantile(std::vector<double> sample, double alpha);
+
+// Case-level analysis of a fitted model (linearised at the fit): leave-one-case-out error and
+// the case-clustered sandwich covariance.
+struct CaseLevel {
+    double loo_score = 0.0;                 // sum over held-out cases of their chi2 (own block)
+    double loo_rmse = 0.0;                  // the observation's unit
+    std::vector<double> robust_se;          // sandwich, small-sample corrected C/(C - p)
+};
+CaseLevel case_level(const ForwardModel& model, const Subset& s, const std::vector<CandidateTerm>& terms,
+                     const std::vector<double>& theta);
+
+}  // namespace manikind::analysis::reconcile::evidence

@@ -1,0 +1,289 @@
+// The forward models reconcile fits: the twin over recorded cases (with its noise model built
+// from the replicates and the instruments' specs), and the whole-body h of the paper's CFD table.
+#include <cmath>
+#include <stdexcept>
+
+#include <fmt/core.h>
+
+#include "analysis/reconcile/noise_model.hpp"
+#include "analysis/reconcile/reconcile.hpp"
+#include "physics/psychrometrics.hpp"
+
+namespace manikind::analysis::reconcile {
+namespace tw = physics::twin;
+namespace {
+
+double spec_u(const Instruments& instruments, const std::string& channel, double reading) {
+    const auto it = instruments.find(channel);
+    return it == instruments.end() ? 0.0 : it->second.standard_uncertainty(reading);
+}
+
+class TwinModel final : public ForwardModel {
+public:
+    TwinModel(std::vector<CaseInput> cases, tw::TwinVersion base) : cases_(std::move(cases)), base_(std::move(base)) {
+        for (std::size_t c = 0; c < cases_.size(); ++c) {
+            const CaseInput& in = cases_[c];
+            const auto& cond = in.conditions;
+            const double p_air = physics::vapour_pressure_pa(cond.air_temp_c, cond.air_rh_pct);
+            const double c_air = physics::vapour_concentration_kg_m3(p_air, cond.air_temp_c);
+            for (std::size_t z = 0; z < cond.zones.size(); ++z) {
+                const double q = in.q_exp_w_m2.at(z);
+                const double u = in.expanded_u_w_m2.at(z);
+                if (!std::isfinite(q) || !std::isfinite(u) || u <= 0.0) continue;
+                Point p;
+                p.case_id = in.case_id;
+                p.zone = cond.zones[z].zone;
+                p.zone_name = z < in.zone_names.size() ? in.zone_names[z] : std::to_string(p.zone);
+                p.region = cond.zones[z].region;
+                p.q_exp = q;
+                p.expanded_u = u;
+                p.coverage_k = z < in.coverage_k.size() && in.coverage_k[z] > 0.0 ? in.coverage_k[z] : 2.0;
+                const double ts = cond.zones[z].skin_temp_c;
+                p.drivers["skin-air temperature difference"] = ts - cond.air_temp_c;
+                p.drivers["vapour concentration difference"] =
+                    cond.wettedness * (physics::saturation_concentration_kg_m3(ts) - c_air);
+                p.drivers["relative humidity"] = cond.air_rh_pct;
+                p.drivers["air speed"] = cond.air_speed_m_s.value_or(0.0);
+                p.drivers["wall-air temperature difference"] = cond.wall_temp_c.value_or(cond.air_temp_c) - cond.air_temp_c;
+                p.drivers["wettedness"] = cond.wettedness;
+                if (z < in.heights_m.size()) p.drivers["zone height"] = in.heights_m[z];
+                if (z < in.sides.size()) p.drivers["side (left -1, right +1)"] = in.sides[z] == "l" ? -1.0 : in.sides[z] == "r" ? 1.0 : 0.0;
+                points_.push_back(std::move(p));
+                index_.emplace_back(c, z);
+            }
+        }
+    }
+    const std::vector<Point>& points() const override { return points_; }
+    bool supports(const std::string&) const override { return true; }
+    std::string base_name() const override { return base_.name; }
+    std::vector<tw::Term> base_terms() const override { return base_.terms; }
+
+    std::vector<double> predict(const std::vector<tw::Term>& extra) const override {
+        tw::TwinVersion v = base_;
+        v.terms.insert(v.terms.end(), extra.begin(), extra.end());
+        std::vector<std::vector<tw::ZoneFlux>> per_case(cases_.size());
+        for (std::size_t c = 0; c < cases_.size(); ++c) per_case[c] = tw::predict(v, cases_[c].conditions);
+        std::vector<double> out(points_.size());
+        for (std::size_t i = 0; i < points_.size(); ++i) out[i] = per_case[index_[i].first][index_[i].second].q_total_w_m2;
+        return out;
+    }
+
+    // Per case: the twin's response (W/m² per zone) to one unit of each shared error: air
+    // temperature (°C), humidity (% RH), wall temperature (°C), a manikin gain and an offset.
+    static Eigen::MatrixXd case_loadings(const tw::TwinVersion& physics, const CaseInput& in,
+                                         const std::vector<tw::ZoneFlux>& twin_case) {
+        const auto z_count = static_cast<Eigen::Index>(in.conditions.zones.size());
+        Eigen::MatrixXd j = Eigen::MatrixXd::Zero(z_count, 5);
+        auto column = [&](Eigen::Index k, double step, auto apply) {
+            tw::TrialConditions up = in.conditions, down = in.conditions;
+            apply(up, step);
+            apply(down, -step);
+            const auto fu = tw::predict(physics, up), fd = tw::predict(physics, down);
+            for (Eigen::Index z = 0; z < z_count; ++z)
+                j(z, k) = (fu[static_cast<std::size_t>(z)].q_total_w_m2 - fd[static_cast<std::size_t>(z)].q_total_w_m2) / (2.0 * step);
+        };
+        column(0, 0.05, [](tw::TrialConditions& t, double d) { t.air_temp_c += d; });
+        column(1, 0.25, [](tw::TrialConditions& t, double d) { t.air_rh_pct += d; });
+        if (in.conditions.wall_temp_c) column(2, 0.05, [](tw::TrialConditions& t, double d) { *t.wall_temp_c += d; });
+        for (Eigen::Index z = 0; z < z_count; ++z) {
+            j(z, 3) = twin_case[static_cast<std::size_t>(z)].q_total_w_m2;
+            j(z, 4) = 1.0;
+        }
+        return j;
+    }
+
+    NoiseModel noise_model(const Instruments& instruments, double shared_fraction,
+                           const std::vector<tw::Term>& with) const override {
+        tw::TwinVersion physics = base_;
+        physics.terms.insert(physics.terms.end(), with.begin(), with.end());
+        const std::size_t n = points_.size();
+        NoiseModel out;
+        out.covariance = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+        out.random_covariance = out.covariance;
+        out.point_replicates.resize(n, 1);
+
+        // Random part: each trial's residual against the twin at that trial's own recorded
+        // conditions, so condition changes between replicates are not counted as noise.
+        ReplicateResiduals data;
+        data.factor_start_sd = {0.1, 0.5, 0.2, 0.01, 0.3};
+        std::vector<Eigen::MatrixXd> loadings;
+        for (const auto& in : cases_) {
+            const std::size_t z_count = in.conditions.zones.size();
+            std::vector<std::vector<double>> trials;
+            for (const auto& t : in.trials) {
+                if (t.q_w_m2.size() != z_count || t.conditions.zones.size() != z_count) continue;
+                const auto twin = tw::predict(physics, t.conditions);
+                std::vector<double> r(z_count);
+                for (std::size_t z = 0; z < z_count; ++z) r[z] = t.q_w_m2[z] - twin[z].q_total_w_m2;
+                trials.push_back(std::move(r));
+            }
+            // Flux-proportional parts (relative scatter, gains) scale with the twin's prediction,
+            // not the observation: a covariance built from the data it judges biases GLS toward
+            // smaller values (Peelle's pertinent puzzle).
+            const auto twin_case = tw::predict(physics, in.conditions);
+            std::vector<double> abs_q(z_count);
+            for (std::size_t z = 0; z < z_count; ++z) abs_q[z] = std::abs(twin_case[z].q_total_w_m2);
+            data.residual_w_m2.push_back(std::move(trials));
+            data.abs_flux_w_m2.push_back(std::move(abs_q));
+            loadings.push_back(case_loadings(physics, in, twin_case));
+        }
+        data.loadings = loadings;
+        const ScatterModel scatter = estimate_scatter(data);
+        out.from_replicates = scatter.estimable;
+        out.random_dof = scatter.dof;
+        out.relative_sd = scatter.relative_sd;
+        if (scatter.estimable) {
+            const char* names[] = {"air °C", "RH %", "wall °C", "gain", "offset W/m²"};
+            for (std::size_t k = 0; k < scatter.factor_sd.size() && k < 5; ++k) {
+                out.trial_factor_sd.emplace_back(names[k], scatter.factor_sd[k]);
+            }
+        } else {
+            out.notes.push_back("no case has two replicates: the random part is each point's own standard "
+                                "uncertainty from the analysis, taken as independent");
+        }
+
+        const auto flux = instruments.count("heat_flux_w_m2") ? instruments.at("heat_flux_w_m2") : InstrumentSpec{};
+        out.calibration_offset_u_w_m2 = flux.standard_uncertainty(0.0);
+        out.calibration_gain_u = flux.standard_uncertainty(1.0) - out.calibration_offset_u_w_m2;
+        out.air_temp_u_c = spec_u(instruments, "air_temp_c", 0.0);
+        out.probe_shared_fraction = shared_fraction;
+        out.wall_temp_u_c = spec_u(instruments, "wall_temp_c", 0.0);
+        if (instruments.count("air_rh_pct")) {
+            const auto& rh = instruments.at("air_rh_pct");
+            out.rh_u_text = fmt::format("{:.3g} + {:.3g} RH % (standard)", rh.standard_uncertainty(0.0),
+                                        rh.standard_uncertainty(100.0) / 100.0 - rh.standard_uncertainty(0.0) / 100.0);
+        }
+
+        std::vector<std::vector<std::size_t>> rows(cases_.size());
+        for (std::size_t i = 0; i < n; ++i) rows[index_[i].first].push_back(i);
+        std::vector<double> scale(n, 0.0);
+        for (std::size_t i = 0; i < n; ++i) scale[i] = loadings[index_[i].first](static_cast<Eigen::Index>(index_[i].second), 3);
+        for (std::size_t c = 0; c < cases_.size(); ++c) {
+            const CaseInput& in = cases_[c];
+            const int reps = std::max<int>(1, static_cast<int>(in.trials.size()));
+            // The case mean of its replicates: the trial covariance over the number of trials.
+            Eigen::MatrixXd trial_cov;
+            if (scatter.estimable) trial_cov = scatter.trial_covariance(data.abs_flux_w_m2[c], loadings[c]);
+            for (std::size_t a : rows[c]) {
+                out.point_replicates[a] = reps;
+                for (std::size_t b : rows[c]) {
+                    double cov = 0.0;
+                    if (scatter.estimable)
+                        cov = trial_cov(static_cast<Eigen::Index>(index_[a].second), static_cast<Eigen::Index>(index_[b].second));
+                    else if (a == b)
+                        cov = points_[a].standard_u() * points_[a].standard_u() * reps;
+                    out.random_covariance(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) = cov / reps;
+                }
+            }
+        }
+        // The probes' Type B errors act through the twin's sensitivities. Part of that variance is
+        // the probe's calibration, the same in every case (`probe_shared_fraction`); the rest
+        // differs from case to case (the error's dependence on temperature and humidity) and is
+        // shared by the zones of one case only.
+        for (Eigen::Index k = 0; k < 3; ++k) {
+            Eigen::VectorXd g = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(n));
+            for (std::size_t c = 0; c < cases_.size(); ++c) {
+                const auto& cond = cases_[c].conditions;
+                const double u = k == 0   ? spec_u(instruments, "air_temp_c", cond.air_temp_c)
+                                 : k == 1 ? spec_u(instruments, "air_rh_pct", cond.air_rh_pct)
+                                 : cond.wall_temp_c ? spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)
+                                                    : 0.0;
+                for (std::size_t a : rows[c]) g(static_cast<Eigen::Index>(a)) = u * loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
+            }
+            out.covariance += shared_fraction * g * g.transpose();
+            for (std::size_t c = 0; c < cases_.size(); ++c)
+                for (std::size_t a : rows[c])
+                    for (std::size_t b : rows[c])
+                        out.covariance(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
+                            (1.0 - shared_fraction) * g(static_cast<Eigen::Index>(a)) * g(static_cast<Eigen::Index>(b));
+        }
+        // The manikin's calibration: one offset and one gain error shared by every zone and case.
+        for (std::size_t a = 0; a < n; ++a)
+            for (std::size_t b = 0; b < n; ++b)
+                out.covariance(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
+                    out.calibration_offset_u_w_m2 * out.calibration_offset_u_w_m2 +
+                    out.calibration_gain_u * out.calibration_gain_u * scale[a] * scale[b];
+        out.covariance += out.random_covariance;
+        // A hair of independent noise keeps the covariance positive definite when the random
+        // part is tiny (synthetic data) and the systematic parts are of low rank.
+        out.covariance.diagonal().array() += 1e-9 * out.covariance.diagonal().mean() + 1e-12;
+        return out;
+    }
+
+private:
+    std::vector<CaseInput> cases_;
+    tw::TwinVersion base_;
+    std::vector<Point> points_;
+    std::vector<std::pair<std::size_t, std::size_t>> index_;
+};
+
+class WholeBodyHModel final : public ForwardModel {
+public:
+    WholeBodyHModel(std::vector<HObservation> obs, double a, double exponent) : a_(a), exponent_(exponent) {
+        for (const auto& o : obs) {
+            Point p;
+            p.case_id = o.case_id;
+            p.zone_name = "whole body";
+            p.region = "whole_body";
+            p.q_exp = o.h_w_m2k;
+            p.expanded_u = o.expanded_u_w_m2k;
+            p.coverage_k = o.coverage_k;
+            const double c_air = physics::vapour_concentration_kg_m3(physics::vapour_pressure_pa(o.air_temp_c, o.air_rh_pct), o.air_temp_c);
+            dt_.push_back(o.skin_temp_c - o.air_temp_c);
+            dc_.push_back(physics::saturation_concentration_kg_m3(o.skin_temp_c) - c_air);
+            p.drivers["skin-air temperature difference"] = dt_.back();
+            p.drivers["vapour concentration difference"] = dc_.back();
+            p.drivers["relative humidity"] = o.air_rh_pct;
+            points_.push_back(std::move(p));
+        }
+    }
+    const std::vector<Point>& points() const override { return points_; }
+    bool supports(const std::string& term) const override {
+        return term == "humidity_buoyancy" || term == "diffusion_floor";
+    }
+    std::string base_name() const override { return fmt::format("h = {} |dT|^{}", a_, exponent_); }
+    std::vector<tw::Term> base_terms() const override { return {}; }
+    std::vector<double> predict(const std::vector<tw::Term>& extra) const override {
+        double gamma = 0.0, h0 = 0.0;
+        for (const auto& t : extra) {
+            if (t.name == "humidity_buoyancy") gamma = t.parameters.at("gamma");
+            else if (t.name == "diffusion_floor") h0 = t.parameters.at("h0");
+            else throw std::invalid_argument("whole-body h model does not support " + t.name);
+        }
+        std::vector<double> out(points_.size());
+        for (std::size_t i = 0; i < points_.size(); ++i)
+            out[i] = h0 + a_ * std::pow(std::abs(dt_[i] + gamma * dc_[i]), exponent_);
+        return out;
+    }
+    // Each CFD case stands alone: independent errors of the stated size, no replicates.
+    NoiseModel noise_model(const Instruments&, double, const std::vector<tw::Term>&) const override {
+        NoiseModel out;
+        const auto n = static_cast<Eigen::Index>(points_.size());
+        out.random_covariance = Eigen::MatrixXd::Zero(n, n);
+        for (Eigen::Index i = 0; i < n; ++i) {
+            const double u = points_[static_cast<std::size_t>(i)].standard_u();
+            out.random_covariance(i, i) = u * u;
+        }
+        out.covariance = out.random_covariance;
+        out.point_replicates.assign(points_.size(), 1);
+        out.notes.push_back("independent observations with their stated standard uncertainty");
+        return out;
+    }
+
+private:
+    double a_, exponent_;
+    std::vector<Point> points_;
+    std::vector<double> dt_, dc_;
+};
+
+}  // namespace
+
+std::unique_ptr<ForwardModel> make_twin_model(std::vector<CaseInput> cases, tw::TwinVersion base) {
+    return std::make_unique<TwinModel>(std::move(cases), std::move(base));
+}
+
+std::unique_ptr<ForwardModel> make_whole_body_h_model(std::vector<HObservation> obs, double a, double exponent) {
+    return std::make_unique<WholeBodyHModel>(std::move(obs), a, exponent);
+}
+
+}  // namespace manikind::analysis::reconcile

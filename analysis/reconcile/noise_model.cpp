@@ -1,0 +1,197 @@
+#include "analysis/reconcile/noise_model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include <Eigen/Dense>
+
+namespace manikind::analysis::reconcile {
+namespace {
+
+struct ZoneData {
+    std::vector<double> ss;        // within-case sum of squares
+    std::vector<double> dof;       // n_c - 1
+    std::vector<double> abs_flux;  // |q| of the case
+};
+
+// -2 log-likelihood of one zone (up to a constant): sum_c dof ln v + ss / v.
+double neg2_loglik(const ZoneData& d, double sigma0_sq, double kappa) {
+    double out = 0.0;
+    for (std::size_t c = 0; c < d.ss.size(); ++c) {
+        const double v = std::max(sigma0_sq + kappa * kappa * d.abs_flux[c] * d.abs_flux[c], 1e-12);
+        out += d.dof[c] * std::log(v) + d.ss[c] / v;
+    }
+    return out;
+}
+
+// A zone's sigma0² is shrunk toward the mean over zones by a scaled inverse-chi² prior of
+// kPriorDof degrees of freedom: with 30 dof per zone a free maximum likelihood can collapse a
+// zone's variance to ~0 (all of it put on kappa), which would make that zone look infinitely
+// precise.
+constexpr double kPriorDof = 10.0;
+
+double objective(const ZoneData& d, double sigma0_sq, double kappa, double prior_sq) {
+    return neg2_loglik(d, sigma0_sq, kappa) + kPriorDof * (std::log(std::max(sigma0_sq, 1e-300)) + prior_sq / std::max(sigma0_sq, 1e-300));
+}
+
+// The zone's sigma0² that minimises the objective for a given kappa: golden section on
+// log(sigma0²), which is unimodal here.
+double best_sigma0_sq(const ZoneData& d, double kappa, double scale, double prior_sq) {
+    double lo = std::log(1e-8 * scale + 1e-12), hi = std::log(100.0 * scale + 1e-6);
+    const double g = (std::sqrt(5.0) - 1.0) / 2.0;
+    double a = hi - g * (hi - lo), b = lo + g * (hi - lo);
+    double fa = objective(d, std::exp(a), kappa, prior_sq), fb = objective(d, std::exp(b), kappa, prior_sq);
+    for (int i = 0; i < 36; ++i) {
+        if (fa < fb) {
+            hi = b;
+            b = a;
+            fb = fa;
+            a = hi - g * (hi - lo);
+            fa = objective(d, std::exp(a), kappa, prior_sq);
+        } else {
+            lo = a;
+            a = b;
+            fa = fb;
+            b = lo + g * (hi - lo);
+            fb = objective(d, std::exp(b), kappa, prior_sq);
+        }
+    }
+    return std::exp(0.5 * (lo + hi));
+}
+
+}  // namespace
+
+Eigen::MatrixXd ScatterModel::trial_covariance(const std::vector<double>& abs_flux, const Eigen::MatrixXd& j) const {
+    const auto z_count = static_cast<Eigen::Index>(zone_sd_w_m2.size());
+    Eigen::MatrixXd v = Eigen::MatrixXd::Zero(z_count, z_count);
+    for (Eigen::Index z = 0; z < z_count; ++z) v(z, z) = variance(static_cast<std::size_t>(z), abs_flux[static_cast<std::size_t>(z)]);
+    if (j.cols() > 0 && j.rows() == z_count) {
+        Eigen::VectorXd t(j.cols());
+        for (Eigen::Index k = 0; k < j.cols(); ++k) t(k) = factor_sd[static_cast<std::size_t>(k)] * factor_sd[static_cast<std::size_t>(k)];
+        v += j * t.asDiagonal() * j.transpose();
+    }
+    return v;
+}
+
+ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations) {
+    ScatterModel out;
+    const std::size_t n_cases = data.residual_w_m2.size();
+    if (data.abs_flux_w_m2.size() != n_cases || data.loadings.size() != n_cases)
+        throw std::invalid_argument("estimate_scatter: cases disagree");
+    const auto k_count = static_cast<Eigen::Index>(data.factor_start_sd.size());
+    std::size_t n_zones = 0;
+    for (const auto& c : data.residual_w_m2)
+        if (!c.empty()) n_zones = std::max(n_zones, c.front().size());
+    const auto z_count = static_cast<Eigen::Index>(n_zones);
+    out.zone_sd_w_m2.assign(n_zones, 0.0);
+    out.factor_sd = data.factor_start_sd;
+
+    // Helmert contrasts of each case's trials: n - 1 independent vectors with the trial covariance.
+    std::vector<std::vector<Eigen::VectorXd>> contrasts(n_cases);
+    double pooled_ss = 0.0, pooled_dof = 0.0;
+    for (std::size_t c = 0; c < n_cases; ++c) {
+        std::vector<Eigen::VectorXd> trials;
+        for (const auto& t : data.residual_w_m2[c]) {
+            if (t.size() != n_zones) continue;
+            Eigen::VectorXd v(z_count);
+            bool finite = true;
+            for (Eigen::Index z = 0; z < z_count; ++z) {
+                v(z) = t[static_cast<std::size_t>(z)];
+                finite = finite && std::isfinite(v(z));
+            }
+            if (finite) trials.push_back(std::move(v));
+        }
+        if (trials.size() < 2) continue;
+        if (data.loadings[c].rows() != z_count || data.loadings[c].cols() != k_count)
+            throw std::invalid_argument("estimate_scatter: loadings do not match the zones and factors");
+        Eigen::VectorXd sum = trials[0];
+        for (std::size_t k = 1; k < trials.size(); ++k) {
+            const double kk = static_cast<double>(k);
+            contrasts[c].push_back((sum - kk * trials[k]) / std::sqrt(kk * (kk + 1.0)));
+            sum += trials[k];
+            pooled_ss += contrasts[c].back().squaredNorm();
+            pooled_dof += static_cast<double>(z_count);
+        }
+        out.dof += static_cast<int>(trials.size()) - 1;
+    }
+    if (out.dof == 0 || pooled_dof <= 0.0) return out;
+    out.estimable = true;
+    const double scale = std::max(pooled_ss / pooled_dof, 1e-12);
+    std::vector<double> sigma_sq(n_zones, 0.5 * scale);
+    double kappa = 0.0;
+
+    for (int it = 0; it < iterations; ++it) {
+        // E-step: the shared factors of each contrast given the current variances.
+        std::vector<ZoneData> zones(n_zones);
+        Eigen::VectorXd tau_sum = Eigen::VectorXd::Zero(k_count);
+        double count = 0.0;
+        for (std::size_t c = 0; c < n_cases; ++c) {
+            if (contrasts[c].empty()) continue;
+            const Eigen::MatrixXd& j = data.loadings[c];
+            Eigen::VectorXd d_inv(z_count);
+            for (Eigen::Index z = 0; z < z_count; ++z) {
+                const double q = data.abs_flux_w_m2[c][static_cast<std::size_t>(z)];
+                d_inv(z) = 1.0 / std::max(sigma_sq[static_cast<std::size_t>(z)] + kappa * kappa * q * q, 1e-9 * scale);
+            }
+            Eigen::MatrixXd post_cov = Eigen::MatrixXd::Zero(k_count, k_count);
+            Eigen::VectorXd explained_var = Eigen::VectorXd::Zero(z_count);
+            if (k_count > 0) {
+                Eigen::MatrixXd m = j.transpose() * d_inv.asDiagonal() * j;
+                for (Eigen::Index k = 0; k < k_count; ++k) {
+                    const double tau = out.factor_sd[static_cast<std::size_t>(k)];
+                    m(k, k) += 1.0 / std::max(tau * tau, 1e-12);
+                }
+                post_cov = m.inverse();
+                explained_var = (j * post_cov * j.transpose()).diagonal();
+            }
+            std::vector<double> ss(n_zones, 0.0);
+            for (const auto& h : contrasts[c]) {
+                Eigen::VectorXd resid = h;
+                if (k_count > 0) {
+                    const Eigen::VectorXd mean = post_cov * (j.transpose() * d_inv.cwiseProduct(h));
+                    tau_sum += mean.cwiseAbs2() + post_cov.diagonal();
+                    resid -= j * mean;
+                }
+                count += 1.0;
+                for (Eigen::Index z = 0; z < z_count; ++z)
+                    ss[static_cast<std::size_t>(z)] += resid(z) * resid(z) + explained_var(z);
+            }
+            for (std::size_t z = 0; z < n_zones; ++z) {
+                zones[z].ss.push_back(ss[z]);
+                zones[z].dof.push_back(static_cast<double>(contrasts[c].size()));
+                zones[z].abs_flux.push_back(data.abs_flux_w_m2[c][z]);
+            }
+        }
+        // M-step: factor variances, then sigma0 per zone and the shared kappa.
+        for (Eigen::Index k = 0; k < k_count; ++k) out.factor_sd[static_cast<std::size_t>(k)] = std::sqrt(tau_sum(k) / count);
+        double prior_sq = 0.0;
+        for (double v : sigma_sq) prior_sq += v / static_cast<double>(n_zones);
+        auto total = [&](double kap, std::vector<double>* s2) {
+            double sum = 0.0;
+            for (std::size_t z = 0; z < n_zones; ++z) {
+                const double v = best_sigma0_sq(zones[z], kap, scale, prior_sq);
+                if (s2) (*s2)[z] = v;
+                sum += objective(zones[z], v, kap, prior_sq);
+            }
+            return sum;
+        };
+        double best_value = total(kappa, nullptr);
+        for (double step : {0.004, 0.001, 0.0003})
+            for (double kap : {kappa - step, kappa + step})
+                if (kap >= 0.0 && kap <= 0.2) {
+                    const double v = total(kap, nullptr);
+                    if (v < best_value) {
+                        best_value = v;
+                        kappa = kap;
+                    }
+                }
+        total(kappa, &sigma_sq);
+    }
+    out.relative_sd = kappa;
+    for (std::size_t z = 0; z < n_zones; ++z) out.zone_sd_w_m2[z] = std::sqrt(sigma_sq[z]);
+    return out;
+}
+
+}  // namespace manikind::analysis::reconcile

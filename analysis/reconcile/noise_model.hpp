@@ -1,0 +1,44 @@
+#pragma once
+// The random part of reconcile's noise model, estimated from the replicates (docs/reconcile.md,
+// "Noise model"). One trial's zone residuals (against the twin at that trial's own recorded
+// conditions) deviate from their case mean as
+//     d_z = e_z + sum_k J_zk eta_k,   e_z ~ N(0, sigma0_z² + (kappa q_z)²),   eta_k ~ N(0, tau_k²)
+// e is each zone's own scatter (sigma0 per zone, kappa shared); eta are errors one trial shares
+// by all its zones (its air temperature, humidity and wall readings, a gain and an offset of
+// the manikin on the day), acting through the twin's sensitivities J. Everything is pooled over
+// the cases by maximum likelihood (EM, the eta being latent), on the within-case (Helmert)
+// contrasts, so the case means themselves carry no information into the noise.
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace manikind::analysis::reconcile {
+
+struct ReplicateResiduals {
+    // [case][trial][zone]: q_trial - q_twin(trial conditions), W/m²
+    std::vector<std::vector<std::vector<double>>> residual_w_m2;
+    // [case][zone]: |twin flux|, the scale of the relative part
+    std::vector<std::vector<double>> abs_flux_w_m2;
+    // [case]: zones x factors, the twin's response to one unit of each shared factor
+    std::vector<Eigen::MatrixXd> loadings;
+    std::vector<double> factor_start_sd;   // a first guess per factor (its unit)
+};
+
+struct ScatterModel {
+    bool estimable = false;          // at least one case with two replicates
+    int dof = 0;                     // sum over cases of (n - 1), per zone
+    std::vector<double> zone_sd_w_m2;// sigma0_z
+    double relative_sd = 0.0;        // kappa
+    std::vector<double> factor_sd;   // tau_k, per trial
+    double variance(std::size_t zone, double abs_flux_w_m2) const {
+        return zone_sd_w_m2[zone] * zone_sd_w_m2[zone] + relative_sd * relative_sd * abs_flux_w_m2 * abs_flux_w_m2;
+    }
+    // Covariance of one trial's zone deviations in a case: diag(v) + J T J'.
+    Eigen::MatrixXd trial_covariance(const std::vector<double>& abs_flux_w_m2, const Eigen::MatrixXd& loadings) const;
+};
+
+// Throws std::invalid_argument when the shapes disagree.
+ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations = 30);
+
+}  // namespace manikind::analysis::reconcile
