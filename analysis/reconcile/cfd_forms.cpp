@@ -281,16 +281,19 @@ CfdGammaReport fit_cfd_gamma_forms(const std::vector<CfdHObservation>& observati
     rep.gamma_u_combined_k_m3_kg = std::sqrt(sum_var / n_fits + ss / (n_fits - 1.0));
 
     // Theory (Eq. 6-7): beta_C alpha/(beta_T D) at each case's film state, averaged.
-    double theory_sum = 0.0;
+    double theory_sum = 0.0, density_sum = 0.0;
     for (const auto& o : observations) {
         physics::SkinAirState s;
         s.skin_temp_c = o.skin_temp_c;
         s.air_temp_c = o.air_temp_c;
         s.air_rh_pct = o.air_rh_pct;
         s.skin_wettedness = 1.0;
-        theory_sum += physics::coupling_coefficient(s);
+        const physics::BuoyancyResult b = physics::buoyancy(s);
+        theory_sum += b.coupling_coefficient;
+        density_sum += b.beta_c_m3_kg / b.beta_t_1_k;
     }
     rep.gamma_theory_table_mean_k_m3_kg = theory_sum / static_cast<double>(observations.size());
+    rep.gamma_density_neutral_table_mean_k_m3_kg = density_sum / static_cast<double>(observations.size());
     rep.z_vs_paper = (rep.gamma_combined_k_m3_kg - rep.gamma_theory_paper_k_m3_kg) / rep.gamma_u_combined_k_m3_kg;
 
     rep.eq8 = fixed_model(d, "Eq. 8: 0.3 + 1.25 |dT + 146 dC|^(1/4)", Params{0.3, 1.25, 146.0}, 0.25);

@@ -76,6 +76,9 @@ struct CfdGammaReport {
     // paper's rounded 146 (Eq. 8).
     double gamma_theory_table_mean_k_m3_kg = 0.0;
     double gamma_theory_paper_k_m3_kg = 146.0;
+    // beta_C/beta_T (no alpha/D): the gamma at which N = 0 is the density-neutral state of Eq. 2,
+    // where B_net = 0 (Table S4's stagnation). Mean over the table's film states.
+    double gamma_density_neutral_table_mean_k_m3_kg = 0.0;
     double z_vs_paper = 0.0;               // (combined - 146) / u_combined
     CfdFixedModel eq8;                     // Eq. 8: 0.3 + 1.25 |dT + 146 dC|^(1/4)
     CfdFixedModel eq_s8;                   // Eq. S8: 1.36 |dT|^0.3 (no humidity term)
