@@ -30,7 +30,7 @@ std::vector<rc::CfdHObservation> cfd_table() {
     return obs;
 }
 
-// One fit of the 90-case table shared by the test cases (about a second of fitting).
+// One fit of the 90-case table shared by the test cases (about 0.1 s of fitting).
 const rc::CfdGammaReport& report() {
     static const rc::CfdGammaReport rep = [] {
         const auto r = rc::fit_cfd_gamma_forms(cfd_table());
