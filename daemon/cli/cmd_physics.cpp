@@ -1,11 +1,14 @@
 // `manikin physics ...`: the physics library at the command line, one correlation at a time.
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include <fmt/core.h>
 
+#include "analysis/reconcile/cfd_forms.hpp"
 #include "daemon/cli/commands.hpp"
 #include "daemon/cli/report.hpp"
 #include "daemon/core/user_error.hpp"
@@ -13,6 +16,7 @@
 #include "physics/buoyancy.hpp"
 #include "physics/convection.hpp"
 #include "physics/heat_exchange.hpp"
+#include "physics/paper_cfd_table.hpp"
 #include "physics/psychrometrics.hpp"
 #include "physics/range_check.hpp"
 #include "physics/threshold_map.hpp"
@@ -300,6 +304,103 @@ void add_threshold(CLI::App& physics) {
     });
 }
 
+void add_cfd_gamma(CLI::App& physics) {
+    auto json = std::make_shared<bool>(false);
+    auto* cmd = physics.add_subcommand(
+        "cfd-gamma", "Fit gamma in |dT + gamma dC| to the paper's CFD whole-body h (Tables S8-S10): Eq. 7 and Eq. S8 shapes");
+    cmd->add_flag("--json", *json, "Print one JSON object instead of a table");
+    cmd->footer("Forms: Eq. 7 h0 + B |N|^(1/4) (h0, B, gamma free); Eq. S8 shape a |N|^0.3 (a, gamma free);\n"
+                "N = dT + gamma dC. Weightings: u = 5 % of h; equal u (5 % of mean h); log residuals (5 %).\n"
+                "Standard errors from the Jacobian, x sqrt(chi2/dof) when > 1; combined u = sqrt(mean se^2 + var between fits).\n"
+                "Example: manikin physics cfd-gamma --json");
+    cmd->callback([json] {
+        namespace rc = manikind::analysis::reconcile;
+        std::vector<rc::CfdHObservation> obs;
+        for (const auto& c : ph::paper_cfd_cases())
+            obs.push_back({c.case_id, c.air_temp_c, c.air_rh_pct, ph::cfd_skin_temp_c, c.h_sim_w_m2k});
+        const auto r = rc::fit_cfd_gamma_forms(obs);
+        const auto fit_json = [](const rc::CfdFormFit& f) {
+            return nlohmann::json{{"form", rc::to_string(f.form)},
+                                  {"weighting", rc::to_string(f.weighting)},
+                                  {"exponent", f.exponent},
+                                  {"gamma_k_m3_kg", f.gamma_k_m3_kg},
+                                  {"gamma_se_k_m3_kg", f.gamma_se_k_m3_kg},
+                                  {"gamma_profile_lo_k_m3_kg", f.gamma_profile_lo_k_m3_kg},
+                                  {"gamma_profile_hi_k_m3_kg", f.gamma_profile_hi_k_m3_kg},
+                                  {"h0_w_m2k", f.h0_w_m2k},
+                                  {"h0_se_w_m2k", f.h0_se_w_m2k},
+                                  {"b_w_m2k", f.b_w_m2k},
+                                  {"b_se_w_m2k", f.b_se_w_m2k},
+                                  {"rmse_w_m2k", f.rmse_w_m2k},
+                                  {"rmse_pct", f.rmse_pct},
+                                  {"chi2_per_dof", f.chi2_per_dof},
+                                  {"dof", f.dof},
+                                  {"converged", f.converged},
+                                  {"at_bound", f.at_bound}};
+        };
+        const auto fixed_json = [](const rc::CfdFixedModel& m) {
+            return nlohmann::json{{"model", m.label}, {"h0_w_m2k", m.h0_w_m2k}, {"b_w_m2k", m.b_w_m2k},
+                                  {"gamma_k_m3_kg", m.gamma_k_m3_kg}, {"exponent", m.exponent},
+                                  {"rmse_w_m2k", m.rmse_w_m2k}, {"rmse_pct", m.rmse_pct}};
+        };
+        if (*json) {
+            nlohmann::json out;
+            out["n_points"] = r.n_points;
+            out["fits"] = nlohmann::json::array();
+            for (const auto& f : r.fits) out["fits"].push_back(fit_json(f));
+            out["eq7_gamma_146"] = nlohmann::json::array();
+            for (const auto& f : r.eq7_gamma_146) out["eq7_gamma_146"].push_back(fit_json(f));
+            out["gamma_combined_k_m3_kg"] = r.gamma_combined_k_m3_kg;
+            out["gamma_u_combined_k_m3_kg"] = r.gamma_u_combined_k_m3_kg;
+            out["gamma_u_within_k_m3_kg"] = r.gamma_u_within_k_m3_kg;
+            out["gamma_u_between_k_m3_kg"] = r.gamma_u_between_k_m3_kg;
+            out["gamma_min_k_m3_kg"] = r.gamma_min_k_m3_kg;
+            out["gamma_max_k_m3_kg"] = r.gamma_max_k_m3_kg;
+            out["gamma_theory_table_mean_k_m3_kg"] = r.gamma_theory_table_mean_k_m3_kg;
+            out["gamma_theory_paper_k_m3_kg"] = r.gamma_theory_paper_k_m3_kg;
+            out["gamma_density_neutral_table_mean_k_m3_kg"] = r.gamma_density_neutral_table_mean_k_m3_kg;
+            out["z_vs_paper"] = r.z_vs_paper;
+            out["eq8"] = fixed_json(r.eq8);
+            out["eq_s8"] = fixed_json(r.eq_s8);
+            std::printf("%s\n", out.dump(2).c_str());
+            return;
+        }
+        fmt::print("gamma in N = dT + gamma dC fitted to the paper's CFD whole-body h, Tables S8-S10 ({} cases)\n\n",
+                   r.n_points);
+        fmt::print("{:<38} {:<27} {:>15} {:>15} {:>15} {:>15} {:>7} {:>6} {:>9}\n", "form", "weighting",
+                   "gamma K m3/kg", "profile range", "h0 W/m2K", "B (a)", "RMSE", "RMSE%", "chi2/dof");
+        const auto row = [](const rc::CfdFormFit& f, bool gamma_free) {
+            const std::string gamma = gamma_free ? fmt::format("{:.1f} +- {:.1f}", f.gamma_k_m3_kg, f.gamma_se_k_m3_kg)
+                                                 : fmt::format("{:.0f} (fixed)", f.gamma_k_m3_kg);
+            const std::string profile = gamma_free ? fmt::format("{:.1f}..{:.1f}", f.gamma_profile_lo_k_m3_kg,
+                                                                 f.gamma_profile_hi_k_m3_kg)
+                                                   : "-";
+            const std::string h0 = f.form == rc::CfdForm::eq7_quarter
+                                       ? fmt::format("{:.3f} +- {:.3f}", f.h0_w_m2k, f.h0_se_w_m2k)
+                                       : "0 (none)";
+            fmt::print("{:<38} {:<27} {:>15} {:>15} {:>15} {:>15} {:>7.3f} {:>6.1f} {:>9.2f}{}\n", rc::to_string(f.form),
+                       rc::to_string(f.weighting), gamma, profile, h0, fmt::format("{:.3f} +- {:.3f}", f.b_w_m2k, f.b_se_w_m2k),
+                       f.rmse_w_m2k, f.rmse_pct, f.chi2_per_dof, f.at_bound ? "  [parameter at bound]" : "");
+        };
+        for (const auto& f : r.fits) row(f, true);
+        fmt::print("\nEq. 7 with gamma fixed at 146 (h0, B free):\n");
+        for (const auto& f : r.eq7_gamma_146) row(f, false);
+        fmt::print("\nFixed correlations on the same table:\n");
+        for (const auto* m : {&r.eq8, &r.eq_s8})
+            fmt::print("  {:<40} RMSE {:.3f} W/m2K, {:.1f} %\n", m->label, m->rmse_w_m2k, m->rmse_pct);
+        fmt::print("\nCombined gamma (mean of the {} fits): {:.1f} +- {:.1f} K m3/kg\n", r.fits.size(),
+                   r.gamma_combined_k_m3_kg, r.gamma_u_combined_k_m3_kg);
+        fmt::print("  u = sqrt(mean within-fit se^2 + sample variance between fits) = sqrt({:.1f}^2 + {:.1f}^2); "
+                   "fits range {:.1f}..{:.1f}\n",
+                   r.gamma_u_within_k_m3_kg, r.gamma_u_between_k_m3_kg, r.gamma_min_k_m3_kg, r.gamma_max_k_m3_kg);
+        fmt::print("Theory beta_C alpha/(beta_T D): {:.1f} (mean over the table's film states), 146 in Eq. 8; "
+                   "(combined - 146)/u = {:+.2f}\n",
+                   r.gamma_theory_table_mean_k_m3_kg, r.z_vs_paper);
+        fmt::print("beta_C/beta_T (N = 0 where the film is density-neutral, Eq. 2 B_net = 0): {:.1f} (table mean)\n",
+                   r.gamma_density_neutral_table_mean_k_m3_kg);
+    });
+}
+
 }  // namespace
 
 void add_physics_commands(CLI::App& app) {
@@ -311,6 +412,7 @@ void add_physics_commands(CLI::App& app) {
     add_h_c(*physics);
     add_stagnation(*physics);
     add_threshold(*physics);
+    add_cfd_gamma(*physics);
 }
 
 }  // namespace manikind::cli
