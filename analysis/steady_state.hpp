@@ -24,8 +24,8 @@ struct SteadyStateOptions {
 };
 
 // A zone's skin temperature over the window: the paper's range and, beside it, the drift
-// (least-squares slope). The range of n noisy samples grows with the noise (about 6-7 SD for
-// 361 samples) and says little about a slow trend; the slope separates the two.
+// (least-squares slope). The range of n noisy samples grows with the noise (about 5-7 SD of
+// Gaussian noise for 361 samples) and says little about a slow trend; the slope separates the two.
 inline constexpr double kDriftInterval_s = 1800.0;  // drifts are reported per 30 min (Text S3 window)
 
 struct ZoneSkinDrift {
@@ -36,7 +36,8 @@ struct ZoneSkinDrift {
     double drift_c_per_30min = 0.0;
     // Standard uncertainty of the slope, °C per 30 min: s_res / sqrt(sum (t - t̄)²), inflated by
     // sqrt((1 + r1) / (1 - r1)) when the residuals' lag-1 autocorrelation r1 is positive
-    // (AR(1) residuals, large-n approximation); r1 <= 0 is treated as white noise.
+    // (AR(1) residuals, large-n approximation; r1 capped at 0.999); r1 <= 0 is treated as
+    // white noise.
     double u_drift_c_per_30min = 0.0;
     double residual_sd_c = 0.0;              // scatter about the line
     double lag1_autocorrelation = 0.0;       // r1 of the residuals

@@ -2,6 +2,7 @@
 // 30 min. Synthetic traces (analysis/synthetic.hpp) with bounded uniform noise.
 #include <cmath>
 #include <limits>
+#include <random>
 #include <string>
 
 #include <catch2/catch.hpp>
@@ -197,13 +198,14 @@ TEST_CASE("Text S3: a 0.04 °C/30 min drift with 0.005 °C noise passes the 0.05
     for (const auto& z : r.zone_skin) {
         CHECK(z.samples == 361);
         CHECK(z.range_c <= 0.05);
-        // The slope recovers the trend: within 3 standard uncertainties of 0.04 °C/30 min...
-        CHECK(std::fabs(z.drift_c_per_30min - 0.04) <= 3.0 * z.u_drift_c_per_30min);
+        // The slope recovers the trend: within 4 standard uncertainties of 0.04 °C/30 min (35
+        // zones at 4 u: a false failure has a chance of about 0.2 %)...
+        CHECK(std::fabs(z.drift_c_per_30min - 0.04) <= 4.0 * z.u_drift_c_per_30min);
         // ...and is far from zero (white noise: u ≈ 0.0029 / sqrt(361 x 1800²/12) x 1800).
         CHECK(z.drift_c_per_30min / z.u_drift_c_per_30min > 10.0);
         CHECK(z.u_drift_c_per_30min < 0.002);
     }
-    CHECK(r.max_skin_drift_c_per_30min == Approx(0.04).margin(3.0 * r.u_max_skin_drift_c_per_30min));
+    CHECK(r.max_skin_drift_c_per_30min == Approx(0.04).margin(4.0 * r.u_max_skin_drift_c_per_30min));
     CHECK(r.worst_skin_drift_zone >= 1);
 }
 
@@ -250,4 +252,35 @@ TEST_CASE("autocorrelated residuals inflate the drift's standard uncertainty") {
     const double r1 = z.lag1_autocorrelation;
     CHECK(z.u_drift_c_per_30min == Approx(white_u * std::sqrt((1.0 + r1) / (1.0 - r1))));
     CHECK(z.u_drift_c_per_30min > 2.0 * white_u);
+}
+
+TEST_CASE("Text S3 range rule with Gaussian noise of SD 0.005 °C: the range is mostly noise, the slope is not") {
+    an::SyntheticTrialOptions o;
+    o.skin_start_offset_c = 0.0;
+    o.skin_noise_c = 0.0;  // Gaussian noise added below
+    const auto clean = an::make_synthetic_trial(map(), o);
+    std::mt19937 rng(7);
+    std::normal_distribution<double> noise_c(0.0, 0.005);
+    auto noisy = [&](double drift_c_per_30min) {
+        auto d = clean;
+        for (auto& zone : d.skin_temp_c)
+            for (std::size_t i = 0; i < zone.size(); ++i) zone[i] += drift_c_per_30min * d.t_s[i] / 1800.0 + noise_c(rng);
+        return an::detect_steady_state(d, map());
+    };
+    // Noise alone: 361 samples span about 5-7 SD per zone, the worst of 35 zones about
+    // 0.033-0.039 °C (docs/analysis.md): most of the 0.05 °C budget, with no trend at all.
+    const auto still = noisy(0.0);
+    CHECK(still.steady);
+    CHECK(still.max_skin_fluctuation_c > 0.028);
+    CHECK(still.max_skin_fluctuation_c < 0.045);
+    for (const auto& z : still.zone_skin) CHECK(z.range_c > 0.015);
+    // With Gaussian noise a 0.04 °C/30 min drift no longer passes the range rule, but the
+    // slope still recovers it.
+    const auto drifting = noisy(0.04);
+    CHECK_FALSE(drifting.steady);
+    CHECK(drifting.max_skin_fluctuation_c > 0.05);
+    for (const auto& z : drifting.zone_skin) {
+        CHECK(std::fabs(z.drift_c_per_30min - 0.04) <= 4.0 * z.u_drift_c_per_30min);  // 35 zones at 4 u
+        CHECK(z.drift_c_per_30min / z.u_drift_c_per_30min > 10.0);
+    }
 }
