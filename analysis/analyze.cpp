@@ -110,15 +110,20 @@ AreaResult area_result(const std::string& name, const std::vector<std::size_t>& 
     const bool correlated = o.type_b_correlation == TypeBCorrelation::correlated;
     const double u_b = correlated ? linear : std::sqrt(squares);
     const int n = static_cast<int>(per_trial.size());
-    a.q = combine(mean(per_trial), type_a_of_mean(per_trial), n, u_b, o.confidence);
+    // Correlated or not, every zone's u_B carries the same relative uncertainty, so the
+    // region's u_B has the same Type B dof (GUM G.4.2).
+    a.q = combine(mean(per_trial), type_a_of_mean(per_trial), n, u_b, o.coverage_options());
     const double u_c2 = a.q.u_c * a.q.u_c;
     auto share = [&](double part2) { return u_c2 > 0.0 ? part2 / u_c2 : 0.0; };
-    a.budget.push_back({fmt::format("Type A: replicate scatter (n = {})", n), 'A', a.q.u_a,
-                        n >= 2 ? n - 1.0 : kInfiniteDof, share(a.q.u_a * a.q.u_a), ""});
+    if (a.q.type_a_estimable)
+        a.budget.push_back({fmt::format("Type A: replicate scatter (n = {})", n), 'A', a.q.u_a, n - 1.0,
+                            share(a.q.u_a * a.q.u_a), ""});
+    else  // absent, not zero: the share stays 0 and u is NaN (null in JSON)
+        a.budget.push_back({fmt::format("Type A: not estimable (n = {})", n), 'A', a.q.u_a, kNaN, 0.0, ""});
     for (std::size_t g = 0; g < groups.size(); ++g) {
         // Correlated parts add linearly: u_B² = sum_g c_g u_B, so c_g u_B is group g's share.
         const double c_g = correlated ? group_linear[g] : std::sqrt(group_squares[g]);
-        a.budget.push_back({"Type B: heat-flux sensors, " + groups[g], 'B', c_g, kInfiniteDof,
+        a.budget.push_back({"Type B: heat-flux sensors, " + groups[g], 'B', c_g, a.q.nu_b,
                             share(correlated ? c_g * u_b : c_g * c_g), groups[g]});
     }
     return a;
@@ -137,7 +142,8 @@ ConditionEstimate condition(const std::string& channel, const std::vector<const 
     }
     const auto spec = campaign.instruments.count(channel) ? campaign.instruments.at(channel) : InstrumentSpec{};
     const double m = mean(values);
-    c.e = combine(m, type_a_of_mean(values), static_cast<int>(values.size()), spec.standard_uncertainty(m), o.confidence);
+    c.e = combine(m, type_a_of_mean(values), static_cast<int>(values.size()), spec.standard_uncertainty(m),
+                  o.coverage_options());
     return c;
 }
 
@@ -145,6 +151,14 @@ ConditionEstimate condition(const std::string& channel, const std::vector<const 
 
 const char* to_string(TypeBCorrelation c) {
     return c == TypeBCorrelation::correlated ? "correlated" : "uncorrelated";
+}
+
+CoverageOptions AnalysisOptions::coverage_options() const {
+    CoverageOptions c;
+    c.coverage = coverage;
+    c.type_b_dof = type_b_dof(type_b_relative_uncertainty);  // GUM G.4.2
+    c.confidence = confidence;
+    return c;
 }
 
 CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions& o) {
@@ -187,8 +201,12 @@ CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions&
             out.unanalysed_cases.push_back(std::move(c));
             continue;
         }
-        if (used.size() == 1)
-            c.warnings.push_back("one usable replicate: Type A cannot be estimated, U covers Type B only");
+        c.type_a_estimable = used.size() >= 2;
+        if (!c.type_a_estimable) {
+            c.warnings.push_back("one usable replicate: Type A is not estimable (u_A absent, not 0), U covers Type B only");
+            if (o.coverage == Coverage::replicates_t)
+                c.warnings.push_back("the paper's k = t(n - 1) needs at least 2 replicates: k from Type B alone");
+        }
         if (wettedness.size() > 1) c.warnings.push_back("replicates disagree on wettedness");
         if (setpoints.size() > 1) c.warnings.push_back("replicates disagree on the skin setpoint");
         if (!wettedness.empty()) c.wettedness = *wettedness.begin();
@@ -210,7 +228,8 @@ CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions&
             // Type B of a zone mean: the sensor's limit at the mean reading. Neither time
             // averaging nor replication shrinks it: a calibration error repeats in every
             // sample and every replicate (fully correlated), unlike noise.
-            zr.q = combine(m, type_a_of_mean(values), c.n_replicates, flux_spec.standard_uncertainty(m), o.confidence);
+            zr.q = combine(m, type_a_of_mean(values), c.n_replicates, flux_spec.standard_uncertainty(m),
+                           o.coverage_options());
             c.zones.push_back(std::move(zr));
         }
         std::vector<std::size_t> all(map.size());
@@ -241,14 +260,16 @@ using nlohmann::json;
 json number_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 json estimate_json(const Estimate& e) {
-    return {{"q_w_m2", e.value}, {"u_a", e.u_a}, {"u_b", e.u_b}, {"u_c", e.u_c}, {"k", e.k}, {"U", e.U},
-            {"nu_eff", number_or_null(e.nu_eff)}, {"ci_low_w_m2", e.value - e.U}, {"ci_high_w_m2", e.value + e.U}};
+    return {{"q_w_m2", e.value}, {"u_a", number_or_null(e.u_a)}, {"type_a_estimable", e.type_a_estimable},
+            {"u_b", e.u_b}, {"nu_b", number_or_null(e.nu_b)}, {"u_c", e.u_c}, {"k", e.k}, {"U", e.U},
+            {"nu_eff", number_or_null(e.nu_eff)}, {"k_dof", number_or_null(e.k_dof)},
+            {"ci_low_w_m2", e.value - e.U}, {"ci_high_w_m2", e.value + e.U}};
 }
 
 json budget_json(const std::vector<BudgetLine>& budget) {
     json out = json::array();
     for (const auto& b : budget)
-        out.push_back({{"source", b.source}, {"type", std::string(1, b.type)}, {"u_w_m2", b.u_w_m2},
+        out.push_back({{"source", b.source}, {"type", std::string(1, b.type)}, {"u_w_m2", number_or_null(b.u_w_m2)},
                        {"dof", number_or_null(b.dof)}, {"share", b.share}, {"part", b.part}});
     return out;
 }
@@ -259,6 +280,20 @@ json area_json(const AreaResult& a, bool region) {
     j["area_m2"] = a.area_m2;
     j["budget"] = budget_json(a.budget);
     return j;
+}
+
+json skin_drift_json(const SteadyStateResult& s) {
+    json zones = json::array();
+    for (const auto& z : s.zone_skin)
+        zones.push_back({{"zone", z.zone}, {"samples", z.samples}, {"range_c", number_or_null(z.range_c)},
+                         {"drift_c_per_30min", number_or_null(z.drift_c_per_30min)},
+                         {"u_drift_c_per_30min", number_or_null(z.u_drift_c_per_30min)},
+                         {"residual_sd_c", number_or_null(z.residual_sd_c)},
+                         {"lag1_autocorrelation", number_or_null(z.lag1_autocorrelation)}});
+    return {{"max_drift_c_per_30min", s.max_skin_drift_c_per_30min},
+            {"u_max_drift_c_per_30min", number_or_null(s.u_max_skin_drift_c_per_30min)},
+            {"worst_zone", s.worst_skin_drift_zone},
+            {"zones", zones}};
 }
 
 json trial_json(const TrialResult& t) {
@@ -276,6 +311,7 @@ json trial_json(const TrialResult& t) {
             {"settled_since_s", number_or_null(s.settled_since_s)},
             {"max_flux_drift_w_m2", s.max_flux_drift_w_m2},
             {"max_flux_sd_w_m2", s.max_flux_sd_w_m2},
+            {"skin_drift", skin_drift_json(s)},
             {"whole_body_q_w_m2", number_or_null(t.whole_body_q_w_m2)}};
 }
 
@@ -284,11 +320,13 @@ json case_json(const CaseResult& c) {
     json conditions_u = json::object();
     for (const auto& ce : c.conditions) {
         conditions[ce.channel] = number_or_null(ce.e.value);
-        conditions_u[ce.channel] = {{"u_a", ce.e.u_a}, {"u_b", ce.e.u_b}, {"u_c", ce.e.u_c}, {"k", ce.e.k}, {"U", ce.e.U}};
+        conditions_u[ce.channel] = {{"u_a", number_or_null(ce.e.u_a)}, {"type_a_estimable", ce.e.type_a_estimable},
+                                    {"u_b", ce.e.u_b}, {"u_c", ce.e.u_c}, {"k", ce.e.k}, {"U", ce.e.U}};
     }
     if (c.wettedness) conditions["wettedness"] = *c.wettedness;
     if (c.skin_setpoint_c) conditions["skin_setpoint_c"] = *c.skin_setpoint_c;
-    json j{{"case", c.case_id}, {"n_replicates", c.n_replicates}, {"conditions", conditions},
+    json j{{"case", c.case_id}, {"n_replicates", c.n_replicates}, {"type_a_estimable", c.type_a_estimable},
+           {"conditions", conditions},
            {"conditions_uncertainty", conditions_u}};
     if (c.n_replicates > 0) {
         j["whole_body"] = area_json(c.whole_body, false);
@@ -315,6 +353,10 @@ json case_json(const CaseResult& c) {
 }
 
 std::string fmt_nu(double nu) { return std::isfinite(nu) ? fmt::format("{:.1f}", nu) : std::string("inf"); }
+// u_A of one replicate is absent, not 0.
+std::string fmt_u(double u, int width, int precision) {
+    return std::isfinite(u) ? fmt::format("{:>{}.{}f}", u, width, precision) : fmt::format("{:>{}}", "n/a", width);
+}
 
 }  // namespace
 
@@ -339,7 +381,10 @@ json to_json(const CampaignResult& r) {
               {"max_flux_sd_w_m2", s.max_flux_sd_w_m2},
               {"include_unsteady", r.options.include_unsteady},
               {"type_b_correlation", to_string(r.options.type_b_correlation)},
-              {"confidence", r.options.confidence}}},
+              {"confidence", r.options.confidence},
+              {"coverage", to_string(r.options.coverage)},
+              {"type_b_relative_uncertainty", r.options.type_b_relative_uncertainty},
+              {"type_b_dof", number_or_null(type_b_dof(r.options.type_b_relative_uncertainty))}}},
             {"cases", cases},
             {"unanalysed_cases", unanalysed},
             {"excluded_trials", excluded},
@@ -353,9 +398,14 @@ std::string format_table(const CampaignResult& r) {
                                   r.campaign, r.cases.size(), r.options.steady.max_skin_fluctuation_c,
                                   r.options.steady.window_s / 60.0, r.options.confidence * 100.0,
                                   to_string(r.options.type_b_correlation));
+    const bool paper_k = r.options.coverage == Coverage::replicates_t;
+    const double nu_b = type_b_dof(r.options.type_b_relative_uncertainty);
+    out += paper_k ? "k = t(n - 1) from the replicates as in Text S3 (--coverage paper)"
+                   : "k = t(ν_eff), Welch-Satterthwaite (GUM G.4; the paper uses t(n - 1), --coverage paper)";
+    out += std::isfinite(nu_b) ? fmt::format("; Type B dof {:.1f} (GUM G.4.2)\n", nu_b) : std::string("\n");
     auto row = [](const std::string& name, const Estimate& e) {
-        return fmt::format("  {:<14} {:>9.2f} {:>7.2f} {:>7.2f} {:>7.2f} {:>6} {:>6.3f} {:>7.2f}\n", name, e.value, e.u_a,
-                           e.u_b, e.u_c, fmt_nu(e.nu_eff), e.k, e.U);
+        return fmt::format("  {:<14} {:>9.2f} {} {:>7.2f} {:>7.2f} {:>6} {:>6.3f} {:>7.2f}\n", name, e.value,
+                           fmt_u(e.u_a, 7, 2), e.u_b, e.u_c, fmt_nu(e.k_dof), e.k, e.U);
     };
     for (const auto& c : r.cases) {
         out += fmt::format("\nCase {} (n = {})", c.case_id, c.n_replicates);
@@ -368,19 +418,22 @@ std::string format_table(const CampaignResult& r) {
                                t.id, t.included ? (t.steady.steady ? "steady" : "INCLUDED") : "EXCLUDED",
                                t.steady.window_start_s, t.steady.window_end_s, t.steady.max_skin_fluctuation_c,
                                t.steady.worst_zone);
+            if (t.steady.worst_skin_drift_zone != 0)  // the trend the range rule cannot see
+                out += fmt::format("  drift {:+.3f} ± {:.3f} °C/30 min (zone {:02})", t.steady.max_skin_drift_c_per_30min,
+                                   t.steady.u_max_skin_drift_c_per_30min, t.steady.worst_skin_drift_zone);
             if (!t.included) out += "  " + t.exclusion_reason;
             else if (!t.steady.steady) out += "  not steady: " + t.steady.reason;
             out += "\n";
         }
         out += fmt::format("  {:<14} {:>9} {:>7} {:>7} {:>7} {:>6} {:>6} {:>7}\n", "Q, W/m²", "mean", "u_A", "u_B", "u_C",
-                           "ν_eff", "k", "U");
+                           paper_k ? "n-1" : "ν_eff", "k", "U");
         out += row("whole body", c.whole_body.q);
         for (const auto& a : c.regions) out += row(a.name, a.q);
         out += "  Budget, whole body (contribution to u_C and share of u_C²):\n";
         const auto& wb = c.whole_body.q;
         for (const auto& b : c.whole_body.budget) {
-            out += fmt::format("    {:<48} {:>7.3f} W/m²  {:>5.1f} %\n", b.type == 'A' ? b.source : "  of which " + b.part,
-                               b.u_w_m2, 100.0 * b.share);
+            out += fmt::format("    {:<48} {} W/m²  {:>5.1f} %\n", b.type == 'A' ? b.source : "  of which " + b.part,
+                               fmt_u(b.u_w_m2, 7, 3), 100.0 * b.share);
             if (b.type == 'A')  // the Type B subtotal, then its parts
                 out += fmt::format("    {:<48} {:>7.3f} W/m²  {:>5.1f} %\n",
                                    fmt::format("Type B: all heat-flux sensors ({})", to_string(r.options.type_b_correlation)),

@@ -30,6 +30,13 @@ struct AnalysisOptions {
     bool include_unsteady = false;   // analyse trials that never settled (flagged either way)
     TypeBCorrelation type_b_correlation = TypeBCorrelation::correlated;
     double confidence = 0.95;        // the paper's 95 % (Eq. S7)
+    // k of U = k u_C: GUM Welch-Satterthwaite (default) or the paper's t_{n-1} (Text S3).
+    Coverage coverage = Coverage::welch_satterthwaite;
+    // Relative uncertainty Δu/u of every Type B standard uncertainty; its dof is
+    // 0.5 (Δu/u)^-2 (GUM G.4.2). 0 = limits exactly known, infinite dof (default).
+    double type_b_relative_uncertainty = 0.0;
+
+    CoverageOptions coverage_options() const;
 };
 
 // One line of an uncertainty budget. Shares add up to 1 over a budget: the Type A line
@@ -85,6 +92,7 @@ struct ConditionEstimate {
 struct CaseResult {
     int case_id = 0;
     int n_replicates = 0;            // trials used
+    bool type_a_estimable = false;   // n_replicates >= 2; otherwise every u_A is NaN (absent)
     std::vector<ConditionEstimate> conditions;
     std::optional<double> wettedness;
     std::optional<double> skin_setpoint_c;

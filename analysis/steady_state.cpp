@@ -37,35 +37,69 @@ WindowStats window_stats(const std::vector<double>& t_s, const std::vector<doubl
     return s;
 }
 
-// Least-squares line through the finite samples: drift = |slope| x window, and the residual
-// standard deviation about the line.
+// Least-squares line through the finite samples from index `first` on.
+struct LineFit {
+    double n = 0.0;
+    double slope_per_s = kNaN;
+    double residual_sd = 0.0;
+    double u_slope_per_s = kNaN;        // white-noise standard uncertainty, s_res / sqrt(Stt)
+    double lag1_autocorrelation = 0.0;  // of the residuals, consecutive finite samples
+};
+
+LineFit fit_line(const std::vector<double>& t_s, const std::vector<double>& v, std::size_t first) {
+    LineFit f;
+    double mean_t = 0.0, mean_v = 0.0;
+    for (std::size_t i = first; i < t_s.size(); ++i) {
+        if (!std::isfinite(v[i])) continue;
+        f.n += 1.0;
+        mean_t += (t_s[i] - mean_t) / f.n;  // running means: exact enough and no overflow
+        mean_v += (v[i] - mean_v) / f.n;
+    }
+    if (f.n < 3.0) return f;
+    double stt = 0.0, stv = 0.0;
+    for (std::size_t i = first; i < t_s.size(); ++i) {
+        if (!std::isfinite(v[i])) continue;
+        stt += (t_s[i] - mean_t) * (t_s[i] - mean_t);
+        stv += (t_s[i] - mean_t) * (v[i] - mean_v);
+    }
+    f.slope_per_s = stt > 0.0 ? stv / stt : 0.0;
+    double ss = 0.0, lag1 = 0.0, previous = kNaN;
+    for (std::size_t i = first; i < t_s.size(); ++i) {
+        if (!std::isfinite(v[i])) continue;
+        const double r = v[i] - (mean_v + f.slope_per_s * (t_s[i] - mean_t));
+        ss += r * r;
+        if (!std::isnan(previous)) lag1 += r * previous;
+        previous = r;
+    }
+    f.residual_sd = std::sqrt(ss / (f.n - 2.0));
+    f.u_slope_per_s = stt > 0.0 ? f.residual_sd / std::sqrt(stt) : kNaN;
+    f.lag1_autocorrelation = ss > 0.0 ? lag1 / ss : 0.0;
+    return f;
+}
+
+// Drift = |slope| x window, and the residual standard deviation about the line.
 void flux_line(const std::vector<double>& t_s, const std::vector<double>& q, std::size_t first, double window_s,
                double& drift_w_m2, double& sd_w_m2) {
-    double n = 0.0, mean_t = 0.0, mean_q = 0.0;
-    for (std::size_t i = first; i < t_s.size(); ++i) {
-        if (!std::isfinite(q[i])) continue;
-        n += 1.0;
-        mean_t += (t_s[i] - mean_t) / n;  // running means: exact enough and no overflow
-        mean_q += (q[i] - mean_q) / n;
-    }
-    drift_w_m2 = 0.0;
-    sd_w_m2 = 0.0;
-    if (n < 3.0) return;
-    double stt = 0.0, stq = 0.0;
-    for (std::size_t i = first; i < t_s.size(); ++i) {
-        if (!std::isfinite(q[i])) continue;
-        stt += (t_s[i] - mean_t) * (t_s[i] - mean_t);
-        stq += (t_s[i] - mean_t) * (q[i] - mean_q);
-    }
-    const double slope = stt > 0.0 ? stq / stt : 0.0;
-    double ss = 0.0;
-    for (std::size_t i = first; i < t_s.size(); ++i) {
-        if (!std::isfinite(q[i])) continue;
-        const double r = q[i] - (mean_q + slope * (t_s[i] - mean_t));
-        ss += r * r;
-    }
-    drift_w_m2 = std::fabs(slope) * window_s;
-    sd_w_m2 = std::sqrt(ss / (n - 2.0));
+    const LineFit f = fit_line(t_s, q, first);
+    drift_w_m2 = f.n < 3.0 ? 0.0 : std::fabs(f.slope_per_s) * window_s;
+    sd_w_m2 = f.n < 3.0 ? 0.0 : f.residual_sd;
+}
+
+// A zone's skin temperature over the window: range (Text S3) and least-squares drift.
+ZoneSkinDrift skin_drift(int zone, const std::vector<double>& t_s, const std::vector<double>& skin_c,
+                         std::size_t first, const WindowStats& stats) {
+    ZoneSkinDrift d;
+    d.zone = zone;
+    d.samples = stats.count;
+    d.range_c = stats.count ? stats.max - stats.min : kNaN;
+    const LineFit f = fit_line(t_s, skin_c, first);
+    d.drift_c_per_30min = f.slope_per_s * kDriftInterval_s;
+    d.residual_sd_c = f.residual_sd;
+    d.lag1_autocorrelation = f.lag1_autocorrelation;
+    // AR(1) residuals: var(slope) grows by about (1 + r1)/(1 - r1) (effective sample size).
+    const double r1 = std::clamp(f.lag1_autocorrelation, 0.0, 0.999);
+    d.u_drift_c_per_30min = f.u_slope_per_s * kDriftInterval_s * std::sqrt((1.0 + r1) / (1.0 - r1));
+    return d;
 }
 
 // Earliest time from which this zone stays within `tolerance` to the end (scanning back),
@@ -123,6 +157,14 @@ SteadyStateResult detect_steady_state(const TrialData& data, const ZoneMap& map,
         const int zone = map.zones[z].zone;
         const WindowStats skin = window_stats(data.t_s, data.skin_temp_c[z], first, r.window_start_s, t_last);
         const WindowStats flux = window_stats(data.t_s, data.heat_flux_w_m2[z], first, r.window_start_s, t_last);
+        r.zone_skin.push_back(skin_drift(zone, data.t_s, data.skin_temp_c[z], first, skin));
+        const auto& sd_zone = r.zone_skin.back();
+        if (std::isfinite(sd_zone.drift_c_per_30min) &&
+            (r.worst_skin_drift_zone == 0 || std::fabs(sd_zone.drift_c_per_30min) > std::fabs(r.max_skin_drift_c_per_30min))) {
+            r.max_skin_drift_c_per_30min = sd_zone.drift_c_per_30min;
+            r.u_max_skin_drift_c_per_30min = sd_zone.u_drift_c_per_30min;
+            r.worst_skin_drift_zone = zone;
+        }
         if (skin.count == 0 || flux.count == 0) {
             if (coverage_problem.empty())
                 coverage_problem = fmt::format("zone {:02} ({}) has no {} sample in the window", zone, map.zones[z].name,

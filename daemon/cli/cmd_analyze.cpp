@@ -1,6 +1,7 @@
 // `manikin analyze <campaign>`: heat fluxes with 95 % expanded uncertainty (Eq. S7) from a
 // recorded campaign (FORMATS.md, manikin-recording/1): steady-state windows, replicate means,
 // Type A + Type B, whole body and regions. Table by default, one JSON document with --json.
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <memory>
@@ -42,6 +43,8 @@ struct AnalyzeOptions {
     bool include_unsteady = false;
     std::string type_b = "correlated";
     double confidence = 0.95;
+    std::string coverage = "gum";
+    double type_b_relative_uncertainty = 0.0;
 };
 
 an::InstrumentSpec to_analysis(const config::InstrumentSpec& s, const std::string& channel) {
@@ -70,6 +73,10 @@ void run(const AnalyzeOptions& o) {
     a.include_unsteady = o.include_unsteady;
     a.type_b_correlation = o.type_b == "uncorrelated" ? an::TypeBCorrelation::uncorrelated : an::TypeBCorrelation::correlated;
     a.confidence = o.confidence;
+    a.coverage = o.coverage == "paper" ? an::Coverage::replicates_t : an::Coverage::welch_satterthwaite;
+    a.type_b_relative_uncertainty = o.type_b_relative_uncertainty;
+    if (!(a.type_b_relative_uncertainty >= 0.0) || !std::isfinite(a.type_b_relative_uncertainty))
+        throw UserError("--type-b-relative-uncertainty must be >= 0 (0 = Type B limits exactly known, infinite dof)");
     if (!(a.steady.window_s > 0.0)) throw UserError("--window-min must be positive");
     if (!(a.steady.max_skin_fluctuation_c > 0.0)) throw UserError("--max-skin-fluctuation must be positive");
     if (!(a.confidence > 0.0 && a.confidence < 1.0)) throw UserError("--confidence must lie between 0 and 1 (0.95 = 95 %)");
@@ -143,6 +150,15 @@ void add_analyze_command(CLI::App& app) {
         ->check(CLI::IsMember({"correlated", "uncorrelated"}))
         ->capture_default_str();
     cmd->add_option("--confidence", o->confidence, "Coverage probability of U (k from Student's t)")->capture_default_str();
+    cmd->add_option("--coverage", o->coverage,
+                    "Coverage factor k: gum = t(nu_eff) by Welch-Satterthwaite (GUM G.4, default); paper = t(n - 1) "
+                    "from the replicates as in Text S3 (4.303 for 3 replicates)")
+        ->check(CLI::IsMember({"gum", "paper"}))
+        ->capture_default_str();
+    cmd->add_option("--type-b-relative-uncertainty", o->type_b_relative_uncertainty,
+                    "Relative uncertainty of every Type B u (Δu/u); Type B dof = 0.5 (Δu/u)^-2 (GUM G.4.2), e.g. "
+                    "0.25 -> 8. 0 = infinite dof")
+        ->capture_default_str();
     cmd->footer(
         "Method (docs/analysis.md):\n"
         "  steady    a trial is steady when every zone's skin temperature stays within 0.05 °C over its final\n"
@@ -150,12 +166,17 @@ void add_analyze_command(CLI::App& app) {
         "  per trial zone heat fluxes averaged over the window; whole body and regions area-weighted.\n"
         "  per case  Q = mean of replicates; u_A = s/sqrt(n); u_B from instrument specs (a + b|Q|)/sqrt(3);\n"
         "            u_C = sqrt(u_A² + u_B²); nu_eff by Welch-Satterthwaite; k = t(0.975, nu_eff) (4.303 for\n"
-        "            3 replicates when Type A dominates); U = k u_C (Eq. S7).\n"
+        "            3 replicates when Type A dominates, about 2 when Type B dominates); U = k u_C (Eq. S7).\n"
+        "            --coverage paper takes k = t(0.975, n - 1) as the paper does (4.303 for 3 replicates).\n"
+        "            One replicate: u_A is not estimable (n/a, null in JSON) and U covers Type B only.\n"
+        "  drift     per trial and zone, the least-squares slope of skin temperature over the window\n"
+        "            (°C per 30 min ± its standard uncertainty), reported beside the range; never gated.\n"
         "Examples:\n"
         "  manikin analyze recordings/validation-2026\n"
         "  manikin analyze recordings/validation-2026 --json > results.json\n"
         "  manikin analyze recordings/validation-2026 --csv results.csv --plot results.svg\n"
         "  manikin analyze recordings/validation-2026 --window-min 20 --require-flux-stability\n"
+        "  manikin analyze recordings/validation-2026 --coverage paper --type-b-relative-uncertainty 0.25\n"
         "Exit status 2 on bad input; the message names file:line:column and the field.");
     cmd->callback([o] { run(*o); });
 }

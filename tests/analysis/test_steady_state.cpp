@@ -2,6 +2,7 @@
 // 30 min. Synthetic traces (analysis/synthetic.hpp) with bounded uniform noise.
 #include <cmath>
 #include <limits>
+#include <random>
 #include <string>
 
 #include <catch2/catch.hpp>
@@ -179,4 +180,107 @@ TEST_CASE("flux stability: a drifting flux fails only when required") {
     const auto noisy = an::detect_steady_state(d, map(), o);
     CHECK_FALSE(noisy.steady);
     CHECK(noisy.reason.find("scatters") != std::string::npos);
+}
+
+TEST_CASE("Text S3: a 0.04 °C/30 min drift with 0.005 °C noise passes the 0.05 °C range rule, the slope finds it") {
+    an::SyntheticTrialOptions o;
+    o.skin_start_offset_c = 0.0;  // settled from the start: only drift and noise
+    o.skin_noise_c = 0.005;       // uniform in ±0.005 °C
+    auto d = an::make_synthetic_trial(map(), o);
+    const double drift_c_per_s = 0.04 / 1800.0;
+    for (auto& zone : d.skin_temp_c)
+        for (std::size_t i = 0; i < zone.size(); ++i) zone[i] += drift_c_per_s * d.t_s[i];
+    const auto r = an::detect_steady_state(d, map());
+    // The paper's rule sees nothing wrong: 0.04 °C of trend + at most 0.01 °C of noise.
+    CHECK(r.steady);
+    CHECK(r.max_skin_fluctuation_c <= 0.05);
+    REQUIRE(r.zone_skin.size() == map().size());
+    for (const auto& z : r.zone_skin) {
+        CHECK(z.samples == 361);
+        CHECK(z.range_c <= 0.05);
+        // The slope recovers the trend: within 4 standard uncertainties of 0.04 °C/30 min (35
+        // zones at 4 u: a false failure has a chance of about 0.2 %)...
+        CHECK(std::fabs(z.drift_c_per_30min - 0.04) <= 4.0 * z.u_drift_c_per_30min);
+        // ...and is far from zero (white noise: u ≈ 0.0029 / sqrt(361 x 1800²/12) x 1800).
+        CHECK(z.drift_c_per_30min / z.u_drift_c_per_30min > 10.0);
+        CHECK(z.u_drift_c_per_30min < 0.002);
+    }
+    CHECK(r.max_skin_drift_c_per_30min == Approx(0.04).margin(4.0 * r.u_max_skin_drift_c_per_30min));
+    CHECK(r.worst_skin_drift_zone >= 1);
+}
+
+TEST_CASE("without a drift the slope is consistent with zero, and the range is noise alone") {
+    an::SyntheticTrialOptions o;
+    o.skin_start_offset_c = 0.0;
+    o.skin_noise_c = 0.005;
+    const auto r = an::detect_steady_state(an::make_synthetic_trial(map(), o), map());
+    CHECK(r.steady);
+    int beyond_3u = 0;
+    for (const auto& z : r.zone_skin) {
+        CHECK(z.range_c <= 0.01);
+        if (std::fabs(z.drift_c_per_30min) > 3.0 * z.u_drift_c_per_30min) ++beyond_3u;
+    }
+    CHECK(beyond_3u <= 1);  // 35 zones at 3 u: about 0.1 expected by chance
+}
+
+TEST_CASE("autocorrelated residuals inflate the drift's standard uncertainty") {
+    // Slowly wandering skin temperature (an AR(1) trace, phi = 0.9):
+    // positive lag-1 autocorrelation, so the white-noise formula would understate u.
+    an::SyntheticTrialOptions o;
+    o.skin_start_offset_c = 0.0;
+    o.skin_noise_c = 0.005;
+    auto d = an::make_synthetic_trial(map(), o);
+    for (auto& zone : d.skin_temp_c) {
+        double ar = 0.0;
+        for (std::size_t i = 0; i < zone.size(); ++i) {
+            ar = 0.9 * ar + (zone[i] - 35.0);  // AR(1) filter of the generator's white noise
+            zone[i] = 35.0 + 0.3 * ar;
+        }
+    }
+    const auto r = an::detect_steady_state(d, map());
+    const auto& z = r.zone_skin.at(0);
+    CHECK(z.lag1_autocorrelation > 0.7);
+    // u = white-noise u x sqrt((1 + r1)/(1 - r1)); the white-noise u is s_res / sqrt(Stt).
+    double mean_t = 0.0, stt = 0.0;
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < d.t_s.size(); ++i)
+        if (d.t_s[i] >= r.window_start_s - 1e-6) { mean_t += d.t_s[i]; ++n; }
+    mean_t /= static_cast<double>(n);
+    for (std::size_t i = 0; i < d.t_s.size(); ++i)
+        if (d.t_s[i] >= r.window_start_s - 1e-6) stt += (d.t_s[i] - mean_t) * (d.t_s[i] - mean_t);
+    const double white_u = z.residual_sd_c / std::sqrt(stt) * 1800.0;
+    const double r1 = z.lag1_autocorrelation;
+    CHECK(z.u_drift_c_per_30min == Approx(white_u * std::sqrt((1.0 + r1) / (1.0 - r1))));
+    CHECK(z.u_drift_c_per_30min > 2.0 * white_u);
+}
+
+TEST_CASE("Text S3 range rule with Gaussian noise of SD 0.005 °C: the range is mostly noise, the slope is not") {
+    an::SyntheticTrialOptions o;
+    o.skin_start_offset_c = 0.0;
+    o.skin_noise_c = 0.0;  // Gaussian noise added below
+    const auto clean = an::make_synthetic_trial(map(), o);
+    std::mt19937 rng(7);
+    std::normal_distribution<double> noise_c(0.0, 0.005);
+    auto noisy = [&](double drift_c_per_30min) {
+        auto d = clean;
+        for (auto& zone : d.skin_temp_c)
+            for (std::size_t i = 0; i < zone.size(); ++i) zone[i] += drift_c_per_30min * d.t_s[i] / 1800.0 + noise_c(rng);
+        return an::detect_steady_state(d, map());
+    };
+    // Noise alone: 361 samples span about 5-7 SD per zone, the worst of 35 zones about
+    // 0.033-0.039 °C (docs/analysis.md): most of the 0.05 °C budget, with no trend at all.
+    const auto still = noisy(0.0);
+    CHECK(still.steady);
+    CHECK(still.max_skin_fluctuation_c > 0.028);
+    CHECK(still.max_skin_fluctuation_c < 0.045);
+    for (const auto& z : still.zone_skin) CHECK(z.range_c > 0.015);
+    // With Gaussian noise a 0.04 °C/30 min drift no longer passes the range rule, but the
+    // slope still recovers it.
+    const auto drifting = noisy(0.04);
+    CHECK_FALSE(drifting.steady);
+    CHECK(drifting.max_skin_fluctuation_c > 0.05);
+    for (const auto& z : drifting.zone_skin) {
+        CHECK(std::fabs(z.drift_c_per_30min - 0.04) <= 4.0 * z.u_drift_c_per_30min);  // 35 zones at 4 u
+        CHECK(z.drift_c_per_30min / z.u_drift_c_per_30min > 10.0);
+    }
 }
