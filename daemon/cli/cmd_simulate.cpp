@@ -86,6 +86,8 @@ void add_simulate_command(CLI::App& app) {
         std::uint64_t seed = 1;
         double unsteady = 0.0;
         bool json = false;
+        sim::ReplicateScatter scatter;
+        bool no_scatter = false;
     };
     auto o = std::make_shared<Opts>();
     auto* cmd = app.add_subcommand("simulate-campaign",
@@ -100,6 +102,35 @@ void add_simulate_command(CLI::App& app) {
     cmd->add_option("--replicates", o->replicates, "Trials per case")->capture_default_str();
     cmd->add_option("--seed", o->seed, "Random seed (same seed, same recordings)")->capture_default_str();
     cmd->add_option("--unsteady-probability", o->unsteady, "Chance that a trial never settles (0-1)")->capture_default_str();
+    // Replicate-to-replicate scatter, drawn once per trial (1 sigma each).
+    sim::ReplicateScatter& sc = o->scatter;
+    const std::vector<CLI::Option*> spreads = {
+        cmd->add_option("--replicate-flux-rel-sd", sc.replicate_flux_rel_sd,
+                        "Relative zone-flux scatter between replicates: flux x (1 + e), e ~ N(0, this) per trial and zone")
+            ->capture_default_str(),
+        cmd->add_option("--replicate-flux-sd", sc.replicate_flux_sd_w_m2,
+                        "Absolute zone-flux offset between replicates, W/m2, per trial and zone")
+            ->capture_default_str(),
+        cmd->add_option("--replicate-air-sd", sc.replicate_air_sd_c,
+                        "Enclosure air temperature actually reached minus the case's nominal, deg C, per trial (the physics follows it)")
+            ->capture_default_str(),
+        cmd->add_option("--replicate-rh-sd", sc.replicate_rh_sd_pct,
+                        "Enclosure RH actually reached minus the case's nominal, % RH, per trial (the physics follows it)")
+            ->capture_default_str(),
+        cmd->add_option("--replicate-wall-sd", sc.replicate_wall_sd_c,
+                        "Wall temperature off its usual offset below the air, deg C, per trial")
+            ->capture_default_str(),
+        cmd->add_option("--probe-air-sd", sc.probe_air_sd_c,
+                        "Recorded minus actual air temperature, deg C, constant within a trial")
+            ->capture_default_str(),
+        cmd->add_option("--probe-rh-sd", sc.probe_rh_sd_pct, "Recorded minus actual RH, % RH, constant within a trial")
+            ->capture_default_str(),
+        cmd->add_option("--probe-wall-sd", sc.probe_wall_sd_c,
+                        "Recorded minus actual wall temperature, deg C, constant within a trial")
+            ->capture_default_str()};
+    auto* no_scatter = cmd->add_flag("--no-scatter", o->no_scatter,
+                                     "No replicate scatter at all (every option above 0): replicates differ by sensor noise only");
+    for (auto* spread : spreads) no_scatter->excludes(spread);
     cmd->add_flag("--json", o->json, "Print a JSON summary");
     cmd->footer("Example: manikin simulate-campaign --effect humidity_buoyancy:gamma=146 --out /tmp/c146\n"
                 "then:    manikin analyze /tmp/c146 ; manikin reconcile /tmp/c146");
@@ -108,6 +139,7 @@ void add_simulate_command(CLI::App& app) {
         g.replicates = o->replicates;
         g.seed = o->seed;
         g.unsteady_probability = o->unsteady;
+        g.scatter = o->no_scatter ? sim::ReplicateScatter::none() : o->scatter;
         g.world.name = "world";
         try {
             for (const auto& e : o->effects) g.world.terms.push_back(sim::parse_effect(e));
@@ -127,7 +159,15 @@ void add_simulate_command(CLI::App& app) {
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         if (o->json) {
             std::printf("%s\n", nlohmann::json{{"out", o->out}, {"trials", c.trials.size()}, {"cases", cases.size()},
-                                               {"effects", o->effects}, {"seed", o->seed}, {"seconds", seconds}}
+                                               {"effects", o->effects}, {"seed", o->seed}, {"seconds", seconds},
+                                               {"scatter", {{"replicate_flux_rel_sd", g.scatter.replicate_flux_rel_sd},
+                                                            {"replicate_flux_sd_w_m2", g.scatter.replicate_flux_sd_w_m2},
+                                                            {"replicate_air_sd_c", g.scatter.replicate_air_sd_c},
+                                                            {"replicate_rh_sd_pct", g.scatter.replicate_rh_sd_pct},
+                                                            {"replicate_wall_sd_c", g.scatter.replicate_wall_sd_c},
+                                                            {"probe_air_sd_c", g.scatter.probe_air_sd_c},
+                                                            {"probe_rh_sd_pct", g.scatter.probe_rh_sd_pct},
+                                                            {"probe_wall_sd_c", g.scatter.probe_wall_sd_c}}}}
                                     .dump(2)
                                     .c_str());
         } else {

@@ -27,6 +27,7 @@ sim::SimLabOptions simulated_lab_options(const config::Config& config) {
         }
     }
     o.world.seed = config.simulation.seed;
+    o.world.scatter = config.simulation.scatter;
     o.manikin_period_s = config.simulation.manikin_period_s;
     o.world.enclosure_table = sim::table_s3_cases();
     o.world.watchdog_s = config.safety.watchdog_timeout_s;

@@ -204,6 +204,15 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*s, "simulation", "runtime_dir", c.simulation.runtime_dir);
         r.number(*s, "simulation", "step_s", c.simulation.step_s, 0.01, 60.0, "s");
         r.number(*s, "simulation", "manikin_period_s", c.simulation.manikin_period_s, 0.1, 60.0, "s");
+        sim::ReplicateScatter& sc = c.simulation.scatter;
+        r.number(*s, "simulation", "replicate_flux_rel_sd", sc.replicate_flux_rel_sd, 0.0, 0.2, "fraction");
+        r.number(*s, "simulation", "replicate_flux_sd_w_m2", sc.replicate_flux_sd_w_m2, 0.0, 50.0, "W/m²");
+        r.number(*s, "simulation", "replicate_air_sd_c", sc.replicate_air_sd_c, 0.0, 5.0, "°C");
+        r.number(*s, "simulation", "replicate_rh_sd_pct", sc.replicate_rh_sd_pct, 0.0, 20.0, "%");
+        r.number(*s, "simulation", "replicate_wall_sd_c", sc.replicate_wall_sd_c, 0.0, 5.0, "°C");
+        r.number(*s, "simulation", "probe_air_sd_c", sc.probe_air_sd_c, 0.0, 5.0, "°C");
+        r.number(*s, "simulation", "probe_rh_sd_pct", sc.probe_rh_sd_pct, 0.0, 20.0, "%");
+        r.number(*s, "simulation", "probe_wall_sd_c", sc.probe_wall_sd_c, 0.0, 5.0, "°C");
     }
     if (const auto* a = r.table(root, "", "api")) {
         r.text(*a, "api", "socket", c.api.socket);

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "sim/campaign/replicate_scatter.hpp"
+
 namespace manikind::config {
 
 struct InstrumentSpec {
@@ -65,6 +67,7 @@ struct SimulationConfig {
     std::string runtime_dir;                  // pty links; empty: a fresh directory under /tmp
     double step_s = 1.0;                      // virtual-clock step
     double manikin_period_s = 5.0;            // the manikin's zone report interval (Text S3.2: 5 s)
+    sim::ReplicateScatter scatter;            // per-trial replicate scatter (keys replicate_*, probe_*)
 };
 
 struct ApiConfig {

@@ -41,6 +41,8 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
     if (o.unsteady_probability < 0.0 || o.unsteady_probability > 1.0)
         throw std::invalid_argument("unsteady probability must be within 0..1");
     if (zones.empty()) throw std::invalid_argument("no zones");
+    o.scatter.validate();
+    const ReplicateScatter& sc = o.scatter;
     std::mt19937_64 rng(o.seed);
     std::normal_distribution<double> gauss(0.0, 1.0);
     std::uniform_real_distribution<double> uniform(0.0, 1.0);
@@ -59,12 +61,22 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
             const std::time_t start = static_cast<std::time_t>(o.start_epoch_s + 7200 * trial_index);
             t.started_utc = fmt::format("{:%Y-%m-%dT%H:%M:%SZ}", fmt::gmtime(start));
             t.unsteady = uniform(rng) < o.unsteady_probability;
-            const double air_c = c.air_temp_c + o.replicate_air_sd_c * gauss(rng);
-            const double rh_pct = std::clamp(c.air_rh_pct + o.replicate_rh_sd_pct * gauss(rng), 1.0, 99.0);
-            const double wall_c = air_c - o.wall_below_air_c + 0.05 * gauss(rng);
+            // The enclosure's actual conditions this trial: the physics follows these.
+            const double air_c = c.air_temp_c + sc.replicate_air_sd_c * gauss(rng);
+            const double rh_pct = std::clamp(c.air_rh_pct + sc.replicate_rh_sd_pct * gauss(rng), 1.0, 99.0);
+            const double wall_c = air_c - o.wall_below_air_c + sc.replicate_wall_sd_c * gauss(rng);
             std::vector<double> zone_offset_w_m2(zones.size());
-            for (auto& z : zone_offset_w_m2) z = o.replicate_flux_sd_w_m2 * gauss(rng);
+            for (auto& z : zone_offset_w_m2) z = sc.replicate_flux_sd_w_m2 * gauss(rng);
             const std::size_t drifting_zone = static_cast<std::size_t>(uniform(rng) * static_cast<double>(zones.size())) % zones.size();
+            // Every draw is taken even at zero spread, so the sensor noise that follows is the
+            // same with and without scatter for a given seed.
+            std::vector<double> zone_flux_factor(zones.size());
+            for (auto& f : zone_flux_factor) f = 1.0 + sc.replicate_flux_rel_sd * gauss(rng);
+            // The probes' per-trial errors: only the recorded channels carry them.
+            const double probe_air_c = sc.probe_air_sd_c * gauss(rng);
+            const double probe_rh_pct = sc.probe_rh_sd_pct * gauss(rng);
+            const double probe_wall_c = sc.probe_wall_sd_c * gauss(rng);
+            t.truth = {air_c, rh_pct, wall_c, probe_air_c, probe_rh_pct, probe_wall_c, zone_flux_factor, zone_offset_w_m2};
 
             t.skin_temp_c.assign(zones.size(), std::vector<double>(n_samples));
             t.heat_flux_w_m2.assign(zones.size(), std::vector<double>(n_samples));
@@ -75,13 +87,13 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
                 const double time_s = static_cast<double>(k) * o.sample_period_s;
                 t.t_s.push_back(time_s);
                 // Air and walls: settled before the manikin starts, with sensor noise.
-                const double a = air_c + o.air_noise_c * gauss(rng);
-                const double h = std::clamp(rh_pct + o.rh_noise_pct * gauss(rng), 0.5, 99.5);
+                const double a = air_c + probe_air_c + o.air_noise_c * gauss(rng);
+                const double h = std::clamp(rh_pct + probe_rh_pct + o.rh_noise_pct * gauss(rng), 0.5, 99.5);
                 const double v = std::max(0.0, o.air_speed_mean_m_s * (1.0 + 0.4 * gauss(rng)));
                 t.air_temp_c.push_back(at_resolution(a, 2));          // EE181 via datalogger
                 t.air_rh_pct.push_back(at_resolution(h, 1));
                 t.air_speed_m_s.push_back(at_resolution(v, 3));      // sonic, mm/s
-                t.wall_temp_c.push_back(at_resolution(wall_c + 0.02 * gauss(rng), 2));
+                t.wall_temp_c.push_back(at_resolution(wall_c + probe_wall_c + 0.02 * gauss(rng), 2));
                 // The shell warms from the air temperature toward its setpoint (first-order lag).
                 const double approach = std::exp(-time_s / o.skin_time_constant_s);
                 cond.air_temp_c = air_c;
@@ -99,8 +111,11 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
                     // The heater also pays for warming the shell while it approaches the setpoint.
                     const double storage_w_m2 = 8000.0 * (c.skin_setpoint_c - air_c) * approach / o.skin_time_constant_s;
                     t.skin_temp_c[z][k] = at_resolution(cond.zones[z].skin_temp_c + o.skin_noise_c * gauss(rng), 3);
-                    t.heat_flux_w_m2[z][k] = at_resolution(
-                        fluxes[z].q_total_w_m2 + storage_w_m2 + zone_offset_w_m2[z] + o.flux_noise_w_m2 * gauss(rng), 2);
+                    // The relative scatter scales what the physics loses (fit and wetting change the
+                    // heat transfer itself); the shell's storage is the heater's and stays unscaled.
+                    t.heat_flux_w_m2[z][k] = at_resolution(fluxes[z].q_total_w_m2 * zone_flux_factor[z] + storage_w_m2 +
+                                                               zone_offset_w_m2[z] + o.flux_noise_w_m2 * gauss(rng),
+                                                           2);
                 }
             }
             trials.push_back(std::move(t));

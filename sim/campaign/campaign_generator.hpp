@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "physics/twin/twin.hpp"
+#include "sim/campaign/replicate_scatter.hpp"
 
 namespace manikind::sim {
 
@@ -39,14 +40,24 @@ struct GeneratorOptions {
     double skin_time_constant_s = 300.0;    // shell warm-up lag under the manikin's PI control
     double skin_noise_c = 0.004;            // zone RTD noise (well inside the 0.05 °C rule)
     double flux_noise_w_m2 = 1.5;           // heat-flux sensor noise
-    double replicate_flux_sd_w_m2 = 1.2;    // trial-to-trial offset per zone (textile fit, placement)
-    double replicate_air_sd_c = 0.08;       // trial-to-trial enclosure temperature
-    double replicate_rh_sd_pct = 0.6;
+    ReplicateScatter scatter;               // trial-to-trial scatter; ReplicateScatter::none() for exact tests
     double air_noise_c = 0.03;
     double rh_noise_pct = 0.3;
     double wall_below_air_c = 0.4;          // walls run a little cooler (Text S3.3)
     double air_speed_mean_m_s = 0.01;       // sealed enclosure: < 0.02 m/s (Text S3.1)
     std::int64_t start_epoch_s = 1780304400;  // 2026-06-01T09:00:00Z; trials follow 2 h apart
+};
+
+// What one trial really was, kept for tests (the recordings never carry it).
+struct TrialTruth {
+    double air_temp_c = 0.0;                 // the enclosure's actual air, which the physics sees
+    double air_rh_pct = 0.0;
+    double wall_temp_c = 0.0;
+    double probe_air_error_c = 0.0;          // recorded = actual + this + sensor noise
+    double probe_rh_error_pct = 0.0;
+    double probe_wall_error_c = 0.0;
+    std::vector<double> zone_flux_factor;    // [zone] 1 + e, e ~ N(0, replicate_flux_rel_sd)
+    std::vector<double> zone_flux_offset_w_m2;  // [zone] ~ N(0, replicate_flux_sd_w_m2)
 };
 
 struct GeneratedTrial {
@@ -56,6 +67,7 @@ struct GeneratedTrial {
     CampaignCase conditions;
     std::string started_utc;
     bool unsteady = false;                   // generated to never settle (ground truth for tests)
+    TrialTruth truth;
     std::vector<double> t_s, air_temp_c, air_rh_pct, air_speed_m_s, wall_temp_c;
     std::vector<std::vector<double>> skin_temp_c;     // [zone][sample]
     std::vector<std::vector<double>> heat_flux_w_m2;  // [zone][sample]

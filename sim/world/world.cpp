@@ -8,14 +8,43 @@ namespace manikind::sim {
 
 namespace mc = protocol::manikin_can;
 
-World::World(WorldOptions options) : o_(std::move(options)), rng_(o_.seed) {
+World::World(WorldOptions options)
+    : o_(std::move(options)), rng_(o_.seed), scatter_rng_(o_.seed ^ 0x5CA77E1200000001ULL) {
     if (o_.zones.empty()) throw std::invalid_argument("the simulated manikin needs a zone map");
+    o_.scatter.validate();
     chamber_sp_c_ = chamber_air_c_ = air_c_ = o_.initial_temp_c;
     chamber_sp_rh_ = chamber_rh_ = rh_ = o_.initial_rh_pct;
     wall_c_ = air_c_ - o_.wall_below_air_c;
     zones_.resize(o_.zones.size());
     for (auto& z : zones_) z.skin_temp_c = o_.initial_temp_c;
     for (const auto& spec : o_.zones) conditions_.zones.push_back(spec.zone);
+    scatter_.trial = 0;
+    draw_trial_scatter();
+}
+
+void World::draw_trial_scatter() {
+    const ReplicateScatter& sc = o_.scatter;
+    std::normal_distribution<double> n(0.0, 1.0);
+    auto draw = [&](double sd) { return sd * n(scatter_rng_); };  // drawn even at sd 0: same stream either way
+    TrialScatter t;
+    t.trial = scatter_.trial + 1;
+    t.air_error_c = draw(sc.replicate_air_sd_c);
+    t.rh_error_pct = draw(sc.replicate_rh_sd_pct);
+    t.wall_error_c = draw(sc.replicate_wall_sd_c);
+    for (int p = 0; p < max_probes; ++p) {
+        t.probe_air_error_c.push_back(draw(sc.probe_air_sd_c));
+        t.probe_rh_error_pct.push_back(draw(sc.probe_rh_sd_pct));
+        t.probe_wall_error_c.push_back(draw(sc.probe_wall_sd_c));
+    }
+    for (std::size_t z = 0; z < zones_.size(); ++z) {
+        t.zone_flux_factor.push_back(1.0 + draw(sc.replicate_flux_rel_sd));
+        t.zone_flux_offset_w_m2.push_back(draw(sc.replicate_flux_sd_w_m2));
+    }
+    scatter_ = std::move(t);
+}
+
+std::size_t World::probe_index(int probe) {
+    return static_cast<std::size_t>(std::clamp(probe, 1, max_probes) - 1);
 }
 
 void World::set_chamber_setpoints(double temp_c, double rh_pct) {
@@ -43,9 +72,10 @@ void World::step(double dt_s) {
         auto lag = [h](double& x, double target, double tau) { x += (target - x) * (1.0 - std::exp(-h / tau)); };
         lag(chamber_air_c_, chamber_sp_c_, o_.chamber_time_constant_s);
         lag(chamber_rh_, chamber_sp_rh_, o_.chamber_time_constant_s);
-        lag(air_c_, chamber_air_c_ + air_offset_c_, o_.enclosure_time_constant_s);
-        lag(rh_, std::clamp(chamber_rh_ + rh_offset_pct_, 0.0, 100.0), o_.enclosure_time_constant_s);
-        lag(wall_c_, air_c_ - o_.wall_below_air_c, o_.wall_time_constant_s);
+        // The enclosure settles where it actually does this trial: nominal offset plus the trial's error.
+        lag(air_c_, chamber_air_c_ + air_offset_c_ + scatter_.air_error_c, o_.enclosure_time_constant_s);
+        lag(rh_, std::clamp(chamber_rh_ + rh_offset_pct_ + scatter_.rh_error_pct, 0.0, 100.0), o_.enclosure_time_constant_s);
+        lag(wall_c_, air_c_ - o_.wall_below_air_c + scatter_.wall_error_c, o_.wall_time_constant_s);
 
         if (run_ && time_s_ - last_heartbeat_s_ > o_.watchdog_s) watchdog_tripped_ = true;
         const bool heating = run_ && !watchdog_tripped_;
@@ -64,7 +94,8 @@ void World::step(double dt_s) {
         const auto fluxes = physics::twin::predict(o_.physics, conditions_);
         for (std::size_t z = 0; z < zones_.size(); ++z) {
             ZoneState& s = zones_[z];
-            s.loss_w_m2 = fluxes[z].q_total_w_m2;
+            // This replicate's fit and wetting change the heat transfer itself; the PI loop pays for it.
+            s.loss_w_m2 = fluxes[z].q_total_w_m2 * scatter_.zone_flux_factor[z] + scatter_.zone_flux_offset_w_m2[z];
             double power = 0.0;
             if (heating && !s.heater_failed) {
                 if (s.mode == mc::ControlMode::constant_skin_temp) {
@@ -85,9 +116,16 @@ void World::step(double dt_s) {
     }
 }
 
-double World::measure_air_temp_c(int probe) { return air_c_ + 0.02 * (probe - 1) + gauss(o_.air_noise_c); }
-double World::measure_rh_pct(int) { return std::clamp(rh_ + gauss(o_.rh_noise_pct), 0.0, 100.0); }
-double World::measure_wall_temp_c(int) { return wall_c_ + gauss(o_.wall_noise_c); }
+// Recorded = actual + the probe's error this trial + noise.
+double World::measure_air_temp_c(int probe) {
+    return air_c_ + 0.02 * (probe - 1) + scatter_.probe_air_error_c[probe_index(probe)] + gauss(o_.air_noise_c);
+}
+double World::measure_rh_pct(int probe) {
+    return std::clamp(rh_ + scatter_.probe_rh_error_pct[probe_index(probe)] + gauss(o_.rh_noise_pct), 0.0, 100.0);
+}
+double World::measure_wall_temp_c(int thermocouple) {
+    return wall_c_ + scatter_.probe_wall_error_c[probe_index(thermocouple)] + gauss(o_.wall_noise_c);
+}
 double World::measure_air_speed_m_s() { return std::max(0.0, o_.air_speed_m_s + gauss(o_.speed_noise_m_s)); }
 
 void World::manikin_command(const mc::Setpoint& sp) {
@@ -109,6 +147,7 @@ void World::manikin_control(bool run) {
         watchdog_tripped_ = false;
         for (auto& z : zones_) z.integral_w_m2 = 0.0;
     }
+    if (!run && run_) draw_trial_scatter();  // this trial is over; the next one scatters afresh
     run_ = run;
     last_heartbeat_s_ = time_s_;
     if (!run) watchdog_tripped_ = false;

@@ -37,6 +37,8 @@ struct WorldOptions {
     double skin_noise_c = 0.004, flux_noise_w_m2 = 1.5, air_noise_c = 0.03, rh_noise_pct = 0.3;
     double wall_noise_c = 0.05, speed_noise_m_s = 0.003;
     std::uint64_t seed = 1;
+    // Replicate scatter, drawn per trial (see World::trial_scatter) from its own seeded stream.
+    ReplicateScatter scatter;
     // The enclosure's own offsets from the chamber for given chamber setpoints (the paper's
     // measured T_air, RH_air of Table S3 for its T_c, RH_c); nearest match within 0.5 °C / 1 %.
     std::vector<CampaignCase> enclosure_table;
@@ -52,6 +54,21 @@ struct ZoneState {
     bool sweating = false;
     double sweat_rate_g_m2_h = 0.0;
     bool heater_failed = false;
+};
+
+// One trial's draw of the replicate scatter. A trial runs from one manikin start to its stop;
+// the next trial's draw is taken when the manikin stops, so the enclosure has settled to it
+// before the next trial starts (the first is drawn at construction).
+struct TrialScatter {
+    int trial = 1;                               // 1 for the first trial, +1 at every manikin stop
+    double air_error_c = 0.0;                    // actual enclosure air minus its nominal offset from the chamber
+    double rh_error_pct = 0.0;
+    double wall_error_c = 0.0;                   // actual walls off their usual offset below the air
+    std::vector<double> probe_air_error_c;       // [probe - 1] recorded minus actual
+    std::vector<double> probe_rh_error_pct;      // [probe - 1]
+    std::vector<double> probe_wall_error_c;      // [thermocouple - 1]
+    std::vector<double> zone_flux_factor;        // [zone - 1] 1 + e applied to the physics' loss
+    std::vector<double> zone_flux_offset_w_m2;   // [zone - 1]
 };
 
 class World {
@@ -87,8 +104,14 @@ public:
     protocol::manikin_can::ZoneStatus measure_zone(int zone);
     void fail_heater(int zone, bool failed);
 
+    // This trial's scatter (ground truth for tests; the devices never report it).
+    const TrialScatter& trial_scatter() const { return scatter_; }
+    static constexpr int max_probes = 8;         // per-probe errors drawn for probes 1..8; more reuse the last
+
 private:
     void apply_enclosure_offsets();
+    void draw_trial_scatter();
+    static std::size_t probe_index(int probe);
     double gauss(double sd) { return sd > 0.0 ? sd * normal_(rng_) : 0.0; }
 
     WorldOptions o_;
@@ -103,6 +126,10 @@ private:
     double last_heartbeat_s_ = 0.0;
     std::mt19937_64 rng_;
     std::normal_distribution<double> normal_{0.0, 1.0};
+    // Scatter has its own stream: how many readings the devices took (which varies with
+    // polling in real time) never changes a trial's draw, only the seed and trial number do.
+    std::mt19937_64 scatter_rng_;
+    TrialScatter scatter_;
 };
 
 }  // namespace manikind::sim
