@@ -192,8 +192,9 @@ void ControlServer::serve() {
                 c.buffer.erase(0, nl + 1);
                 bool shutdown = false;
                 const std::string reply = handle_request(daemon_, o_, line, shutdown).dump() + "\n";
-                [[maybe_unused]] auto w = ::write(c.fd, reply.data(), reply.size());
+                // Flag before replying: a client that reads "ok" must find the shutdown requested.
                 if (shutdown) shutdown_ = true;
+                [[maybe_unused]] auto w = ::write(c.fd, reply.data(), reply.size());
             }
             if (c.buffer.size() > o_.max_message_bytes) {  // oversized: refuse and hang up
                 const std::string reply =
