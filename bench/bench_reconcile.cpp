@@ -107,6 +107,7 @@ int main(int argc, char** argv) {
             const auto m = campaign_model({"world", {{t.term, {{t.parameter, t.value}}, t.region, {}}}}, 5000 + static_cast<std::uint64_t>(i));
             const auto r = rc::fit_candidate(*m, {*it});
             covered += r.interval_lo[0] <= t.value && t.value <= r.interval_hi[0] ? 1 : 0;
+            if (std::getenv("BENCH_VERBOSE")) std::printf("    %s: %.5g +- %.3g, 95 %% [%.5g, %.5g]\n", t.term, r.values[0], r.uncertainties[0], r.interval_lo[0], r.interval_hi[0]);
         }
         std::printf("coverage of the 95 %% interval, %s %s = %g: %d of %d (%.0f %%)\n", t.term, t.parameter, t.value, covered,
                     coverage_runs, 100.0 * covered / coverage_runs);

@@ -5,6 +5,7 @@
 #include <future>
 #include <limits>
 #include <map>
+#include <set>
 #include <stdexcept>
 
 #include <Eigen/Dense>
@@ -83,6 +84,29 @@ Grid make_grid(const ForwardModel& model, const CandidateTerm& term, int steps) 
         if (!g.valid[i]) g.raw[i].assign(model.points().size(), 0.0);
     }
     return g;
+}
+
+std::vector<CandidateTerm> single_library(const ForwardModel& model) {
+    std::set<std::string> wet_regions;
+    for (const auto& p : model.points()) {
+        const auto it = p.drivers.find("wettedness");
+        if (it != p.drivers.end() && it->second > 0.0) wet_regions.insert(p.region);
+    }
+    std::vector<CandidateTerm> library;
+    for (auto& c : candidate_library({wet_regions.begin(), wet_regions.end()}))
+        if (model.supports(c.term) && c.parameters.size() == 1) library.push_back(std::move(c));
+    return library;
+}
+
+std::vector<Grid> make_grids(const ForwardModel& model, const std::vector<CandidateTerm>& library, int steps) {
+    std::vector<Grid> grids(library.size());
+    auto work = [&](std::size_t begin) {
+        for (std::size_t k = begin; k < library.size(); k += 2) grids[k] = make_grid(model, library[k], steps);
+    };
+    auto other = std::async(std::launch::async, work, 1);
+    work(0);
+    other.get();
+    return grids;
 }
 
 WhitenedGrid whiten_grid(const Subset& s, const Grid& g) {
@@ -173,8 +197,10 @@ CaseLevel case_level(const ForwardModel& model, const Subset& s, const std::vect
     const auto f0 = model.predict(to_twin_terms(terms, theta));
     std::vector<std::vector<double>> df(theta.size());
     std::vector<double> steps(theta.size());
+    // Secant over 1/120 of the range (the grid step), stepping inward at a bound: the same finite
+    // step as the fit's covariance, for the same reason (the kink at dT = 0).
     for (std::size_t j = 0; j < theta.size(); ++j) {
-        double h = 1e-4 * (bounds[j].hi - bounds[j].lo);
+        double h = (bounds[j].hi - bounds[j].lo) / 120.0;
         if (theta[j] + h > bounds[j].hi) h = -h;
         auto t = theta;
         t[j] += h;

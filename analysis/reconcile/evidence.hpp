@@ -42,6 +42,11 @@ struct Grid {
 };
 Grid make_grid(const ForwardModel& model, const CandidateTerm& term, int steps);
 
+// The single-parameter candidates the model supports (partial wettedness for each region that is
+// wet in some case), and their grids (computed on two threads).
+std::vector<CandidateTerm> single_library(const ForwardModel& model);
+std::vector<Grid> make_grids(const ForwardModel& model, const std::vector<CandidateTerm>& library, int steps);
+
 // The grid whitened for one subset.
 struct WhitenedGrid {
     const Grid* grid = nullptr;

@@ -58,20 +58,45 @@ public:
     std::string base_name() const override { return base_.name; }
     std::vector<tw::Term> base_terms() const override { return base_.terms; }
 
+    // A case's prediction is the mean of the twin at each replicate's own recorded conditions, as
+    // the observation is the mean of the replicates' fluxes: near the kink of |dT|^(1/4) at dT = 0
+    // the twin at the mean conditions is not the mean of the twin (replicates straddle the kink),
+    // and that difference biased a fitted air-probe bias by 10 %.
     std::vector<double> predict(const std::vector<tw::Term>& extra) const override {
         tw::TwinVersion v = base_;
         v.terms.insert(v.terms.end(), extra.begin(), extra.end());
-        std::vector<std::vector<tw::ZoneFlux>> per_case(cases_.size());
-        for (std::size_t c = 0; c < cases_.size(); ++c) per_case[c] = tw::predict(v, cases_[c].conditions);
+        std::vector<std::vector<double>> per_case(cases_.size());
+        for (std::size_t c = 0; c < cases_.size(); ++c) {
+            const auto& in = cases_[c];
+            const std::size_t z_count = in.conditions.zones.size();
+            std::vector<double>& q = per_case[c];
+            q.assign(z_count, 0.0);
+            int used = 0;
+            for (const auto& t : in.trials) {
+                if (t.conditions.zones.size() != z_count) continue;
+                const auto f = tw::predict(v, t.conditions);
+                for (std::size_t z = 0; z < z_count; ++z) q[z] += f[z].q_total_w_m2;
+                ++used;
+            }
+            if (used == 0) {
+                const auto f = tw::predict(v, in.conditions);
+                for (std::size_t z = 0; z < z_count; ++z) q[z] = f[z].q_total_w_m2;
+            } else {
+                for (double& x : q) x /= used;
+            }
+        }
         std::vector<double> out(points_.size());
-        for (std::size_t i = 0; i < points_.size(); ++i) out[i] = per_case[index_[i].first][index_[i].second].q_total_w_m2;
+        for (std::size_t i = 0; i < points_.size(); ++i) out[i] = per_case[index_[i].first][index_[i].second];
         return out;
     }
 
     // Per case: the twin's response (W/m² per zone) to one unit of each shared error: air
     // temperature (°C), humidity (% RH), wall temperature (°C), a manikin gain and an offset.
+    // The slopes are secants over +-2 standard uncertainties of each probe, not derivatives at a
+    // point: |dT|^(1/4) has a kink at dT = 0, where a derivative overstates how the flux moves
+    // over the range the error really spans (GUM Supplement 1's concern with linearisation).
     static Eigen::MatrixXd case_loadings(const tw::TwinVersion& physics, const CaseInput& in,
-                                         const std::vector<tw::ZoneFlux>& twin_case) {
+                                         const std::vector<tw::ZoneFlux>& twin_case, const Instruments& instruments) {
         const auto z_count = static_cast<Eigen::Index>(in.conditions.zones.size());
         Eigen::MatrixXd j = Eigen::MatrixXd::Zero(z_count, 5);
         auto column = [&](Eigen::Index k, double step, auto apply) {
@@ -82,9 +107,14 @@ public:
             for (Eigen::Index z = 0; z < z_count; ++z)
                 j(z, k) = (fu[static_cast<std::size_t>(z)].q_total_w_m2 - fd[static_cast<std::size_t>(z)].q_total_w_m2) / (2.0 * step);
         };
-        column(0, 0.05, [](tw::TrialConditions& t, double d) { t.air_temp_c += d; });
-        column(1, 0.25, [](tw::TrialConditions& t, double d) { t.air_rh_pct += d; });
-        if (in.conditions.wall_temp_c) column(2, 0.05, [](tw::TrialConditions& t, double d) { *t.wall_temp_c += d; });
+        const auto& cond = in.conditions;
+        column(0, std::max(0.05, 2.0 * spec_u(instruments, "air_temp_c", cond.air_temp_c)),
+               [](tw::TrialConditions& t, double d) { t.air_temp_c += d; });
+        column(1, std::max(0.25, 2.0 * spec_u(instruments, "air_rh_pct", cond.air_rh_pct)),
+               [](tw::TrialConditions& t, double d) { t.air_rh_pct += d; });
+        if (cond.wall_temp_c)
+            column(2, std::max(0.05, 2.0 * spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)),
+                   [](tw::TrialConditions& t, double d) { *t.wall_temp_c += d; });
         for (Eigen::Index z = 0; z < z_count; ++z) {
             j(z, 3) = twin_case[static_cast<std::size_t>(z)].q_total_w_m2;
             j(z, 4) = 1.0;
@@ -125,7 +155,7 @@ public:
             for (std::size_t z = 0; z < z_count; ++z) abs_q[z] = std::abs(twin_case[z].q_total_w_m2);
             data.residual_w_m2.push_back(std::move(trials));
             data.abs_flux_w_m2.push_back(std::move(abs_q));
-            loadings.push_back(case_loadings(physics, in, twin_case));
+            loadings.push_back(case_loadings(physics, in, twin_case, instruments));
         }
         data.loadings = loadings;
         const ScatterModel scatter = estimate_scatter(data);

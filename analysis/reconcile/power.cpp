@@ -45,23 +45,8 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
     if (std::find(replicates.begin(), replicates.end(), rep.campaign_replicates) == replicates.end())
         rep.replicates.insert(rep.replicates.begin(), rep.campaign_replicates);
     const auto base = model.predict({});
-    std::set<std::string> wet_regions;
-    for (const auto& p : pts) {
-        const auto it = p.drivers.find("wettedness");
-        if (it != p.drivers.end() && it->second > 0.0) wet_regions.insert(p.region);
-    }
-    std::vector<CandidateTerm> library;
-    for (auto& c : candidate_library({wet_regions.begin(), wet_regions.end()}))
-        if (model.supports(c.term) && c.parameters.size() == 1) library.push_back(std::move(c));
-    std::vector<ev::Grid> grids(library.size());
-    {
-        auto work = [&](std::size_t begin) {
-            for (std::size_t k = begin; k < library.size(); k += 2) grids[k] = ev::make_grid(model, library[k], kGridSteps);
-        };
-        auto other = std::async(std::launch::async, work, 1);
-        work(0);
-        other.get();
-    }
+    const std::vector<CandidateTerm> library = ev::single_library(model);
+    const std::vector<ev::Grid> grids = ev::make_grids(model, library, kGridSteps);
     std::vector<std::size_t> idx(pts.size());
     std::iota(idx.begin(), idx.end(), 0);
     std::mt19937_64 rng(opt.seed + 7);

@@ -212,6 +212,42 @@ CandidateResult describe(const ForwardModel& model, const ev::Subset& s, const s
     return r;
 }
 
+// Jackknife over cases with real refits (not linearised): where the physics is strongly
+// nonlinear (the kink of |dT|^(1/4) at dT = 0) a few cases can carry most of the information,
+// and only refitting without them shows how much the value leans on them. Used for the claimed
+// term (it costs a refit per case): its uncertainty is the largest of model-based, sandwich and
+// jackknife, and the interval is rebuilt from it.
+void widen_by_jackknife(const ForwardModel& model, const Eigen::MatrixXd& covariance, const ev::Subset& s,
+                        const std::vector<double>& base, CandidateResult& r) {
+    const std::size_t cases = s.case_ids.size();
+    if (cases < 3) return;
+    std::vector<std::vector<double>> folds(cases);
+    auto work = [&](std::size_t begin) {
+        for (std::size_t c = begin; c < cases; c += 2) {
+            std::vector<std::size_t> keep;
+            for (std::size_t i : s.idx)
+                if (model.points()[i].case_id != s.case_ids[c]) keep.push_back(i);
+            const ev::Subset fold = ev::make_subset(model, covariance, keep, base);
+            folds[c] = fit_gls(model, fold, r.terms, {r.values}).values;
+        }
+    };
+    auto other = std::async(std::launch::async, work, 1);
+    work(0);
+    other.get();
+    const double c_count = static_cast<double>(cases);
+    const double k = t_quantile(c_count - static_cast<double>(r.values.size()), 0.975);
+    for (std::size_t j = 0; j < r.values.size(); ++j) {
+        double mean = 0.0;
+        for (const auto& f : folds) mean += f[j] / c_count;
+        double ss = 0.0;
+        for (const auto& f : folds) ss += (f[j] - mean) * (f[j] - mean);
+        const double se = std::sqrt((c_count - 1.0) / c_count * ss);
+        if (se > r.uncertainties[j]) r.uncertainties[j] = se;
+        r.interval_lo[j] = r.values[j] - k * r.uncertainties[j];
+        r.interval_hi[j] = r.values[j] + k * r.uncertainties[j];
+    }
+}
+
 // One pass of the evidence over a set of points.
 struct Stage {
     ev::Subset subset;
@@ -376,23 +412,8 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     rep.best_driver = rep.located.front().driver;
 
     // The library and its grids (computed once; a subset only re-whitens them).
-    std::set<std::string> wet_regions;
-    for (const auto& p : pts) {
-        const auto it = p.drivers.find("wettedness");
-        if (it != p.drivers.end() && it->second > 0.0) wet_regions.insert(p.region);
-    }
-    std::vector<CandidateTerm> library;
-    for (auto& c : candidate_library({wet_regions.begin(), wet_regions.end()}))
-        if (model.supports(c.term) && c.parameters.size() == 1) library.push_back(std::move(c));
-    std::vector<ev::Grid> grids(library.size());
-    {
-        auto work = [&](std::size_t begin) {
-            for (std::size_t k = begin; k < library.size(); k += 2) grids[k] = ev::make_grid(model, library[k], kGridSteps);
-        };
-        auto other = std::async(std::launch::async, work, 1);
-        work(0);
-        other.get();
-    }
+    const std::vector<CandidateTerm> library = ev::single_library(model);
+    const std::vector<ev::Grid> grids = ev::make_grids(model, library, kGridSteps);
 
     Stage st = run_stage(model, rep.noise, grids, all_idx, rep.predicted_before, opt);
     {
@@ -513,7 +534,7 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
             other.get();
             const double pair_threshold = boost::math::quantile(
                 boost::math::complement(boost::math::chi_squared(1.0), opt.alpha / static_cast<double>(std::max<std::size_t>(1, pairs.size()))));
-            const CandidateResult* best_pair = nullptr;
+            CandidateResult* best_pair = nullptr;
             for (std::size_t i = 0; i < pairs.size(); ++i) {
                 auto& pr = pair_results[i];
                 const auto [a, b] = pairs[i];
@@ -538,7 +559,25 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
                 for (const auto& pr : pair_results)
                     if (&pr != best_pair && pr.reason.rfind("both terms needed", 0) == 0 && pr.chi2 - best_pair->chi2 < margin)
                         rep.ambiguous_with.push_back(pr.label);
-                chosen = *best_pair;
+                // Each term of the pair must stand on its own: its interval (widened by the
+                // jackknife over cases) must exclude "no effect", else the single is kept.
+                CandidateResult pair = *best_pair;
+                widen_by_jackknife(model, rep.noise.covariance, sub, rep.predicted_before, pair);
+                std::string weak;
+                std::size_t j = 0;
+                for (const auto& t : pair.terms)
+                    for (const auto& p : t.parameters) {
+                        if (pair.interval_lo[j] <= p.null_value && p.null_value <= pair.interval_hi[j])
+                            weak = fmt::format("{} = {:.4g} ± {:.2g} is not distinguishable from no effect", p.name,
+                                               pair.values[j], pair.uncertainties[j]);
+                        ++j;
+                    }
+                if (weak.empty()) {
+                    chosen = pair;
+                } else {
+                    best_pair->reason = "one term is enough: " + weak;
+                    rep.ambiguous_with.clear();
+                }
             }
             results.insert(results.end(), pair_results.begin(), pair_results.end());
         }
@@ -568,6 +607,7 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
             why_not = fmt::format("{} improves the fit but leaves it beyond the noise (chi2/dof {:.2f} after)",
                                   chosen.label, chosen.after.chi2_per_dof);
         } else {
+            widen_by_jackknife(model, rep.noise.covariance, sub, rep.predicted_before, chosen);
             chosen.accepted = true;
             chosen.reason = fmt::format("explains the residual: evidence {:.1f} beyond the null's {:.1f} ({:.0f} % level)",
                                         chosen.evidence, st.threshold, 100.0 * (1.0 - opt.alpha));
@@ -680,12 +720,45 @@ CandidateResult fit_candidate(const ForwardModel& model, const std::vector<Candi
         for (const auto& p : t.parameters) start.push_back(p.start);
     NoiseModel noise = model.noise_model(opt.instruments, opt.probe_shared_fraction);
     ev::Subset s = ev::make_subset(model, noise.covariance, idx, base);
-    Fitted f = fit_gls(model, s, terms, {start});
+    // The kink of |dT|^(1/4) makes local minima: start from the best point of a scan as well
+    // (25 values per parameter for one, 13 x 13 for two).
+    std::vector<std::vector<double>> starts = {start};
+    if (terms.size() <= 2) {
+        const int steps = terms.size() == 1 ? 24 : 12;
+        std::vector<std::vector<double>> axes;
+        for (const auto& t : terms)
+            for (const auto& p : t.parameters) {
+                axes.emplace_back();
+                for (int i = 0; i <= steps; ++i) axes.back().push_back(p.lo + (p.hi - p.lo) * i / steps);
+            }
+        double best = std::numeric_limits<double>::infinity();
+        std::vector<double> best_x;
+        std::vector<std::size_t> at(axes.size(), 0);
+        while (true) {
+            std::vector<double> x;
+            for (std::size_t d = 0; d < axes.size(); ++d) x.push_back(axes[d][at[d]]);
+            try {
+                const double c2 = s.chi2(model.predict(to_twin_terms(terms, x)));
+                if (std::isfinite(c2) && c2 < best) {
+                    best = c2;
+                    best_x = x;
+                }
+            } catch (const std::exception&) {
+            }
+            std::size_t d = 0;
+            while (d < at.size() && ++at[d] == axes[d].size()) at[d++] = 0;
+            if (d == at.size()) break;
+        }
+        if (!best_x.empty()) starts.push_back(best_x);
+    }
+    Fitted f = fit_gls(model, s, terms, starts);
     noise = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms(terms, f.values));
     s = ev::make_subset(model, noise.covariance, idx, base);
     f = fit_gls(model, s, terms, {f.values});
     const double base_chi2 = (s.y - s.w_base).squaredNorm();
-    return describe(model, s, terms, f, base_chi2, base_chi2 - f.chi2);
+    CandidateResult r = describe(model, s, terms, f, base_chi2, base_chi2 - f.chi2);
+    widen_by_jackknife(model, noise.covariance, s, base, r);
+    return r;
 }
 
 }  // namespace manikind::analysis::reconcile

@@ -184,8 +184,9 @@ std::string report_to_text(const Report& r) {
     const auto& n = r.noise;
     std::string factors;
     for (const auto& [name, sd] : n.trial_factor_sd) factors += fmt::format("{}{} {:.3g}", factors.empty() ? "" : ", ", name, sd);
-    o << fmt::format("Noise:  {}; calibration ±{:.2f} W/m² + {:.1f} % shared by all points; per case probe errors "
-                     "±{:.2f} °C air, RH {}, ±{:.2f} °C wall\n",
+    o << fmt::format("Noise:  {}; calibration ±{:.2f} W/m² + {:.1f} % shared by all points; probes' Type B "
+                     "±{:.2f} °C air, RH {}, ±{:.2f} °C wall ({:.0f} % of that variance common to all cases, the rest "
+                     "per case)\n",
                      n.from_replicates ? fmt::format("replicate scatter pooled per zone ({} dof), {:.1f} % of flux; "
                                                      "per trial shared: {}", n.random_dof, 100.0 * n.relative_sd, factors)
                                        : std::string("no replicates to pool"),
