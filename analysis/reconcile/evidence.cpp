@@ -138,7 +138,9 @@ ProfileMin profile_min(const Eigen::Ref<const Eigen::VectorXd>& chi2, const Grid
         if (curvature > 0.0) {
             const double x = std::clamp((a - d) / (2.0 * curvature), -1.0, 1.0);
             out.chi2 = std::min(b, b - (d - a) * (d - a) / (8.0 * curvature));
-            out.theta += x * (g.theta[1] - g.theta[0]);
+            const double step = g.theta[1] - g.theta[0];
+            out.theta += x * step;
+            out.curvature = curvature / (step * step);
         }
     }
     return out;

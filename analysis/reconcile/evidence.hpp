@@ -59,6 +59,7 @@ WhitenedGrid whiten_grid(const Subset& s, const Grid& g);
 struct ProfileMin {
     double chi2 = 0.0;
     double theta = 0.0;
+    double curvature = 0.0;   // d²chi2/dtheta² from the parabola (0 when not available)
 };
 ProfileMin profile_min(const Eigen::Ref<const Eigen::VectorXd>& chi2, const Grid& g);
 

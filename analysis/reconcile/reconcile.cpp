@@ -299,7 +299,16 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::v
                 (st.grids[k].norm2.array() - 2.0 * (st.grids[k].w.transpose() * s.y).array() + s.y.squaredNorm()).matrix(),
                 grids[k]);
             st.base_grid_chi2[k] = observed(static_cast<Eigen::Index>(k), 0);
-            st.single_fits[k] = fit_gls(model, s, {grids[k].term}, {{pm.theta}});
+            if (st.base_chi2 - st.base_grid_chi2[k] > st.threshold) {
+                st.single_fits[k] = fit_gls(model, s, {grids[k].term}, {{pm.theta}});
+            } else {
+                // Within the noise: the grid's optimum is enough for the report (no refinement).
+                Fitted& f = st.single_fits[k];
+                f.values = {pm.theta};
+                f.model_se = {pm.curvature > 0.0 ? std::sqrt(2.0 / pm.curvature) : std::numeric_limits<double>::infinity()};
+                f.chi2 = pm.chi2;
+                f.prediction = model.predict(to_twin_terms({grids[k].term}, f.values));
+            }
             st.singles[k] = describe(model, s, {grids[k].term}, st.single_fits[k], st.base_chi2,
                                      st.base_chi2 - observed(static_cast<Eigen::Index>(k), 0));
         }
@@ -508,12 +517,12 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
                     const double va = st.single_fits[a].values[0], vb = st.single_fits[b].values[0];
                     const double na = library[a].parameters[0].null_value, nb = library[b].parameters[0].null_value;
                     // |dT + gamma w dC|^(1/4) has a kink, so a pair's surface can hold more than one
-                    // valley: start from the singles and from the best point of a 13 x 13 scan.
+                    // valley: start from the singles and from the best point of a 7 x 7 scan.
                     std::vector<std::vector<double>> starts = {{va, vb}, {va, nb}, {na, vb}};
                     double best_scan = std::numeric_limits<double>::infinity();
                     std::vector<double> scan_start;
-                    for (std::size_t ga = 0; ga < grids[a].theta.size(); ga += 10)
-                        for (std::size_t gb = 0; gb < grids[b].theta.size(); gb += 10) {
+                    for (std::size_t ga = 0; ga < grids[a].theta.size(); ga += 20)
+                        for (std::size_t gb = 0; gb < grids[b].theta.size(); gb += 20) {
                             const std::vector<double> xy = {grids[a].theta[ga], grids[b].theta[gb]};
                             try {
                                 const double c2 = sub.chi2(model.predict(to_twin_terms({library[a], library[b]}, xy)));
