@@ -39,7 +39,7 @@ double radiative_heat_flux_w_m2(double skin_temp_c, double wall_temp_c, double e
     const double ts_k = skin_temp_c + kelvin_offset;
     const double tw_k = wall_temp_c + kelvin_offset;
     return radiating_area_fraction * emissivity * stefan_boltzmann_w_m2_k4 *
-           (std::pow(ts_k, 4.0) - std::pow(tw_k, 4.0));
+           (ts_k * ts_k * ts_k * ts_k - tw_k * tw_k * tw_k * tw_k);
 }
 
 double radiative_coefficient_w_m2k(double skin_temp_c, double wall_temp_c, double emissivity,

@@ -132,14 +132,16 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
             f.zone = z.zone;
             f.surface_temp_c = surface_c;
             const double dt_c = surface_c - air_c;
-            const double dc_kg_m3 = saturation_concentration_kg_m3(surface_c) - c_air_kg_m3;
+            // One saturation pressure per surface temperature serves both the concentration and
+            // Eq. 1 (reconcile evaluates this thousands of times per campaign).
+            const double p_surface_pa = saturation_vapour_pressure_pa(surface_c);
+            const double dc_kg_m3 = vapour_concentration_kg_m3(p_surface_pa, surface_c) - c_air_kg_m3;
             const double drive_c = dt_c + k.gamma * wettedness * dc_kg_m3;  // Eq. 7 with omega
-            double h = k.h0_w_m2k + seg->wissler_a * std::pow(std::abs(drive_c), 0.25);
+            double h = k.h0_w_m2k + seg->wissler_a * std::sqrt(std::sqrt(std::abs(drive_c)));  // |.|^(1/4)
             if (h_forced_w_m2k > 0.0) h = h_mixed_w_m2k(h, h_forced_w_m2k);  // Eq. 9, n = 3
             f.h_c_w_m2k = h;
             f.q_convection_w_m2 = h * dt_c;
             f.q_radiation_w_m2 = radiative_heat_flux_w_m2(surface_c, wall_c, baseline_skin_emissivity, seg->radiating_fraction);
-            const double p_surface_pa = saturation_vapour_pressure_pa(surface_c);
             // Eq. 1; no condensation modelled (TWIN-BASELINE step 4).
             f.q_evaporation_w_m2 = p_surface_pa > p_air_pa
                                        ? evaporative_heat_flux_w_m2(h, p_surface_pa, p_air_pa, wettedness, baseline_lewis_k_kpa)
