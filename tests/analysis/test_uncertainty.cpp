@@ -11,16 +11,13 @@
 #include "analysis/recording.hpp"
 #include "analysis/synthetic.hpp"
 #include "analysis/uncertainty.hpp"
+#include "tests/analysis/short_window.hpp"
 
 namespace an = manikind::analysis;
 
 namespace {
 
-an::AnalysisOptions short_window() {
-    an::AnalysisOptions o;
-    o.steady.window_s = 20.0;  // the hand-made trials last 30 s
-    return o;
-}
+using manikind::test::short_window;
 
 const an::CampaignResult& good_result() {
     static const an::CampaignResult r =
