@@ -1,6 +1,8 @@
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <filesystem>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
@@ -60,4 +62,29 @@ TEST_CASE("cli: bad --effect and --twin inputs are refused with what was expecte
     r = run_manikin("reconcile /nonexistent-campaign --twin /nonexistent.toml 2>&1");
     CHECK(r.exit_code == 2);
     CHECK_THAT(r.out, Catch::Contains("--twin"));
+}
+
+TEST_CASE("cli: reconcile --power prints a detection limit per candidate at 3, 5 and 10 replicates, smaller with more",
+          "[cli][reconcile]") {
+    const std::string dir = temp_dir("power");
+    REQUIRE(run_manikin("simulate-campaign --seed 5 --out " + dir).exit_code == 0);
+    const auto r = run_manikin("reconcile " + dir + " --power --json");
+    REQUIRE(r.exit_code == 0);
+    const auto j = nlohmann::json::parse(r.out);
+    CHECK(j["campaign_replicates"] == 3);
+    CHECK(j["replicates"] == nlohmann::json::array({3, 5, 10}));
+    std::map<std::string, std::map<int, double>> limits;
+    for (const auto& l : j["limits"])
+        if (!l["smallest_effect"].is_null()) {
+            limits[l["term"].get<std::string>()][l["replicates"].get<int>()] = l["smallest_effect"].get<double>();
+            CHECK(l["simulated_power"].get<double>() >= 0.8);  // checked by simulation at that value
+        }
+    for (const char* term : {"humidity_buoyancy", "diffusion_floor", "wall_offset", "air_temp_bias", "textile_resistance"}) {
+        INFO(term);
+        REQUIRE(limits[term].count(3) == 1);
+        REQUIRE(limits[term].count(10) == 1);
+        CHECK(std::abs(limits[term][10]) <= std::abs(limits[term][3]) + 1e-12);  // more replicates never hurt
+        CHECK(limits[term][3] != 0.0);
+    }
+    std::filesystem::remove_all(dir);
 }
