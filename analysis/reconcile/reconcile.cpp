@@ -279,7 +279,6 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::v
     for (const auto& g : st.grids) all.push_back(&g);
     // Observed evidence per single, and its null distribution (the best single's evidence in
     // campaigns simulated from the twin as given and the noise model).
-    const Eigen::MatrixXd observed = ev::profile_chi2(all, s.y);
     std::mt19937_64 rng(opt.seed);
     const Eigen::MatrixXd sim = ev::simulate(s.w_base, opt.null_simulations, rng);
     const Eigen::MatrixXd prof = ev::profile_chi2(all, sim);
@@ -298,7 +297,7 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::v
             const ev::ProfileMin pm = ev::profile_min(
                 (st.grids[k].norm2.array() - 2.0 * (st.grids[k].w.transpose() * s.y).array() + s.y.squaredNorm()).matrix(),
                 grids[k]);
-            st.base_grid_chi2[k] = observed(static_cast<Eigen::Index>(k), 0);
+            st.base_grid_chi2[k] = pm.chi2;
             if (st.base_chi2 - st.base_grid_chi2[k] > st.threshold) {
                 st.single_fits[k] = fit_gls(model, s, {grids[k].term}, {{pm.theta}});
             } else {
@@ -310,7 +309,7 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::v
                 f.prediction = model.predict(to_twin_terms({grids[k].term}, f.values));
             }
             st.singles[k] = describe(model, s, {grids[k].term}, st.single_fits[k], st.base_chi2,
-                                     st.base_chi2 - observed(static_cast<Eigen::Index>(k), 0));
+                                     st.base_chi2 - pm.chi2);
         }
     };
     auto other = std::async(std::launch::async, work, 1);
