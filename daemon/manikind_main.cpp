@@ -3,11 +3,18 @@
 //   manikind                                        the simulated lab (built-in config), real time
 //   manikind --virtual --campaign builtin:table-s3  the simulated lab on the virtual clock
 // It serves the control API on a Unix socket until SIGINT/SIGTERM or a `shutdown` request.
+// Under systemd (Type=notify) it says READY=1 once the socket listens, and feeds the watchdog
+// only while both its acquisition tick and its control server are alive, so a hung daemon is
+// restarted.
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <string>
 #include <sys/signalfd.h>
+#include <sys/stat.h>
 #include <unistd.h>
+
+#include <systemd/sd-daemon.h>
 
 #include <poll.h>
 
@@ -46,6 +53,8 @@ int main(int argc, char** argv) {
     pthread_sigmask(SIG_BLOCK, &mask, nullptr);
     const int sig_fd = signalfd(-1, &mask, SFD_CLOEXEC | SFD_NONBLOCK);
     std::signal(SIGPIPE, SIG_IGN);
+    // Files the daemon creates (database, captures, logs) are never world-readable.
+    ::umask(::umask(0) | 0027);
 
     try {
         config::Config cfg = config_file.empty() ? config::default_config() : config::load_config(config_file);
@@ -54,17 +63,35 @@ int main(int argc, char** argv) {
         if (!socket.empty()) cfg.api.socket = socket;
         set_log_level(cfg.log_level);
         if (virtual_clock && cfg.mode != "simulated") throw UserError("--virtual needs mode = \"simulated\"");
-        LabDaemon daemon({cfg, virtual_clock, speed});
         ControlOptions api;
         api.socket_path = cfg.api.socket;
         api.tcp_port = static_cast<int>(cfg.api.tcp_port);
+        // One daemon per socket, decided first: a refused second daemon touches no database and
+        // no token file of the first.
+        InstanceLock socket_lock = InstanceLock::acquire(api.socket_path, "control socket");
         api.token = load_or_create_token(cfg.api.token, api.socket_path);
+        LabDaemon daemon({cfg, virtual_clock, speed});
         ControlServer server(daemon, api);
+        server.adopt_socket_lock(std::move(socket_lock));
         server.start();
         std::printf("manikind: %s lab, %s clock; database %s; control socket %s%s\n", cfg.mode.c_str(),
                     virtual_clock ? "virtual" : "real", daemon.database_path().c_str(), api.socket_path.c_str(),
                     api.tcp_port ? fmt::format(" and 127.0.0.1:{}", api.tcp_port).c_str() : "");
         std::fflush(stdout);
+        ::sd_notifyf(0, "READY=1\nSTATUS=%s lab, control socket %s", cfg.mode.c_str(), api.socket_path.c_str());
+        // The watchdog (WatchdogSec=) is fed at a third of its period, and only while the daemon
+        // is really alive: its tick ran and the control server's timer ran within the last 5 s.
+        std::uint64_t watchdog_usec = 0;
+        const bool watchdog = ::sd_watchdog_enabled(0, &watchdog_usec) > 0 && watchdog_usec > 0;
+        auto last_ping = std::chrono::steady_clock::now() - std::chrono::hours(1);
+        auto feed_watchdog = [&] {
+            if (!watchdog) return;
+            const auto now = std::chrono::steady_clock::now();
+            if (now - last_ping < std::chrono::microseconds(watchdog_usec / 3)) return;
+            if (daemon.seconds_since_tick() > 5.0 || server.seconds_since_heartbeat() > 5.0) return;
+            ::sd_notify(0, "WATCHDOG=1");
+            last_ping = now;
+        };
         if (!campaign.empty()) {
             CampaignPlan plan = load_campaign_plan(campaign);
             if (const auto why = daemon.start_campaign(plan); !why.empty()) throw UserError(why);
@@ -78,6 +105,7 @@ int main(int argc, char** argv) {
             std::string last_stage;
             for (;;) {
                 if (signalled() || server.shutdown_requested()) break;
+                feed_watchdog();
                 daemon.step_virtual(dt);
                 const auto st = daemon.status_json();
                 const std::string stage = st["stage"].get<std::string>() + (st.contains("trial") ? fmt::format(" trial {}", st["trial"]["id"].get<long>()) : "");
@@ -94,10 +122,12 @@ int main(int argc, char** argv) {
             for (;;) {
                 pollfd p{sig_fd, POLLIN, 0};
                 ::poll(&p, 1, 500);
+                feed_watchdog();
                 if (signalled() || server.shutdown_requested()) break;
                 if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;
             }
         }
+        ::sd_notify(0, "STOPPING=1");
         std::printf("manikind: stopping\n");
         server.stop();
         daemon.stop();

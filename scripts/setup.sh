@@ -1,19 +1,34 @@
 #!/usr/bin/env bash
 # Installs what is missing on a Debian 12 machine (as root), then configures and builds.
-#   scripts/setup.sh            release build in build/
-#   scripts/setup.sh asan       AddressSanitizer + UBSan build in build-asan/
+#   scripts/setup.sh                  release build in build/ (what the program needs)
+#   scripts/setup.sh --tests          the same, plus what the test suite drives (peers, tools)
+#   scripts/setup.sh [--tests] asan   AddressSanitizer + UBSan build in build-asan/
 # Safe to run again: it installs nothing that is already there and rebuilds incrementally.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-preset="${1:-default}"
+preset=default
+with_tests=no
+for arg in "$@"; do
+  case "$arg" in
+    --tests) with_tests=yes ;;
+    default|asan) preset="$arg" ;;
+    *) echo "setup: unknown argument '$arg' (expected --tests, default or asan)" >&2; exit 2 ;;
+  esac
+done
 
 packages=(
   build-essential cmake ninja-build pkg-config git
-  libmodbus-dev libboost-dev libsqlite3-dev sqlite3
+  libmodbus-dev libboost-dev libsqlite3-dev sqlite3 libsystemd-dev
   libspdlog-dev libfmt-dev catch2 libtomlplusplus-dev nlohmann-json3-dev libcli11-dev libeigen3-dev
-  # Peers not written here, for the interoperability tests (tests/interop/).
-  mbpoll python3 python3-serial python3-pymodbus python3-serial-asyncio
 )
+if [ "$with_tests" = yes ]; then
+  packages+=(
+    # Peers not written here, for the interoperability tests (tests/interop/).
+    mbpoll python3 python3-serial python3-pymodbus python3-serial-asyncio
+    # systemd-analyze scores the shipped unit's sandbox (tests/daemon/systemd_unit_score.sh).
+    systemd
+  )
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -26,12 +26,16 @@ namespace {
 struct Conn {
     std::string socket = "manikind.sock";
     std::string token;
+    double timeout_s = 10.0;
     bool json = false;
 };
 
 void add_conn_options(CLI::App* cmd, Conn& c, bool mutating) {
     cmd->add_option("--socket", c.socket, "The daemon's control socket ([api] socket)")->capture_default_str();
     if (mutating) cmd->add_option("--token", c.token, "API token (default: read from <socket>.token, or $MANIKIND_TOKEN)");
+    cmd->add_option("--timeout", c.timeout_s, "Seconds to wait for the daemon's answer before saying what it waited for")
+        ->capture_default_str()
+        ->check(CLI::Range(0.1, 3600.0));
     cmd->add_flag("--json", c.json, "Print the daemon's JSON reply");
 }
 
@@ -43,7 +47,7 @@ nlohmann::json call(const Conn& c, nlohmann::json req, bool mutating) {
         if (token.empty()) token = read_token_file(c.socket);
         req["token"] = token;
     }
-    auto reply = call_daemon(c.socket, req);
+    auto reply = call_daemon(c.socket, req, c.timeout_s);
     if (!reply.value("ok", false)) throw UserError("the daemon refused: " + reply.value("error", std::string("?")));
     return reply;
 }

@@ -6,6 +6,7 @@
 #include <poll.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/random.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -15,8 +16,9 @@
 #include <cstring>
 #include <fstream>
 #include <map>
-#include <random>
+#include <chrono>
 
+#include "daemon/core/config.hpp"
 #include "daemon/core/user_error.hpp"
 
 namespace manikind {
@@ -111,128 +113,97 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
     return fail("unhandled command");
 }
 
-ControlServer::ControlServer(LabDaemon& daemon, ControlOptions options) : daemon_(daemon), o_(std::move(options)) {}
-ControlServer::~ControlServer() { stop(); }
+namespace {
 
-void ControlServer::start() {
-    unix_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    const std::string path = o_.socket_path.string();
-    if (path.size() >= sizeof addr.sun_path) throw UserError(fmt::format("socket path too long: {}", path));
-    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
-    ::unlink(path.c_str());  // a stale socket from a killed daemon
-    const mode_t old_mask = ::umask(0117);  // created 0660: owner and group only
-    const int rc = ::bind(unix_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-    ::umask(old_mask);
-    if (rc != 0 || ::listen(unix_fd_, 16) != 0)
-        throw UserError(fmt::format("cannot listen on {}: {}", path, std::strerror(errno)));
-    ::chmod(path.c_str(), 0660);
-    if (o_.tcp_port > 0) {
-        tcp_fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        int one = 1;
-        ::setsockopt(tcp_fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-        sockaddr_in in{};
-        in.sin_family = AF_INET;
-        in.sin_addr.s_addr = htonl(INADDR_LOOPBACK);  // never any other interface
-        in.sin_port = htons(static_cast<std::uint16_t>(o_.tcp_port));
-        if (::bind(tcp_fd_, reinterpret_cast<sockaddr*>(&in), sizeof in) != 0 || ::listen(tcp_fd_, 16) != 0)
-            throw UserError(fmt::format("cannot listen on 127.0.0.1:{}: {}", o_.tcp_port, std::strerror(errno)));
-        bound_tcp_port_ = o_.tcp_port;
-    }
-    if (::pipe2(wake_, O_CLOEXEC) != 0) throw UserError("pipe failed");
-    thread_ = std::thread([this] { serve(); });
-}
+using client_clock = std::chrono::steady_clock;
 
-void ControlServer::stop() {
-    if (!thread_.joinable()) return;
-    const char b = 'x';
-    [[maybe_unused]] auto n = ::write(wake_[1], &b, 1);
-    thread_.join();
-    for (int fd : {unix_fd_, tcp_fd_, wake_[0], wake_[1]})
-        if (fd >= 0) ::close(fd);
-    ::unlink(o_.socket_path.c_str());
-}
-
-void ControlServer::serve() {
-    struct Client {
-        int fd;
-        std::string buffer;
-    };
-    std::vector<Client> clients;
+// Waits for `events` on `fd` until `deadline`; false on timeout.
+bool wait_for(int fd, short events, client_clock::time_point deadline) {
     for (;;) {
-        std::vector<pollfd> fds = {{wake_[0], POLLIN, 0}, {unix_fd_, POLLIN, 0}};
-        if (tcp_fd_ >= 0) fds.push_back({tcp_fd_, POLLIN, 0});
-        const std::size_t first_client = fds.size();
-        for (const auto& c : clients) fds.push_back({c.fd, POLLIN, 0});
-        if (::poll(fds.data(), fds.size(), -1) < 0) {
-            if (errno == EINTR) continue;
-            return;
-        }
-        if (fds[0].revents) return;
-        for (std::size_t i = 1; i < first_client; ++i)
-            if (fds[i].revents & POLLIN) {
-                const int c = ::accept4(fds[i].fd, nullptr, nullptr, SOCK_CLOEXEC);
-                if (c >= 0) clients.push_back({c, {}});
-            }
-        std::vector<int> closed;
-        for (std::size_t i = first_client; i < fds.size(); ++i) {
-            if (!fds[i].revents) continue;
-            Client& c = clients[i - first_client];
-            char buf[4096];
-            const ssize_t n = ::read(c.fd, buf, sizeof buf);
-            if (n <= 0) {
-                closed.push_back(c.fd);
-                continue;
-            }
-            c.buffer.append(buf, static_cast<std::size_t>(n));
-            bool drop = false;
-            for (auto nl = c.buffer.find('\n'); nl != std::string::npos; nl = c.buffer.find('\n')) {
-                const std::string line = c.buffer.substr(0, nl);
-                c.buffer.erase(0, nl + 1);
-                bool shutdown = false;
-                const std::string reply = handle_request(daemon_, o_, line, shutdown).dump() + "\n";
-                // Flag before replying: a client that reads "ok" must find the shutdown requested.
-                if (shutdown) shutdown_ = true;
-                [[maybe_unused]] auto w = ::write(c.fd, reply.data(), reply.size());
-            }
-            if (c.buffer.size() > o_.max_message_bytes) {  // oversized: refuse and hang up
-                const std::string reply =
-                    fail(fmt::format("message over the limit of {} bytes; connection closed", o_.max_message_bytes)).dump() + "\n";
-                [[maybe_unused]] auto w = ::write(c.fd, reply.data(), reply.size());
-                drop = true;
-            }
-            if (drop) closed.push_back(c.fd);
-        }
-        for (int fd : closed) {
-            ::close(fd);
-            std::erase_if(clients, [fd](const Client& c) { return c.fd == fd; });
-        }
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - client_clock::now()).count();
+        if (left <= 0) return false;
+        pollfd p{fd, events, 0};
+        const int rc = ::poll(&p, 1, static_cast<int>(std::min<long long>(left, 1000)));
+        if (rc > 0) return true;
+        if (rc < 0 && errno != EINTR) return true;  // let the read/write report the error
     }
 }
 
-nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohmann::json& request) {
-    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+// INTERIM until config::token_problem lands.
+std::string interim_token_problem(const std::string& t) { return t.size() < 24 ? "too short" : ""; }
+
+}  // namespace
+
+nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohmann::json& request, double timeout_s) {
+    const std::string path = socket_path.string();
+    const std::string cmd = request.value("cmd", std::string("?"));
+    const auto deadline = client_clock::now() + std::chrono::duration_cast<client_clock::duration>(
+                                                    std::chrono::duration<double>(timeout_s));
+    auto timed_out = [&](const char* waiting_for) {
+        return UserError(fmt::format("no answer from the daemon at {} within {} s: waited for {} ('{}'). It may be hung "
+                                     "or overloaded: see its log (journalctl -u manikind), or try a longer --timeout",
+                                     path, timeout_s, waiting_for, cmd));
+    };
     sockaddr_un addr{};
     addr.sun_family = AF_UNIX;
-    const std::string path = socket_path.string();
-    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
-    if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
-        const std::string why = std::strerror(errno);
-        ::close(fd);
-        throw UserError(fmt::format("cannot reach the daemon at {}: {} (is manikind running? --socket)", path, why));
+    if (path.size() >= sizeof addr.sun_path)
+        throw UserError(fmt::format("socket path is {} characters, over the limit of {}: {}", path.size(),
+                                    sizeof addr.sun_path - 1, path));
+    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+    if (fd < 0) throw UserError(fmt::format("cannot create a socket: {}", std::strerror(errno)));
+    struct Closer {
+        int fd;
+        ~Closer() { ::close(fd); }
+    } closer{fd};
+    // A Unix connect fails with EAGAIN while the daemon's backlog is full: retry until the deadline.
+    for (;;) {
+        if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0) break;
+        if (errno == EAGAIN || errno == EINTR) {
+            if (client_clock::now() >= deadline) throw timed_out("a free place in its connection queue");
+            pollfd none{-1, 0, 0};
+            ::poll(&none, 1, 20);
+            continue;
+        }
+        if (errno == EINPROGRESS) {
+            if (!wait_for(fd, POLLOUT, deadline)) throw timed_out("it to accept the connection");
+            int err = 0;
+            socklen_t len = sizeof err;
+            ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len);
+            if (err == 0) break;
+            errno = err;
+        }
+        throw UserError(fmt::format("cannot reach the daemon at {}: {} (is manikind running? --socket)", path,
+                                    std::strerror(errno)));
     }
     const std::string msg = request.dump() + "\n";
-    [[maybe_unused]] auto w = ::write(fd, msg.data(), msg.size());
+    for (std::size_t sent = 0; sent < msg.size();) {
+        const ssize_t n = ::send(fd, msg.data() + sent, msg.size() - sent, MSG_NOSIGNAL);
+        if (n > 0) {
+            sent += static_cast<std::size_t>(n);
+            continue;
+        }
+        if (n < 0 && (errno == EAGAIN || errno == EINTR)) {
+            if (!wait_for(fd, POLLOUT, deadline)) throw timed_out("it to take the request");
+            continue;
+        }
+        throw UserError(fmt::format("the daemon at {} closed the connection: {}", path, std::strerror(errno)));
+    }
     std::string reply;
     char buf[65536];
-    for (;;) {
+    while (reply.empty() || reply.back() != '\n') {
         const ssize_t n = ::read(fd, buf, sizeof buf);
-        if (n <= 0) break;
-        reply.append(buf, static_cast<std::size_t>(n));
-        if (!reply.empty() && reply.back() == '\n') break;
+        if (n > 0) {
+            reply.append(buf, static_cast<std::size_t>(n));
+            continue;
+        }
+        if (n < 0 && (errno == EAGAIN || errno == EINTR)) {
+            if (!wait_for(fd, POLLIN, deadline)) throw timed_out("its reply");
+            continue;
+        }
+        if (reply.empty()) throw UserError(fmt::format("the daemon at {} closed the connection without replying", path));
+        break;
     }
-    ::close(fd);
     const auto j = nlohmann::json::parse(reply, nullptr, false);
     if (j.is_discarded()) throw UserError("the daemon's reply is not JSON: " + reply.substr(0, 200));
     return j;
@@ -246,15 +217,43 @@ std::string read_token_file(const std::filesystem::path& socket_path) {
 }
 
 std::string load_or_create_token(const std::string& configured, const std::filesystem::path& socket_path) {
-    if (!configured.empty()) return configured;
-    std::random_device rd;
+    if (!configured.empty()) {
+        if (const auto why = interim_token_problem(configured); !why.empty()) throw UserError("[api] token: " + why);
+        return configured;
+    }
+    unsigned char bytes[32];
+    for (std::size_t got = 0; got < sizeof bytes;) {
+        const ssize_t n = ::getrandom(bytes + got, sizeof bytes - got, 0);
+        if (n < 0 && errno != EINTR) throw UserError(fmt::format("cannot make an API token: getrandom: {}", std::strerror(errno)));
+        if (n > 0) got += static_cast<std::size_t>(n);
+    }
     std::string token;
-    for (int i = 0; i < 32; ++i) token += "0123456789abcdef"[rd() % 16];
+    for (unsigned char b : bytes) token += fmt::format("{:02x}", b);
+
     const std::string file = socket_path.string() + ".token";
-    const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    struct stat st {};
+    if (::lstat(file.c_str(), &st) == 0) {
+        // Replace only our own private file; anything else is someone's mistake or a trap: say so.
+        if (S_ISLNK(st.st_mode))
+            throw UserError(fmt::format("{} is a symbolic link; refusing to write the API token through it (remove it)", file));
+        if (!S_ISREG(st.st_mode)) throw UserError(fmt::format("{} exists and is not a regular file; remove it", file));
+        if (st.st_uid != ::geteuid())
+            throw UserError(fmt::format("{} belongs to user id {}, not to the daemon's user ({}); remove it", file, st.st_uid,
+                                        ::geteuid()));
+        if ((st.st_mode & 077) != 0)
+            throw UserError(fmt::format("{} has mode {:04o}: others could read the API token; remove it (the daemon "
+                                        "writes a fresh one, mode 0600)",
+                                        file, st.st_mode & 07777));
+        if (::unlink(file.c_str()) != 0)
+            throw UserError(fmt::format("cannot replace the API token file {}: {}", file, std::strerror(errno)));
+    }
+    // O_EXCL|O_NOFOLLOW: a file or symlink that appeared since is never written through.
+    const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0600);
     if (fd < 0) throw UserError(fmt::format("cannot write the API token to {}: {}", file, std::strerror(errno)));
-    [[maybe_unused]] auto w = ::write(fd, (token + "\n").data(), token.size() + 1);
+    const std::string line = token + "\n";
+    const bool written = ::write(fd, line.data(), line.size()) == static_cast<ssize_t>(line.size());
     ::close(fd);
+    if (!written) throw UserError(fmt::format("cannot write the API token to {}", file));
     return token;
 }
 

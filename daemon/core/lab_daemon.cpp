@@ -16,6 +16,12 @@ namespace manikind {
 
 namespace mc = protocol::manikin_can;
 
+namespace {
+std::int64_t steady_now_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+}  // namespace
+
 const char* to_string(Stage s) {
     switch (s) {
         case Stage::idle: return "idle";
@@ -52,7 +58,9 @@ LabDaemon::LabDaemon(DaemonOptions options)
     : o_(std::move(options)),
       db_path_(o_.config.database.is_relative() && !o_.config.source_dir.empty() ? o_.config.source_dir / o_.config.database
                                                                                  : o_.config.database),
+      db_lock_(InstanceLock::acquire(db_path_, "database")),
       db_(recorder::Database::open(db_path_)) {
+    last_tick_steady_ns_ = steady_now_ns();
     const int interrupted = db_.mark_interrupted_trials(system_clock_.utc_ns());
     if (interrupted > 0)
         db_.add_event(std::nullopt, 0, system_clock_.utc_ns(), "warn", "restart",
@@ -412,6 +420,7 @@ void LabDaemon::step_virtual(double dt_s) {
     std::lock_guard lk(lock_);
     acq_->step(dt_s);
     tick_locked();
+    last_tick_steady_ns_ = steady_now_ns();
 }
 
 bool LabDaemon::campaign_active() {
@@ -445,8 +454,14 @@ void LabDaemon::start_realtime() {
             std::lock_guard lk(lock_);
             if (stop_) break;
             tick_locked();
+            last_tick_steady_ns_ = steady_now_ns();
         }
     });
+}
+
+double LabDaemon::seconds_since_tick() const {
+    const auto now = steady_now_ns();
+    return static_cast<double>(now - last_tick_steady_ns_.load()) * 1e-9;
 }
 
 void LabDaemon::stop() {

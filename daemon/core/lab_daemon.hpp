@@ -6,6 +6,7 @@
 // hang. Campaigns are cases x replicates, queued. The daemon enforces the manikin's safety
 // limits itself (skin temperature, heater power, a watchdog on the manikin and chamber) and
 // records every such event. Thread-safe: the control API calls in from its own thread.
+#include <atomic>
 #include <deque>
 #include <functional>
 #include <map>
@@ -21,6 +22,7 @@
 #include "daemon/core/acquisition.hpp"
 #include "daemon/core/campaign_plan.hpp"
 #include "daemon/core/config.hpp"
+#include "daemon/core/instance_lock.hpp"
 #include "daemon/core/recorder/database.hpp"
 #include "daemon/core/recorder/recorder.hpp"
 
@@ -83,6 +85,9 @@ public:
     Acquisition& acquisition() { return *acq_; }
     const std::filesystem::path& database_path() const { return db_path_; }
     std::optional<std::string> last_campaign() const { return last_campaign_; }
+    // Seconds since the acquisition tick last ran (real time) or the virtual clock last stepped:
+    // the systemd watchdog is fed only while this stays small.
+    double seconds_since_tick() const;
 
 private:
     struct TrialJob {
@@ -105,6 +110,7 @@ private:
 
     DaemonOptions o_;
     std::filesystem::path db_path_;
+    InstanceLock db_lock_;   // before db_: a second daemon must not touch the database at all
     recorder::Database db_;
     std::unique_ptr<recorder::Recorder> recorder_;
     drivers::ManualClock virtual_clock_;
@@ -144,6 +150,7 @@ private:
 
     std::thread tick_thread_;
     bool stop_ = false;
+    std::atomic<std::int64_t> last_tick_steady_ns_{0};
 };
 
 }  // namespace manikind

@@ -2,6 +2,9 @@
 
 #include <sqlite3.h>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -290,6 +293,9 @@ int Database::latest_schema_version() { return static_cast<int>(all_migrations.s
 Database Database::open(const std::filesystem::path& path) {
     auto impl = std::make_unique<Impl>();
     impl->path = path;
+    // Created 0640 (or tighter, by the umask): recordings are the lab's, not every local user's. SQLite
+    // gives the -wal and -shm files the database file's mode.
+    if (const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0640); fd >= 0) ::close(fd);
     if (sqlite3_open_v2(path.c_str(), &impl->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX,
                         nullptr) != SQLITE_OK)
         impl->fail("cannot open the database");

@@ -1,0 +1,323 @@
+// Issue 14: no client can freeze control, one daemon per database and socket, a token no one
+// else can read. Clients here misbehave on purpose (never read, write slowly, hold idle
+// connections under a small open-file limit) while another client aborts a campaign.
+#include <catch2/catch.hpp>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <sys/random.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "daemon/core/control_api.hpp"
+#include "daemon/core/user_error.hpp"
+#include "daemon_fixture.hpp"
+#include "daemon_process.hpp"
+
+namespace fs = std::filesystem;
+using manikind::ControlOptions;
+using manikind::ControlServer;
+using manikind::call_daemon;
+using manikind::test::DaemonFixture;
+using manikind::test::DaemonProcess;
+using manikind::test::quick_plan;
+using clock_type = std::chrono::steady_clock;
+
+namespace {
+
+std::string random_token() {
+    unsigned char b[32];
+    REQUIRE(::getrandom(b, sizeof b, 0) == static_cast<ssize_t>(sizeof b));
+    std::string t;
+    for (unsigned char c : b) t += fmt::format("{:02x}", c);
+    return t;
+}
+
+int connect_unix(const fs::path& path, bool nonblocking) {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | (nonblocking ? SOCK_NONBLOCK : 0), 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
+    if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+        ::close(fd);
+        return -errno;
+    }
+    return fd;
+}
+
+// Everything the server says on `fd` until it hangs up (or `limit_s` passes: then the test fails).
+std::string read_until_closed(int fd, double limit_s) {
+    std::string all;
+    const auto end = clock_type::now() + std::chrono::duration_cast<clock_type::duration>(std::chrono::duration<double>(limit_s));
+    for (;;) {
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - clock_type::now()).count();
+        REQUIRE(left > 0);
+        pollfd p{fd, POLLIN, 0};
+        if (::poll(&p, 1, static_cast<int>(left)) <= 0) continue;
+        char buf[65536];
+        const ssize_t n = ::read(fd, buf, sizeof buf);
+        if (n > 0) all.append(buf, static_cast<std::size_t>(n));
+        else if (n == 0 || (errno != EAGAIN && errno != EINTR)) return all;
+    }
+}
+
+// Aborts through the API and returns how long the answer took.
+double timed_abort(const fs::path& socket, const std::string& token, nlohmann::json& reply) {
+    const auto t0 = clock_type::now();
+    reply = call_daemon(socket, {{"cmd", "abort"}, {"token", token}}, 5.0);
+    return std::chrono::duration<double>(clock_type::now() - t0).count();
+}
+
+struct ServedFixture {
+    explicit ServedFixture(std::function<void(ControlOptions&)> tweak = {}) {
+        options.socket_path = fixture.dir() / "api.sock";
+        options.token = random_token();
+        if (tweak) tweak(options);
+        server = std::make_unique<ControlServer>(fixture.daemon(), options);
+        server->start();
+        REQUIRE(fixture.daemon().start_campaign(quick_plan("hardening")).empty());
+    }
+    DaemonFixture fixture;
+    ControlOptions options;
+    std::unique_ptr<ControlServer> server;
+};
+
+}  // namespace
+
+TEST_CASE("a client that never reads its replies is dropped past the bound; an abort meanwhile is answered "
+          "within a second",
+          "[daemon][api][hardening]") {
+    ServedFixture s([](ControlOptions& o) { o.max_unread_reply_bytes = 2 * 1024 * 1024; });
+    // 200 status requests on a non-blocking socket, replies never read (the issue's reproduction).
+    const int hog = connect_unix(s.options.socket_path, true);
+    REQUIRE(hog >= 0);
+    const std::string request = "{\"cmd\":\"status\"}\n";
+    for (int i = 0; i < 200; ++i) REQUIRE(::send(hog, request.data(), request.size(), MSG_NOSIGNAL) == ssize_t(request.size()));
+    // The hog's replies fill its socket; the server keeps serving others.
+    nlohmann::json reply;
+    CHECK(timed_abort(s.options.socket_path, s.options.token, reply) < 1.0);
+    CHECK(reply["ok"] == true);
+    CHECK(s.fixture.daemon().status_json()["campaign"].is_null());
+    CHECK(s.server->counters().dropped_unread == 0);  // the hog is still there, its replies queued
+    // It keeps asking without reading: once its unread replies pass the bound it is let go.
+    for (int i = 0; i < 100000; ++i) {
+        pollfd p{hog, POLLOUT, 0};
+        REQUIRE(::poll(&p, 1, 5000) == 1);
+        if (::send(hog, request.data(), request.size(), MSG_NOSIGNAL) < 0) break;
+    }
+    CHECK(s.server->counters().dropped_unread == 1);
+    ::close(hog);
+}
+
+TEST_CASE("a slow writer cannot hold the server: abort is answered at once, the half-sent request times out",
+          "[daemon][api][hardening]") {
+    ServedFixture s([](ControlOptions& o) { o.request_timeout_s = 0.3; });
+    const int slow = connect_unix(s.options.socket_path, false);
+    REQUIRE(slow >= 0);
+    const std::string half = "{\"cmd\":\"sta";
+    REQUIRE(::send(slow, half.data(), half.size(), MSG_NOSIGNAL) == ssize_t(half.size()));
+    nlohmann::json reply;
+    CHECK(timed_abort(s.options.socket_path, s.options.token, reply) < 1.0);
+    CHECK(reply["ok"] == true);
+    const std::string last_word = read_until_closed(slow, 5.0);
+    CHECK(last_word.find("request not completed within 0.3 s") != std::string::npos);
+    CHECK(s.server->counters().timed_out == 1);
+    ::close(slow);
+}
+
+TEST_CASE("idle clients beyond the cap make room for a new one, which is served; busy slots refuse with a reason",
+          "[daemon][api][hardening]") {
+    ServedFixture s([](ControlOptions& o) { o.max_clients = 8; });
+    std::vector<int> idle;
+    for (int i = 0; i < 20; ++i) idle.push_back(connect_unix(s.options.socket_path, false));
+    nlohmann::json reply;
+    CHECK(timed_abort(s.options.socket_path, s.options.token, reply) < 1.0);
+    CHECK(reply["ok"] == true);
+    const auto c = s.server->counters();
+    CHECK(c.max_clients == 8);
+    CHECK(c.connected <= 8);
+    CHECK(c.evicted_idle >= 13);
+    // The first idle client was let go with a reason.
+    CHECK(read_until_closed(idle.front(), 5.0).find("disconnected to make room") != std::string::npos);
+    for (int fd : idle) ::close(fd);
+}
+
+TEST_CASE("when every slot is busy mid-request, a new client is refused with the reason", "[daemon][api][hardening]") {
+    ServedFixture s([](ControlOptions& o) { o.max_clients = 8; });
+    // Each sends a whole request and the first byte of the next in one write, and reads the reply:
+    // once it has, the server holds that client's half-sent request.
+    std::vector<int> busy;
+    for (int i = 0; i < 8; ++i) {
+        busy.push_back(connect_unix(s.options.socket_path, false));
+        const std::string bytes = "{\"cmd\":\"live\"}\n{";
+        REQUIRE(::send(busy.back(), bytes.data(), bytes.size(), MSG_NOSIGNAL) == ssize_t(bytes.size()));
+        std::string line;
+        char ch = 0;
+        while (::read(busy.back(), &ch, 1) == 1 && ch != '\n') line += ch;
+        REQUIRE(line.find("\"ok\":true") != std::string::npos);
+    }
+    const int ninth = connect_unix(s.options.socket_path, false);
+    CHECK(read_until_closed(ninth, 5.0).find("refused: 8 clients are connected and busy") != std::string::npos);
+    CHECK(s.server->counters().refused_full == 1);
+    ::close(ninth);
+    for (int fd : busy) ::close(fd);
+}
+
+TEST_CASE("an idle client is disconnected after idle_timeout_s", "[daemon][api][hardening]") {
+    ServedFixture s([](ControlOptions& o) { o.idle_timeout_s = 0.3; });
+    const int fd = connect_unix(s.options.socket_path, false);
+    const std::string said = read_until_closed(fd, 5.0);
+    CHECK(said.find("idle for 0.3 s; disconnected") != std::string::npos);
+    ::close(fd);
+}
+
+TEST_CASE("the CLI's call gives up after its timeout and says what it waited for", "[daemon][api][hardening]") {
+    DaemonFixture f;
+    // A socket that listens but never answers: a hung daemon.
+    const fs::path path = f.dir() / "hung.sock";
+    const int listener = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
+    REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+    REQUIRE(::listen(listener, 4) == 0);
+    const auto t0 = clock_type::now();
+    try {
+        call_daemon(path, {{"cmd", "abort"}}, 0.3);
+        FAIL("no timeout");
+    } catch (const manikind::UserError& e) {
+        CHECK(std::string(e.what()).find("within 0.3 s: waited for its reply ('abort')") != std::string::npos);
+    }
+    CHECK(std::chrono::duration<double>(clock_type::now() - t0).count() < 3.0);
+    ::close(listener);
+}
+
+TEST_CASE("a second daemon on the same database or socket is refused with the holder's PID; the first is unharmed",
+          "[daemon][lock][hardening]") {
+    ServedFixture first;
+    const std::string pid = std::to_string(::getpid());
+    // Same database, another socket.
+    try {
+        auto c = manikind::config::default_config();
+        c.database = first.fixture.dir() / "test.db";
+        c.simulation.runtime_dir = (first.fixture.dir() / "sim2").string();
+        c.log_level = "error";
+        manikind::LabDaemon second({c, true, 1.0});
+        FAIL("the second daemon opened the first one's database");
+    } catch (const manikind::UserError& e) {
+        CHECK(std::string(e.what()).find("database") != std::string::npos);
+        CHECK(std::string(e.what()).find("in use by another manikind (PID " + pid) != std::string::npos);
+    }
+    // Same socket, another database.
+    DaemonFixture other;
+    ControlOptions o = first.options;
+    ControlServer second(other.daemon(), o);
+    CHECK_THROWS_WITH(second.start(), Catch::Contains("control socket") && Catch::Contains("PID " + pid));
+    // The first still answers, and its trial was not marked interrupted.
+    const auto status = call_daemon(first.options.socket_path, {{"cmd", "status"}}, 5.0);
+    CHECK(status["ok"] == true);
+    CHECK(status["status"]["campaign"] == "hardening");
+    CHECK(fs::exists(first.options.socket_path));
+}
+
+TEST_CASE("a stale socket is replaced; a live one or a file that is not a socket never is", "[daemon][lock][hardening]") {
+    DaemonFixture f;
+    ControlOptions o;
+    o.token = random_token();
+    SECTION("stale: a socket file no one listens on") {
+        o.socket_path = f.dir() / "stale.sock";
+        const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+        sockaddr_un addr{};
+        addr.sun_family = AF_UNIX;
+        std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", o.socket_path.c_str());
+        REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+        ::close(fd);  // the killed daemon's leftover
+        ControlServer server(f.daemon(), o);
+        server.start();
+        CHECK(call_daemon(o.socket_path, {{"cmd", "status"}}, 5.0)["ok"] == true);
+    }
+    SECTION("live: another program listens there") {
+        o.socket_path = f.dir() / "live.sock";
+        const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+        sockaddr_un addr{};
+        addr.sun_family = AF_UNIX;
+        std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", o.socket_path.c_str());
+        REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+        REQUIRE(::listen(fd, 4) == 0);
+        ControlServer server(f.daemon(), o);
+        CHECK_THROWS_WITH(server.start(), Catch::Contains("another process answers on"));
+        CHECK(fs::is_socket(o.socket_path));
+        ::close(fd);
+    }
+    SECTION("a regular file") {
+        o.socket_path = f.dir() / "notes.txt";
+        std::ofstream(o.socket_path) << "keep me\n";
+        ControlServer server(f.daemon(), o);
+        CHECK_THROWS_WITH(server.start(), Catch::Contains("exists and is not a socket"));
+        std::ifstream in(o.socket_path);
+        std::string line;
+        std::getline(in, line);
+        CHECK(line == "keep me");
+    }
+}
+
+TEST_CASE("the token file is never written through a symlink nor kept readable by others", "[daemon][token][hardening]") {
+    DaemonFixture f;
+    const fs::path socket = f.dir() / "t.sock";
+    const fs::path token_file = f.dir() / "t.sock.token";
+    SECTION("a symlink at the token path: its target is untouched") {
+        const fs::path target = f.dir() / "victim";
+        std::ofstream(target) << "precious\n";
+        fs::permissions(target, fs::perms(0644));
+        fs::create_symlink(target, token_file);
+        CHECK_THROWS_WITH(manikind::load_or_create_token("", socket), Catch::Contains("symbolic link"));
+        std::ifstream in(target);
+        std::string line;
+        std::getline(in, line);
+        CHECK(line == "precious");
+        CHECK((fs::status(target).permissions() & fs::perms::all) == fs::perms(0644));
+    }
+    SECTION("a 0644 file at the token path: refused, neither written nor widened") {
+        std::ofstream(token_file) << "old\n";
+        fs::permissions(token_file, fs::perms(0644));
+        CHECK_THROWS_WITH(manikind::load_or_create_token("", socket), Catch::Contains("mode 0644"));
+        std::ifstream in(token_file);
+        std::string line;
+        std::getline(in, line);
+        CHECK(line == "old");
+        CHECK((fs::status(token_file).permissions() & fs::perms::all) == fs::perms(0644));
+    }
+    SECTION("no file, or the daemon's own 0600 file: a fresh 0600 token") {
+        const std::string first = manikind::load_or_create_token("", socket);
+        CHECK(first.size() == 64);
+        CHECK((fs::symlink_status(token_file).permissions() & fs::perms::all) == fs::perms(0600));
+        const std::string second = manikind::load_or_create_token("", socket);
+        CHECK(second != first);
+        CHECK(manikind::read_token_file(socket) == second);
+        CHECK((fs::symlink_status(token_file).permissions() & fs::perms::all) == fs::perms(0600));
+    }
+}
+
+TEST_CASE("the database and its WAL are created 0640 or tighter", "[daemon][hardening]") {
+    DaemonFixture f;
+    f.daemon().step_virtual(10.0);
+    for (const char* name : {"test.db", "test.db-wal"}) {
+        const fs::path p = f.dir() / name;
+        REQUIRE(fs::exists(p));
+        const auto mode = static_cast<unsigned>(fs::status(p).permissions() & fs::perms::all);
+        INFO(name << " mode " << std::oct << mode);
+        CHECK((mode & 0027u) == 0u);
+    }
+}
