@@ -6,6 +6,7 @@
 // Under systemd (Type=notify) it says READY=1 once the socket listens, and feeds the watchdog
 // only while both its acquisition tick and its control server are alive, so a hung daemon is
 // restarted.
+#include <algorithm>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -121,7 +122,7 @@ int main(int argc, char** argv) {
             daemon.start_realtime();
             for (;;) {
                 pollfd p{sig_fd, POLLIN, 0};
-                ::poll(&p, 1, 500);
+                ::poll(&p, 1, watchdog ? static_cast<int>(std::clamp<std::uint64_t>(watchdog_usec / 3000, 10, 500)) : 500);
                 feed_watchdog();
                 if (signalled() || server.shutdown_requested()) break;
                 if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;

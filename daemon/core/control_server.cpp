@@ -388,9 +388,12 @@ void ControlServer::start() {
     }
 
     // Leave descriptors for the drivers (reconnects), SQLite and the recorder: clients never take the last ones.
-    rlimit nofile{};
-    ::getrlimit(RLIMIT_NOFILE, &nofile);
-    const long budget = static_cast<long>(nofile.rlim_cur) - count_open_fds() - 32;
+    // (getrlimit is prlimit64, which a seccomp filter may refuse: then the configured cap stands.)
+    rlimit nofile{RLIM_INFINITY, RLIM_INFINITY};
+    if (::getrlimit(RLIMIT_NOFILE, &nofile) != 0) nofile.rlim_cur = RLIM_INFINITY;
+    const long budget = nofile.rlim_cur == RLIM_INFINITY
+                            ? static_cast<long>(s.o.max_clients)
+                            : static_cast<long>(nofile.rlim_cur) - count_open_fds() - 32;
     s.counters.max_clients = static_cast<std::size_t>(std::max(2L, std::min(static_cast<long>(s.o.max_clients), budget)));
     if (s.counters.max_clients < s.o.max_clients)
         spdlog::warn("control API: at most {} clients (api.max_clients {}), to fit the open-file limit of {}",

@@ -321,3 +321,90 @@ TEST_CASE("the database and its WAL are created 0640 or tighter", "[daemon][hard
         CHECK((mode & 0027u) == 0u);
     }
 }
+
+namespace {
+const std::string daemon_bin = std::string(MANIKIND_BIN_DIR) + "/manikind";
+
+fs::path fresh_dir(const std::string& name) {
+    const fs::path dir = fs::temp_directory_path() / fmt::format("manikind-{}-{}", name, ::getpid());
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    return dir;
+}
+
+std::string slurp(const fs::path& p) {
+    std::ifstream in(p);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+}  // namespace
+
+TEST_CASE("a second manikind process on the same database or socket exits with the first one's PID and touches "
+          "nothing of it",
+          "[daemon][lock][hardening]") {
+    const fs::path dir = fresh_dir("two-daemons");
+    auto first = DaemonProcess::spawn({daemon_bin, "--socket", (dir / "a.sock").string(), "--database",
+                                       (dir / "a.db").string(), "--campaign", "builtin:table-s3"});
+    REQUIRE(first.read_until("control socket"));
+    const std::string token_before = slurp(dir / "a.sock.token");
+    const std::string holder = "in use by another manikind (PID " + std::to_string(first.pid());
+
+    auto same_db = DaemonProcess::spawn({daemon_bin, "--socket", (dir / "b.sock").string(), "--database",
+                                         (dir / "a.db").string()});
+    const int db_status = same_db.wait();
+    CHECK(WEXITSTATUS(db_status) == 2);
+    CHECK(same_db.output().find("the database " + (dir / "a.db").string() + " is " + holder) != std::string::npos);
+
+    auto same_socket = DaemonProcess::spawn({daemon_bin, "--socket", (dir / "a.sock").string(), "--database",
+                                             (dir / "b.db").string()});
+    const int socket_status = same_socket.wait();
+    CHECK(WEXITSTATUS(socket_status) == 2);
+    CHECK(same_socket.output().find("the control socket " + (dir / "a.sock").string() + " is " + holder) != std::string::npos);
+    CHECK_FALSE(fs::exists(dir / "b.db"));                  // refused before it made a database
+    CHECK(slurp(dir / "a.sock.token") == token_before);     // nor replaced the first one's token
+
+    // The first is unharmed: it answers, and its trial is still the live one.
+    const auto status = call_daemon(dir / "a.sock", {{"cmd", "status"}}, 5.0);
+    CHECK(status["status"]["campaign"] == "table-s3");
+    CHECK(WEXITSTATUS(first.terminate()) == 0);
+    fs::remove_all(dir);
+}
+
+TEST_CASE("under systemd the daemon says READY=1 once its socket answers, feeds the watchdog, and says STOPPING=1",
+          "[daemon][systemd][hardening]") {
+    const fs::path dir = fresh_dir("notify");
+    const fs::path notify = dir / "notify.sock";
+    const int listener = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", notify.c_str());
+    REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+    DaemonProcess::Options env;
+    env.env = {{"NOTIFY_SOCKET", notify.string()}, {"WATCHDOG_USEC", "300000"}};
+    auto d = DaemonProcess::spawn({daemon_bin, "--socket", (dir / "d.sock").string(), "--database", (dir / "d.db").string()},
+                                  env);
+    auto next_message = [&] {
+        pollfd p{listener, POLLIN, 0};
+        REQUIRE(::poll(&p, 1, 20000) == 1);
+        char buf[4096];
+        const ssize_t n = ::recv(listener, buf, sizeof buf, 0);
+        REQUIRE(n > 0);
+        return std::string(buf, static_cast<std::size_t>(n));
+    };
+    const std::string ready = next_message();
+    CHECK(ready.rfind("READY=1", 0) == 0);
+    CHECK(call_daemon(dir / "d.sock", {{"cmd", "status"}}, 5.0)["ok"] == true);  // ready means reachable
+    int pings = 0;
+    while (pings < 3) {
+        const std::string m = next_message();
+        REQUIRE(m == "WATCHDOG=1");
+        ++pings;
+    }
+    ::kill(d.pid(), SIGTERM);
+    std::string m;
+    do m = next_message();
+    while (m == "WATCHDOG=1");
+    CHECK(m == "STOPPING=1");
+    CHECK(WEXITSTATUS(d.wait()) == 0);
+    ::close(listener);
+    fs::remove_all(dir);
+}
