@@ -15,6 +15,7 @@
 #include <fmt/core.h>
 #include <spdlog/spdlog.h>
 
+#include "daemon/core/config.hpp"
 #include "daemon/core/control_api.hpp"
 #include "daemon/core/lab_daemon.hpp"
 #include "daemon/core/logging.hpp"
@@ -51,7 +52,11 @@ int main(int argc, char** argv) {
         config::Config cfg = config_file.empty() ? config::default_config() : config::load_config(config_file);
         for (const auto& w : cfg.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
         if (!database.empty()) cfg.database = database;
-        if (!socket.empty()) cfg.api.socket = socket;
+        if (!socket.empty()) {
+            cfg.api.socket = socket;
+            cfg.key_where["api.socket"] = "--socket";  // problems with it are the option's, not the file's
+        }
+        config::require_valid(cfg);  // the same check as `manikin config check`
         set_log_level(cfg.log_level);
         if (virtual_clock && cfg.mode != "simulated") throw UserError("--virtual needs mode = \"simulated\"");
         LabDaemon daemon({cfg, virtual_clock, speed});
