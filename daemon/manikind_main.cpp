@@ -23,6 +23,7 @@
 #include <fmt/core.h>
 #include <spdlog/spdlog.h>
 
+#include "daemon/core/config.hpp"
 #include "daemon/core/control_api.hpp"
 #include "daemon/core/lab_daemon.hpp"
 #include "daemon/core/logging.hpp"
@@ -61,12 +62,18 @@ int main(int argc, char** argv) {
         config::Config cfg = config_file.empty() ? config::default_config() : config::load_config(config_file);
         for (const auto& w : cfg.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
         if (!database.empty()) cfg.database = database;
-        if (!socket.empty()) cfg.api.socket = socket;
+        if (!socket.empty()) {
+            cfg.api.socket = socket;
+            cfg.key_where["api.socket"] = "--socket";  // problems with it are the option's, not the file's
+        }
+        config::require_valid(cfg);  // the same check as `manikin config check`
         set_log_level(cfg.log_level);
         if (virtual_clock && cfg.mode != "simulated") throw UserError("--virtual needs mode = \"simulated\"");
         ControlOptions api;
         api.socket_path = cfg.api.socket;
         api.tcp_port = static_cast<int>(cfg.api.tcp_port);
+        api.max_clients = static_cast<std::size_t>(cfg.api.max_clients);
+        api.idle_timeout_s = cfg.api.idle_timeout_s;
         // One daemon per socket, decided first: a refused second daemon touches no database and
         // no token file of the first.
         InstanceLock socket_lock = InstanceLock::acquire(api.socket_path, "control socket");

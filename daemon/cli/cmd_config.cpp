@@ -1,6 +1,9 @@
-// `manikin config check|show`: validate a configuration file before a lab relies on it.
+// `manikin config check|show|token`: validate a configuration file before a lab relies on it.
+#include <array>
 #include <cstdio>
+#include <fstream>
 #include <memory>
+#include <random>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -28,7 +31,25 @@ nlohmann::json to_json(const config::Config& c) {
             {"steady_state", {{"window_min", c.steady_state.window_s / 60.0},
                               {"max_skin_fluctuation_c", c.steady_state.max_skin_fluctuation_c}}},
             {"instruments", instruments},
+            {"api", {{"socket", c.api.socket}, {"tcp_port", c.api.tcp_port}, {"max_clients", c.api.max_clients},
+                     {"idle_timeout_s", c.api.idle_timeout_s}, {"token_set", !c.api.token.empty()}}},
             {"warnings", c.warnings}};
+}
+
+// 32 random bytes as 64 hex characters: 256 bits, far above what token_problem asks for.
+std::string random_token() {
+    std::array<unsigned char, 32> bytes{};
+    std::ifstream urandom("/dev/urandom", std::ios::binary);
+    if (!urandom.read(reinterpret_cast<char*>(bytes.data()), bytes.size())) {
+        std::random_device rd;
+        for (auto& b : bytes) b = static_cast<unsigned char>(rd() & 0xff);
+    }
+    std::string hex;
+    for (const unsigned char b : bytes) {
+        hex += "0123456789abcdef"[b >> 4];
+        hex += "0123456789abcdef"[b & 0x0f];
+    }
+    return hex;
 }
 
 }  // namespace
@@ -38,21 +59,25 @@ void add_config_command(CLI::App& app) {
     cmd->require_subcommand(1);
     auto file = std::make_shared<std::string>();
     auto json = std::make_shared<bool>(false);
-    auto* check = cmd->add_subcommand("check", "Parse a file; errors name file:line:column and the key");
+    auto* check = cmd->add_subcommand("check", "Parse and validate a file as manikind does at start (register maps, "
+                                                  "faults, socket path, real-mode keys, token); errors name file:line:column and the key");
     check->add_option("file", *file, "Configuration file")->required();
     check->add_flag("--json", *json, "Print the effective configuration as JSON");
     check->callback([file, json] {
         const auto c = config::load_config(*file);
+        for (const auto& w : c.warnings) spdlog::warn("{}", w);
+        config::require_valid(c);  // the daemon's own start-up check: the two never disagree
         if (*json) {
             std::printf("%s\n", to_json(c).dump(2).c_str());
             return;
         }
-        for (const auto& w : c.warnings) spdlog::warn("{}", w);
         std::printf("%s: ok (%s lab '%s', %zu instrument specs, %zu warnings)\n", file->c_str(), c.mode.c_str(),
                     c.lab_name.c_str(), c.instruments.size(), c.warnings.size());
     });
     auto* show = cmd->add_subcommand("show", "Print the built-in default configuration (the simulated lab)");
     show->callback([] { std::printf("%s", config::default_config_toml()); });
+    auto* token = cmd->add_subcommand("token", "Print a new random API token (64 hex characters) for [api] token");
+    token->callback([] { std::printf("%s\n", random_token().c_str()); });
 }
 
 }  // namespace manikind::cli

@@ -1,5 +1,7 @@
 #include "daemon/core/config.hpp"
 
+#include <sys/stat.h>
+
 #include <set>
 
 #include <fmt/core.h>
@@ -102,6 +104,18 @@ public:
         }
     }
 
+    // Every key in the text and where it is, so later checks can name the line.
+    void record_positions(const toml::table& table, const std::string& path) {
+        for (const auto& [key, node] : table) {
+            const std::string full = path.empty() ? std::string(key.str()) : path + "." + std::string(key.str());
+            out_.key_where[full] = where(source_, node.source());
+            if (const auto* t = node.as_table()) record_positions(*t, full);
+            if (const auto* a = node.as_array())
+                for (std::size_t i = 0; i < a->size(); ++i)
+                    out_.key_where[fmt::format("{}[{}]", full, i)] = where(source_, (*a)[i].source());
+        }
+    }
+
 private:
     const toml::table& root_;
     std::string source_;
@@ -124,7 +138,11 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
     const toml::table root = toml_input::parse(toml_text, source_name);
     Config c = base;
     c.warnings.clear();
+    c.key_where.clear();
+    c.source_name = source_name;
+    c.file_mode = 0;
     Reader r(root, source_name, c);
+    r.record_positions(root, "");
     if (const auto* lab = r.table(root, "", "lab")) {
         r.text(*lab, "lab", "name", c.lab_name);
         r.text(*lab, "lab", "mode", c.mode, {"simulated", "real"});
@@ -218,16 +236,20 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*a, "api", "socket", c.api.socket);
         r.number(*a, "api", "tcp_port", c.api.tcp_port, 0, 65535, "");
         r.text(*a, "api", "token", c.api.token);
+        r.number(*a, "api", "max_clients", c.api.max_clients, 1, 4096, "clients");
+        r.number(*a, "api", "idle_timeout_s", c.api.idle_timeout_s, 1, 86400, "s");
     }
     r.warn_unknown(root, "");
     return c;
 }
 
 Config load_config(const std::filesystem::path& path) {
-    const auto text = toml_input::read_file(path);
-    if (!text) throw UserError(fmt::format("{}: cannot open the configuration file", path.string()));
-    Config c = parse_config(*text, path.string());
+    const std::string text = toml_input::read_text_file(path, "a TOML configuration file");
+    Config c = parse_config(text, path.string());
     c.source_dir = path.parent_path();
+    // Kept for validate(): a file holding the API token must not be readable by every user.
+    struct stat st {};
+    if (::stat(path.c_str(), &st) == 0) c.file_mode = static_cast<unsigned>(st.st_mode & 07777);
     return c;
 }
 

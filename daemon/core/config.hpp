@@ -74,6 +74,8 @@ struct ApiConfig {
     std::string socket = "manikind.sock";   // Unix socket, mode 0660; relative: from the working directory
     double tcp_port = 0;                     // 0: off; else listens on 127.0.0.1 only
     std::string token;                       // empty: the daemon makes one and writes <socket>.token (0600)
+    double max_clients = 64;                 // simultaneous control connections (the longest idle makes room)
+    double idle_timeout_s = 120;             // a client silent this long is disconnected
 };
 
 struct Config {
@@ -89,6 +91,11 @@ struct Config {
     ApiConfig api;
     std::filesystem::path source_dir;      // relative paths in the file resolve from here
     std::vector<std::string> warnings;     // unknown keys and similar, with file:line
+    // Where each key present in the text was: "devices.chamber.register_map" -> "file:line:column";
+    // array elements as "simulation.faults[0]". Validation names file, line and key from here.
+    std::map<std::string, std::string> key_where;
+    std::string source_name;               // the file in messages (empty: nothing parsed yet)
+    unsigned file_mode = 0;                // permission bits of the file load_config read (0: not from a file)
 };
 
 // The text of config/manikind.toml, embedded at build time (CMake writes it into the build tree).
@@ -102,7 +109,22 @@ Config default_config();
 Config parse_config(const std::string& toml_text, const std::string& source_name);
 Config parse_config(const std::string& toml_text, const std::string& source_name, const Config& base);
 
-// Reads and parses a file. Throws manikind::UserError (missing file, syntax, types, ranges).
+// Reads and parses a file. Throws manikind::UserError (missing file, syntax, types, ranges;
+// a directory, device or a file over 1 MiB is refused before it is read).
 Config load_config(const std::filesystem::path& path);
+
+// Everything the daemon would refuse at start, beyond what parsing already refused: register
+// maps that do not load, world effects and faults that do not parse, a control socket path too
+// long for sockaddr_un, missing keys in mode = "real", a weak API token, a token in a file others
+// can read. One message per problem, each naming file:line:column and the key; empty: fine.
+// `manikin config check` and manikind both call this, so the two never disagree.
+std::vector<std::string> validate(const Config& c);
+
+// Throws manikind::UserError with every problem validate() finds, one per line.
+void require_valid(const Config& c);
+
+// Why a control API token is too weak (placeholder, short, low entropy), with how to make a good
+// one; empty when it is fine.
+std::string token_problem(const std::string& token);
 
 }  // namespace manikind::config

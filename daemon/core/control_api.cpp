@@ -129,9 +129,6 @@ bool wait_for(int fd, short events, client_clock::time_point deadline) {
     }
 }
 
-// INTERIM until config::token_problem lands.
-std::string interim_token_problem(const std::string& t) { return t.size() < 24 ? "too short" : ""; }
-
 }  // namespace
 
 nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohmann::json& request, double timeout_s) {
@@ -218,7 +215,7 @@ std::string read_token_file(const std::filesystem::path& socket_path) {
 
 std::string load_or_create_token(const std::string& configured, const std::filesystem::path& socket_path) {
     if (!configured.empty()) {
-        if (const auto why = interim_token_problem(configured); !why.empty()) throw UserError("[api] token: " + why);
+        if (const auto why = config::token_problem(configured); !why.empty()) throw UserError("[api] token: " + why);
         return configured;
     }
     unsigned char bytes[32];

@@ -113,9 +113,7 @@ RegisterMap parse_register_map(const std::string& text, const std::string& sourc
 }
 
 RegisterMap load_register_map(const std::filesystem::path& path) {
-    const auto text = toml_input::read_file(path);
-    if (!text) throw UserError(fmt::format("{}: cannot open the register map", path.string()));
-    return parse_register_map(*text, path.string());
+    return parse_register_map(toml_input::read_text_file(path, "a TOML register map"), path.string());
 }
 
 RegisterMap register_map_from_setting(const std::string& setting, const std::string& device,

@@ -408,3 +408,54 @@ TEST_CASE("under systemd the daemon says READY=1 once its socket answers, feeds 
     ::close(listener);
     fs::remove_all(dir);
 }
+
+TEST_CASE("300 idle clients against a daemon limited to 128 open files: abort answered within a second, CPU stays "
+          "low, the instruments stay connected",
+          "[daemon][api][hardening]") {
+    const fs::path dir = fresh_dir("idle-300");
+    const std::string token = random_token();
+    const fs::path cfg = dir / "lab.toml";
+    std::ofstream(cfg) << fmt::format("[lab]\ndatabase = \"{}\"\n[api]\nsocket = \"{}\"\ntoken = \"{}\"\nidle_timeout_s = 2\n"
+                                      "[simulation]\nruntime_dir = \"{}\"\n",
+                                      (dir / "d.db").string(), (dir / "d.sock").string(), token, (dir / "sim").string());
+    fs::permissions(cfg, fs::perms(0600));
+    DaemonProcess::Options limited;
+    limited.max_open_files = 128;
+    auto d = DaemonProcess::spawn({daemon_bin, "--config", cfg.string(), "--campaign", "builtin:table-s3"}, limited);
+    REQUIRE(d.read_until("control socket"));
+
+    rlimit mine{};
+    ::getrlimit(RLIMIT_NOFILE, &mine);
+    mine.rlim_cur = mine.rlim_max;
+    ::setrlimit(RLIMIT_NOFILE, &mine);
+    REQUIRE(mine.rlim_cur >= 400);
+
+    const double cpu0 = d.cpu_seconds();
+    const auto t0 = clock_type::now();
+    std::vector<int> clients;
+    int refused_by_backlog = 0;
+    for (int i = 0; i < 300; ++i) {
+        const int fd = connect_unix(dir / "d.sock", true);
+        if (fd == -EAGAIN) ++refused_by_backlog;
+        else if (fd >= 0) clients.push_back(fd);
+    }
+    CHECK(refused_by_backlog == 0);  // the backlog (4096) holds them while the server accepts
+    nlohmann::json reply;
+    CHECK(timed_abort(dir / "d.sock", token, reply) < 1.0);
+    CHECK(reply["ok"] == true);
+    // Wait for a real event: the newest idle client timed out by the daemon (2 s). Over that
+    // time a daemon spinning on accept would burn a whole core.
+    REQUIRE(!clients.empty());
+    CHECK(read_until_closed(clients.back(), 15.0).find("idle for 2 s") != std::string::npos);
+    const double cpu_fraction = (d.cpu_seconds() - cpu0) / std::chrono::duration<double>(clock_type::now() - t0).count();
+    INFO("daemon CPU " << cpu_fraction * 100 << " % of one core");
+    CHECK(cpu_fraction < 0.25);
+    const auto status = call_daemon(dir / "d.sock", {{"cmd", "status"}}, 5.0);
+    for (const auto& dev : status["status"]["devices"]) {
+        INFO(dev["name"]);
+        CHECK(dev["connected"] == true);
+    }
+    for (int fd : clients) ::close(fd);
+    CHECK(WEXITSTATUS(d.terminate()) == 0);
+    fs::remove_all(dir);
+}
