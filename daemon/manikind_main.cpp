@@ -21,6 +21,7 @@
 
 #include <CLI/CLI.hpp>
 #include <fmt/core.h>
+#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
 #include "daemon/core/config.hpp"
@@ -28,6 +29,30 @@
 #include "daemon/core/lab_daemon.hpp"
 #include "daemon/core/logging.hpp"
 #include "daemon/core/user_error.hpp"
+
+namespace {
+
+// What `manikin results` prints, so a batch run ends with its answer and not only "stopping".
+void print_results_summary(manikind::LabDaemon& daemon, const std::string& campaign) {
+    try {
+        const auto r = daemon.results_json(campaign);
+        std::printf("results of campaign %s (whole body, 95 %% CI over replicates)\n  case  n   Q_WB W/m²   95 %% CI\n",
+                    campaign.c_str());
+        const nlohmann::json none = nlohmann::json::object();
+        for (const auto& c : r.contains("cases") ? r["cases"] : nlohmann::json::array()) {
+            const auto& wb = c.contains("whole_body") ? c["whole_body"] : none;
+            std::printf("  %4d  %d  %9.2f   [%.2f, %.2f]\n", c.value("case", 0), c.value("n_replicates", 0), wb.value("q_w_m2", 0.0),
+                        wb.value("ci_low_w_m2", 0.0), wb.value("ci_high_w_m2", 0.0));
+        }
+        if (const auto ex = r.find("excluded_trials"); ex != r.end() && ex->is_array() && !ex->empty())
+            std::printf("  %zu trial(s) excluded (see `manikin results --json`)\n", ex->size());
+    } catch (const std::exception& e) {
+        std::printf("no results for campaign %s: %s\n", campaign.c_str(), e.what());
+    }
+    std::fflush(stdout);
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
     using namespace manikind;
@@ -100,9 +125,11 @@ int main(int argc, char** argv) {
             ::sd_notify(0, "WATCHDOG=1");
             last_ping = now;
         };
+        std::string campaign_name;
         if (!campaign.empty()) {
             CampaignPlan plan = load_campaign_plan(campaign);
             if (const auto why = daemon.start_campaign(plan); !why.empty()) throw UserError(why);
+            campaign_name = plan.name;
         }
         auto signalled = [&] {
             signalfd_siginfo si{};
@@ -135,6 +162,7 @@ int main(int argc, char** argv) {
                 if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;
             }
         }
+        if (exit_when_done && !campaign_name.empty() && !daemon.campaign_active()) print_results_summary(daemon, campaign_name);
         ::sd_notify(0, "STOPPING=1");
         std::printf("manikind: stopping\n");
         server.stop();

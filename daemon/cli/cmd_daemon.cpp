@@ -1,7 +1,11 @@
 // The `manikin` commands that talk to a running daemon over its control socket, and the ones that
-// read its database: status, campaign run|abort|pause|resume, setpoint, trial watch, results,
-// export.
+// read its database: status, live, campaign run|abort|pause|resume|check, setpoint, trial watch,
+// results, campaigns, export.
+#include <unistd.h>
+
+#include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -13,6 +17,9 @@
 #include <nlohmann/json.hpp>
 
 #include "analysis/analyze.hpp"
+#include "daemon/core/campaign_plan.hpp"
+#include "daemon/core/config.hpp"
+#include "daemon/core/toml_input.hpp"
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/control_api.hpp"
 #include "daemon/core/database_export.hpp"
@@ -53,8 +60,50 @@ nlohmann::json call(const Conn& c, nlohmann::json req, bool mutating) {
 }
 
 std::string bar(double fraction, int width = 30) {
-    const int filled = static_cast<int>(std::clamp(fraction, 0.0, 1.0) * width + 0.5);
+    const int filled = static_cast<int>(std::floor(std::clamp(fraction, 0.0, 1.0) * width));  // full only at 1
     return "[" + std::string(static_cast<std::size_t>(filled), '#') + std::string(static_cast<std::size_t>(width - filled), '.') + "]";
+}
+
+// "2026-11-03 14:05:09" (UTC) from nanoseconds since the epoch.
+std::string utc_text(std::int64_t utc_ns) {
+    const std::time_t t = static_cast<std::time_t>(utc_ns / 1'000'000'000);
+    std::tm tm{};
+    ::gmtime_r(&t, &tm);
+    char buf[32];
+    std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
+    return buf;
+}
+
+// "12.34" or "—" for a JSON null (a channel not yet seen, a NaN).
+std::string number_or_dash(const nlohmann::json& v, int decimals) {
+    return v.is_number() ? fmt::format("{:.{}f}", v.get<double>(), decimals) : std::string("—");
+}
+
+std::string age_text(const nlohmann::json& age_s) {
+    return age_s.is_number() ? fmt::format("{:.1f} s ago", age_s.get<double>()) : std::string("never");
+}
+
+// One measured value: "chamber air      35.21 °C  (setpoint 35.30 °C)  good, 0.4 s ago".
+void print_measured(const nlohmann::json& measured) {
+    const struct {
+        const char* key;
+        const char* label;
+        int decimals;
+    } rows[] = {{"chamber_air_temp_c", "chamber air temp", 2}, {"chamber_air_rh_pct", "chamber air RH", 1},
+                {"air_speed_m_s", "air speed", 2},            {"mean_skin_temp_c", "mean skin temp", 2},
+                {"mean_heat_flux_w_m2", "mean heat flux", 1}};
+    for (const auto& row : rows) {
+        if (!measured.contains(row.key)) continue;
+        const auto& m = measured[row.key];
+        const std::string unit = m.value("unit", "");
+        std::string setpoint;
+        if (m.contains("setpoint"))
+            setpoint = m["setpoint"].is_number() ? fmt::format("  (setpoint {} {})", number_or_dash(m["setpoint"], row.decimals), unit)
+                                                 : std::string("  (no setpoint sent)");
+        std::printf("  %-17s %8s %-5s%s  %s, %s  [%s]\n", row.label, number_or_dash(m["value"], row.decimals).c_str(),
+                    unit.c_str(), setpoint.c_str(), m["quality"].is_string() ? m["quality"].get<std::string>().c_str() : "no data",
+                    age_text(m["age_s"]).c_str(), m.value("source", "").c_str());
+    }
 }
 
 void print_status(const nlohmann::json& s) {
@@ -67,13 +116,25 @@ void print_status(const nlohmann::json& s) {
                     s["paused"].get<bool>() ? " (paused)" : "");
     if (s.contains("trial")) {
         const auto& t = s["trial"];
-        std::printf("trial %ld: case %d replicate %d, %.0f s in stage", t["id"].get<long>(), t["case"].get<int>(),
+        std::printf("trial %ld: case %d replicate %d, %.0f s in stage\n", t["id"].get<long>(), t["case"].get<int>(),
                     t["replicate"].get<int>(), t["stage_elapsed_s"].get<double>());
-        if (t.contains("steady_progress"))
-            std::printf("  steady %s %3.0f %%  worst zone range %.3f °C%s", bar(t["steady_progress"].get<double>()).c_str(),
-                        100.0 * t["steady_progress"].get<double>(), t["worst_zone_range_c"].get<double>(),
-                        t["steady"].get<bool>() ? "  STEADY" : "");
-        std::printf("\n");
+        if (t.contains("steady_progress")) {
+            const double progress = t["steady_progress"].get<double>();
+            // Floor, not round: 99.9 % must not print as 100 % while the rule says no.
+            std::printf("  steady %s %3.0f %%%s\n", bar(progress).c_str(), std::floor(100.0 * progress),
+                        t["steady"].get<bool>() ? "  STEADY" : "  not steady");
+            const auto& wz = t["worst_zone"];
+            std::printf("    window filled %3.0f %% of %.0f min; worst zone %s range %s °C (limit < %.3f °C); "
+                        "%.0f of %.0f min\n",
+                        std::floor(100.0 * t["window_filled_fraction"].get<double>()), t["window_s"].get<double>() / 60.0,
+                        wz.is_object() ? fmt::format("{} ({})", wz["zone"].get<int>(), wz["name"].get<std::string>()).c_str() : "—",
+                        number_or_dash(t["worst_zone_range_c"], 3).c_str(), t["limit_c"].get<double>(),
+                        std::floor(t["elapsed_s"].get<double>() / 60.0), t["min_duration_s"].get<double>() / 60.0);
+        }
+    }
+    if (s.contains("measured")) {
+        std::printf("measured:\n");
+        print_measured(s["measured"]);
     }
     std::printf("%-11s %-5s %-5s %9s %6s %6s %6s %6s %6s  %s\n", "device", "conn", "stale", "samples", "cksum", "tmout", "exc",
                 "recon", "faults", "last error");
@@ -127,6 +188,39 @@ void add_daemon_commands(CLI::App& app) {
             if (c->json) std::printf("{\"ok\":true}\n");
             else std::printf("campaign queued; follow it with `manikin trial watch`\n");
         });
+        {
+            auto check_file = std::make_shared<std::string>(), config_file = std::make_shared<std::string>();
+            auto json = std::make_shared<bool>(false);
+            auto* check = campaign->add_subcommand(
+                "check", "Parse a campaign file as the daemon would: unknown keys are errors (file:line:column, "
+                         "with the nearest known key), setpoints checked against [safety]");
+            check->add_option("file", *check_file, "Campaign file")->required();
+            check->add_option("--config", *config_file, "Daemon config whose [safety] limits apply (default: built-in limits)");
+            check->add_flag("--json", *json, "Print the parsed plan as JSON");
+            check->callback([check_file, config_file, json] {
+                const auto text = toml_input::read_file(*check_file);
+                if (!text) throw UserError(fmt::format("{}: cannot open the campaign file", *check_file));
+                const CampaignPlan plan = parse_campaign_plan(*text, *check_file);
+                const auto cfg = config_file->empty() ? config::default_config() : config::load_config(*config_file);
+                if (const auto why = check_plan_against_limits(plan, cfg.safety); !why.empty())
+                    throw UserError(fmt::format("{}: {}", *check_file, why));
+                if (*json) {
+                    nlohmann::json cases = nlohmann::json::array();
+                    for (const auto& pc : plan.cases)
+                        cases.push_back({{"id", pc.id}, {"chamber_temp_c", pc.chamber_temp_c}, {"chamber_rh_pct", pc.chamber_rh_pct},
+                                         {"skin_setpoint_c", pc.skin_setpoint_c}, {"wet", pc.wet},
+                                         {"sweat_rate_g_m2_h", pc.sweat_rate_g_m2_h}});
+                    std::printf("%s\n", nlohmann::json{{"ok", true}, {"name", plan.name}, {"replicates", plan.replicates},
+                                                        {"trial_duration_s", plan.trial_duration_s}, {"cases", cases}}
+                                                .dump(2)
+                                                .c_str());
+                } else {
+                    std::printf("%s: ok: campaign '%s', %zu case(s) x %d replicate(s) = %zu trials of %.0f min\n",
+                                check_file->c_str(), plan.name.c_str(), plan.cases.size(), plan.replicates,
+                                plan.cases.size() * static_cast<std::size_t>(plan.replicates), plan.trial_duration_s / 60.0);
+                }
+            });
+        }
         for (const char* name : {"abort", "pause", "resume"}) {
             auto* sub = campaign->add_subcommand(name, fmt::format("{} the running campaign", name));
             add_conn_options(sub, *c, true);
@@ -157,11 +251,14 @@ void add_daemon_commands(CLI::App& app) {
         add_conn_options(watch, *c, false);
         watch->add_flag("--once", *once, "Print one update and exit");
         watch->callback([c, once] {
-            for (;;) {
+            // Clear the screen only on a terminal; a pipe or a log file gets plain blocks.
+            const bool terminal = ::isatty(STDOUT_FILENO) == 1;
+            for (bool first = true;; first = false) {
                 const auto r = call(*c, {{"cmd", "status"}}, false);
                 if (c->json) std::printf("%s\n", r["status"].dump().c_str());
                 else {
-                    std::printf("\033[H\033[2J");
+                    if (terminal) std::printf("\033[H\033[2J");
+                    else if (!first) std::printf("\n");
                     print_status(r["status"]);
                 }
                 std::fflush(stdout);
@@ -190,6 +287,64 @@ void add_daemon_commands(CLI::App& app) {
                 std::printf("  %4d  %d  %9.2f  %9.2f   [%.2f, %.2f]\n", cs.value("case", 0), cs.value("n_replicates", 0),
                             wb.value("q_w_m2", 0.0), wb.value("U", 0.0), wb.value("ci_low_w_m2", 0.0), wb.value("ci_high_w_m2", 0.0));
             }
+        });
+    }
+    {
+        auto c = std::make_shared<Conn>();
+        auto* cmd = app.add_subcommand("live", "Every live channel of the running daemon: value, unit, quality and age");
+        add_conn_options(cmd, *c, false);
+        cmd->callback([c] {
+            const auto r = call(*c, {{"cmd", "live"}}, false);
+            if (c->json) {
+                std::printf("%s\n", r["live"].dump(2).c_str());
+                return;
+            }
+            std::printf("%-36s %12s %-9s %-12s %10s\n", "channel", "value", "unit", "quality", "age s");
+            for (const auto& [key, ch] : r["live"].items()) {
+                const auto& v = ch["value"];
+                std::printf("%-36s %12s %-9s %-12s %10.1f\n", key.c_str(),
+                            v.is_number() ? fmt::format("{:.4g}", v.get<double>()).c_str() : "—", ch.value("unit", "").c_str(),
+                            ch.value("quality", "").c_str(), ch.value("age_s", 0.0));
+            }
+        });
+    }
+    {
+        auto db = std::make_shared<std::string>("manikind.db");
+        auto json = std::make_shared<bool>(false);
+        auto* cmd = app.add_subcommand("campaigns", "The campaigns in a daemon's database: name, created, trials done/total, state");
+        cmd->add_option("--db", *db, "The daemon's database")->capture_default_str();
+        cmd->add_flag("--json", *json, "Print one JSON array");
+        cmd->callback([db, json] {
+            if (!std::filesystem::exists(*db)) throw UserError(fmt::format("{}: no such database", *db));
+            auto database = recorder::Database::open(*db);
+            nlohmann::json out = nlohmann::json::array();
+            for (const auto& row : database.campaigns()) {
+                // Trials are created as they start, so the total comes from the plan: cases x replicates.
+                const auto definition = nlohmann::json::parse(row.definition_json, nullptr, false);
+                const int replicates = definition.is_object() ? definition.value("replicates", 1) : 1;
+                const auto cases = database.cases(row.id).size();
+                int done = 0, failed = 0;
+                for (const auto& t : database.trials(row.id)) {
+                    if (t.state == "done") ++done;
+                    else if (recorder::is_terminal_trial_state(t.state)) ++failed;
+                }
+                out.push_back({{"name", row.name}, {"created_utc", utc_text(row.created_utc_ns)},
+                               {"created_utc_ns", row.created_utc_ns}, {"trials_done", done}, {"trials_failed_or_aborted", failed},
+                               {"trials_total", static_cast<int>(cases) * replicates}, {"state", row.state}});
+            }
+            if (*json) {
+                std::printf("%s\n", out.dump(2).c_str());
+                return;
+            }
+            if (out.empty()) {
+                std::printf("%s: no campaigns\n", db->c_str());
+                return;
+            }
+            std::printf("%-28s %-20s %11s %6s  %s\n", "campaign", "created (UTC)", "done/total", "failed", "state");
+            for (const auto& r : out)
+                std::printf("%-28s %-20s %5d/%-5d %6d  %s\n", r["name"].get<std::string>().c_str(),
+                            r["created_utc"].get<std::string>().c_str(), r["trials_done"].get<int>(), r["trials_total"].get<int>(),
+                            r["trials_failed_or_aborted"].get<int>(), r["state"].get<std::string>().c_str());
         });
     }
     {

@@ -1,5 +1,10 @@
 #include "daemon/core/campaign_plan.hpp"
 
+#include <algorithm>
+#include <initializer_list>
+#include <string_view>
+#include <vector>
+
 #include <fmt/format.h>
 #include <toml++/toml.h>
 
@@ -18,9 +23,49 @@ CampaignPlan table_s3_plan(const std::string& name) {
     return p;
 }
 
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diagonal = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            const std::size_t up = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diagonal = up;
+        }
+    }
+    return row[b.size()];
+}
+
+namespace {
+
+// A misspelt key would otherwise be silently replaced by its default (replicate = 1 would run 3
+// replicates), so every key the parser does not read is an error, with the nearest known key.
+void refuse_unknown_keys(const toml::table& table, std::initializer_list<std::string_view> known, const std::string& source,
+                         const std::string& prefix) {
+    for (const auto& [key, node] : table) {
+        const std::string_view k = key.str();
+        if (std::find(known.begin(), known.end(), k) != known.end()) continue;
+        std::string_view nearest;
+        std::size_t best = std::string_view::npos;
+        for (const auto candidate : known)
+            if (const auto d = edit_distance(k, candidate); d < best) best = d, nearest = candidate;
+        // Close: at most 2 edits, and fewer than a third of the key (so "id" does not suggest "wet").
+        const bool close = best <= 2 && best * 3 <= std::max(k.size(), nearest.size());
+        throw UserError(fmt::format("{}: {}{}: unknown key{}", toml_input::where(source, key.source()), prefix, k,
+                                    close ? fmt::format(" (did you mean '{}'?)", nearest) : std::string()));
+    }
+}
+
+}  // namespace
+
 CampaignPlan parse_campaign_plan(const std::string& text, const std::string& source) {
     const toml::table root = toml_input::parse(text, source);
     auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
+    refuse_unknown_keys(root,
+                        {"name", "replicates", "trial_duration_min", "settle_window_min", "settle_band_c", "builtin_cases", "cases"},
+                        source, "");
     auto number = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
         const auto* n = t.get(key);
         if (!n) return fallback;
@@ -50,6 +95,8 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
         for (const auto& node : *arr) {
             const auto* t = node.as_table();
             if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
+            refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h"},
+                                source, "cases.");
             PlannedCase c;
             c.id = static_cast<int>(number(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6));
             if (!t->get("chamber_temp_c") || !t->get("chamber_rh_pct"))

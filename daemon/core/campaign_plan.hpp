@@ -3,6 +3,7 @@
 // TOML file or the built-in Table S3 list. Every setpoint is checked against the configured
 // safety limits before anything starts; an error names the file, line and key.
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "daemon/core/config.hpp"
@@ -32,12 +33,16 @@ struct CampaignPlan {
 // The paper's 15 validation cases (Table S3) x 3 replicates.
 CampaignPlan table_s3_plan(const std::string& name);
 
-// `text` is the TOML; `source` names it in messages. "builtin:table-s3" as a file name gives the
+// `text` is the TOML; `source` names it in messages. A key the parser does not know is an error
+// ("file:line:column: key: unknown key (did you mean '...'?)"): the daemon refuses such a plan. "builtin:table-s3" as a file name gives the
 // Table S3 plan. Throws UserError.
 CampaignPlan parse_campaign_plan(const std::string& text, const std::string& source);
 CampaignPlan load_campaign_plan(const std::string& file_or_builtin);
 
 // Empty when every case is inside the limits, else the first violation with the limit named.
+// Levenshtein distance, for "did you mean" suggestions.
+std::size_t edit_distance(std::string_view a, std::string_view b);
+
 std::string check_plan_against_limits(const CampaignPlan& plan, const config::SafetyLimits& limits);
 
 }  // namespace manikind

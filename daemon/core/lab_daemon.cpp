@@ -154,6 +154,29 @@ double LabDaemon::enclosure_air_c() const {
     return n ? sum / n : std::nan("");
 }
 
+LabDaemon::SteadyCheck LabDaemon::check_steady_window_locked(std::int64_t now) {
+    const double window_s = o_.config.steady_state.window_s;
+    SteadyCheck c;
+    const double acquiring_s = static_cast<double>(now - acquiring_since_ns_) * 1e-9;
+    c.window_filled_fraction = window_s > 0 ? std::clamp(acquiring_s / window_s, 0.0, 1.0) : 1.0;
+    bool observed = acquiring_s >= window_s;
+    double worst = -1.0;
+    for (std::size_t i = 0; i < skin_range_.size(); ++i) {
+        auto& r = skin_range_[i];
+        r.evict_before(now - static_cast<std::int64_t>(window_s * 1e9));
+        if (r.empty()) {
+            observed = false;
+        } else if (r.range() > worst) {
+            worst = r.range();
+            c.worst_zone = static_cast<int>(i + 1);
+        }
+    }
+    if (worst >= 0.0) c.worst_zone_range_c = worst;
+    // Methods: "< 0.05 °C", strictly, as the analysis applies it.
+    c.window_steady = observed && worst >= 0.0 && worst < o_.config.steady_state.max_skin_fluctuation_c;
+    return c;
+}
+
 double LabDaemon::stage_elapsed_s() const {
     const std::int64_t now = paused_ ? paused_at_ns_ : clock_->mono_ns();
     return static_cast<double>(now - stage_start_ns_) * 1e-9;
@@ -244,6 +267,8 @@ std::string LabDaemon::set_chamber(double temp_c, double rh_pct) {
                            l.min_chamber_rh_pct, l.max_chamber_rh_pct);
     if (auto why = acq_->chamber().write("air_temp_remote_setpoint_c", temp_c); !why.empty()) return why;
     if (auto why = acq_->chamber().write("air_rh_remote_setpoint_pct", rh_pct); !why.empty()) return why;
+    chamber_setpoint_temp_c_ = temp_c;
+    chamber_setpoint_rh_pct_ = rh_pct;
     event("info", "setpoint", fmt::format("chamber {} °C, {} %", temp_c, rh_pct));
     return {};
 }
@@ -378,15 +403,9 @@ void LabDaemon::tick_locked() {
         }
         case Stage::acquiring: {
             const double window_s = o_.config.steady_state.window_s;
-            double worst = 0.0;
-            bool observed = static_cast<double>(now - acquiring_since_ns_) * 1e-9 >= window_s;
-            for (auto& r : skin_range_) {
-                r.evict_before(now - static_cast<std::int64_t>(window_s * 1e9));
-                if (r.empty()) observed = false;
-                else worst = std::max(worst, r.range());
-            }
-            // Methods: "< 0.05 °C", strictly, as the analysis applies it.
-            const bool steady = observed && worst < o_.config.steady_state.max_skin_fluctuation_c;
+            const SteadyCheck check = check_steady_window_locked(now);
+            const double worst = std::isfinite(check.worst_zone_range_c) ? check.worst_zone_range_c : 0.0;
+            const bool steady = check.window_steady;
             if (steady && !steady_since_ns_) {
                 steady_since_ns_ = now - static_cast<std::int64_t>(window_s * 1e9);
                 steady_seen_at_ns_ = now;
@@ -495,13 +514,38 @@ nlohmann::json LabDaemon::status_json() {
         j["trial"] = {{"case", current_->c.id}, {"replicate", current_->replicate}, {"id", trial_id_},
                       {"stage_elapsed_s", stage_elapsed_s()}};
         if (stage_ == Stage::acquiring) {
-            double worst = 0.0;
-            for (const auto& r : skin_range_)
-                if (!r.empty()) worst = std::max(worst, r.range());
-            const double window = o_.config.steady_state.window_s;
-            j["trial"]["steady_progress"] = std::min(1.0, static_cast<double>(clock_->mono_ns() - acquiring_since_ns_) * 1e-9 / window);
-            j["trial"]["worst_zone_range_c"] = worst;
-            j["trial"]["steady"] = steady_since_ns_.has_value();
+            const SteadyCheck c = check_steady_window_locked(paused_ ? paused_at_ns_ : clock_->mono_ns());
+            const double limit_c = o_.config.steady_state.max_skin_fluctuation_c;
+            const double elapsed_s = stage_elapsed_s();
+            const double min_duration_s = plan_->trial_duration_s;
+            // The rule (Methods): every zone's range over the window below the limit, and the
+            // trial's duration reached.
+            const bool steady = c.window_steady && elapsed_s >= min_duration_s;
+            // Progress is the least-advanced of the rule's three conditions, so the bar cannot be
+            // full while the rule says no.
+            const double range_fraction =
+                !std::isfinite(c.worst_zone_range_c) ? 0.0
+                : c.worst_zone_range_c <= 0.0     ? 1.0
+                                                  : std::min(1.0, limit_c / c.worst_zone_range_c);
+            const double duration_fraction = min_duration_s > 0 ? std::min(1.0, elapsed_s / min_duration_s) : 1.0;
+            double progress = std::min({c.window_filled_fraction, range_fraction, duration_fraction});
+            if (!steady) progress = std::min(progress, 0.999);
+            else progress = 1.0;
+            auto& t = j["trial"];
+            t["window_filled_fraction"] = c.window_filled_fraction;
+            t["window_s"] = o_.config.steady_state.window_s;
+            t["worst_zone_range_c"] = std::isfinite(c.worst_zone_range_c) ? nlohmann::json(c.worst_zone_range_c) : nlohmann::json(nullptr);
+            const auto& zones = analysis::andi35_zone_map().zones;
+            if (c.worst_zone >= 1 && c.worst_zone <= static_cast<int>(zones.size()))
+                t["worst_zone"] = {{"zone", c.worst_zone}, {"name", zones[static_cast<std::size_t>(c.worst_zone - 1)].name}};
+            else
+                t["worst_zone"] = nullptr;
+            t["limit_c"] = limit_c;
+            t["elapsed_s"] = elapsed_s;
+            t["min_duration_s"] = min_duration_s;
+            t["window_steady"] = c.window_steady;
+            t["steady"] = steady;
+            t["steady_progress"] = progress;
         }
     }
     nlohmann::json devices = nlohmann::json::array();
@@ -515,7 +559,53 @@ nlohmann::json LabDaemon::status_json() {
     const auto rs = recorder_->stats();
     j["recorder"] = {{"accepted", rs.accepted}, {"committed", rs.committed}, {"dropped", rs.dropped + dropped_samples_}};
     j["safety_tripped"] = safety_tripped_;
+    j["measured"] = measured_json_locked();
     return j;
+}
+
+// The values an operator watches, from the live channels: each with unit, age and the channel(s)
+// it came from. Mean skin temperature and heat flux are area-weighted over the zones whose last
+// sample is good; their age is the oldest of those samples.
+nlohmann::json LabDaemon::measured_json_locked() const {
+    const std::int64_t now = clock_->mono_ns();
+    auto null_if_nan = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    auto one = [&](const std::string& key, const std::string& unit) {
+        nlohmann::json m = {{"value", nullptr}, {"unit", unit}, {"age_s", nullptr}, {"quality", nullptr}, {"source", key}};
+        if (const auto it = live_.find(key); it != live_.end()) {
+            m["value"] = null_if_nan(it->second.value);
+            m["age_s"] = static_cast<double>(now - it->second.mono_ns) * 1e-9;
+            m["quality"] = drivers::to_string(it->second.quality);
+        }
+        return m;
+    };
+    auto zone_mean = [&](const std::string& suffix, const std::string& unit) {
+        const auto& zones = analysis::andi35_zone_map().zones;
+        double sum = 0, area = 0, oldest_s = 0;
+        std::size_t used = 0;
+        for (const auto& z : zones) {
+            const auto it = live_.find(fmt::format("manikin/z{:02d}.{}", z.zone, suffix));
+            if (it == live_.end() || it->second.quality != drivers::Quality::good || !std::isfinite(it->second.value)) continue;
+            sum += it->second.value * z.area_m2;
+            area += z.area_m2;
+            oldest_s = std::max(oldest_s, static_cast<double>(now - it->second.mono_ns) * 1e-9);
+            ++used;
+        }
+        return nlohmann::json{{"value", area > 0 ? nlohmann::json(sum / area) : nlohmann::json(nullptr)},
+                              {"unit", unit},
+                              {"age_s", used ? nlohmann::json(oldest_s) : nlohmann::json(nullptr)},
+                              {"quality", used == zones.size() ? "good" : used ? "partial" : "none"},
+                              {"zones_used", used},
+                              {"source", "manikin/zNN." + suffix + " (area-weighted)"}};
+    };
+    nlohmann::json m;
+    m["chamber_air_temp_c"] = one("datalogger/ee181_1.air_temp_c", "°C");
+    m["chamber_air_temp_c"]["setpoint"] = null_if_nan(chamber_setpoint_temp_c_);
+    m["chamber_air_rh_pct"] = one("datalogger/ee181_1.air_rh_pct", "%");
+    m["chamber_air_rh_pct"]["setpoint"] = null_if_nan(chamber_setpoint_rh_pct_);
+    m["air_speed_m_s"] = one("windsonic/air_speed_m_s", "m/s");
+    m["mean_skin_temp_c"] = zone_mean("skin_temp_c", "°C");
+    m["mean_heat_flux_w_m2"] = zone_mean("heat_flux_w_m2", "W/m²");
+    return m;
 }
 
 nlohmann::json LabDaemon::live_json() {
@@ -523,7 +613,7 @@ nlohmann::json LabDaemon::live_json() {
     nlohmann::json j = nlohmann::json::object();
     for (const auto& [key, s] : live_)
         j[key] = {{"value", std::isfinite(s.value) ? nlohmann::json(s.value) : nlohmann::json(nullptr)},
-                  {"quality", drivers::to_string(s.quality)}, {"age_s", static_cast<double>(clock_->mono_ns() - s.mono_ns) * 1e-9}};
+                  {"unit", drivers::unit_of_channel(s.channel)}, {"quality", drivers::to_string(s.quality)}, {"age_s", static_cast<double>(clock_->mono_ns() - s.mono_ns) * 1e-9}};
     return j;
 }
 

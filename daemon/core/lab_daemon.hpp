@@ -9,6 +9,7 @@
 #include <atomic>
 #include <deque>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -106,6 +107,15 @@ private:
     double stage_elapsed_s() const;
     std::int64_t channel_id(const std::string& device, const std::string& channel);
     double enclosure_air_c() const;
+    // The steady-state rule's inputs now: evicts samples older than the window, then measures.
+    struct SteadyCheck {
+        double window_filled_fraction = 0.0;   // time acquiring / steady_state.window_s, capped at 1
+        double worst_zone_range_c = std::numeric_limits<double>::quiet_NaN();   // NaN: no zone sampled yet
+        int worst_zone = 0;                    // 1-based zone number, 0 when none
+        bool window_steady = false;            // every zone sampled over a full window, each range < the limit
+    };
+    SteadyCheck check_steady_window_locked(std::int64_t now_ns);
+    nlohmann::json measured_json_locked() const;
     void flush_recorder();
 
     DaemonOptions o_;
@@ -147,6 +157,9 @@ private:
     std::map<std::string, std::int64_t> gap_since_ns_;
     std::int64_t manikin_silent_since_ns_ = -1;
     std::uint64_t dropped_samples_ = 0;
+    // The chamber setpoints last commanded (NaN until the first set_chamber).
+    double chamber_setpoint_temp_c_ = std::numeric_limits<double>::quiet_NaN();
+    double chamber_setpoint_rh_pct_ = std::numeric_limits<double>::quiet_NaN();
 
     std::thread tick_thread_;
     bool stop_ = false;

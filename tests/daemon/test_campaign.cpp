@@ -4,6 +4,8 @@
 
 #include <map>
 
+#include "daemon/core/campaign_plan.hpp"
+#include "daemon/core/control_api.hpp"
 #include "daemon/core/database_export.hpp"
 #include "daemon_fixture.hpp"
 
@@ -124,4 +126,97 @@ TEST_CASE("pause holds the stage clock, abort ends the campaign", "[daemon]") {
     const auto trials = f.daemon().db().trials(*f.daemon().db().find_campaign("pausing"));
     CHECK(trials[0].state == "aborted");
     CHECK(f.daemon().status_json()["campaign"].is_null());
+}
+
+TEST_CASE("steady progress is below 1 whenever the rule says not steady, and 1 once it says steady", "[daemon][campaign]") {
+    DaemonFixture f;
+    REQUIRE(f.daemon().start_campaign(quick_plan("progress")).empty());
+    int acquiring_checks = 0, steady_checks = 0, not_steady_checks = 0;
+    bool saw_full_window_not_steady = false;
+    for (int i = 0; i < 6 * 3600 && f.daemon().campaign_active(); ++i) {
+        f.daemon().step_virtual(1.0);
+        const auto s = f.daemon().status_json();
+        if (s["stage"] != "acquiring" || !s.contains("trial")) continue;
+        const auto& t = s["trial"];
+        ++acquiring_checks;
+        const double progress = t["steady_progress"].get<double>();
+        const bool steady = t["steady"].get<bool>();
+        INFO("t = " << s["time_s"] << " s: " << t.dump());
+        CHECK(t["limit_c"].get<double>() == Approx(0.05));
+        CHECK(t["min_duration_s"].get<double>() == Approx(35 * 60));
+        CHECK(t["window_filled_fraction"].get<double>() <= 1.0);
+        if (steady) {
+            ++steady_checks;
+            CHECK(progress == 1.0);
+            CHECK(t["worst_zone_range_c"].get<double>() < 0.05);
+            CHECK(t["elapsed_s"].get<double>() >= 35 * 60);
+            CHECK(t["worst_zone"]["zone"].get<int>() >= 1);
+            CHECK_FALSE(t["worst_zone"]["name"].get<std::string>().empty());
+        } else {
+            ++not_steady_checks;
+            CHECK(progress < 1.0);
+            // The old bar (time in stage over the window) was full here while the rule said no.
+            if (t["window_filled_fraction"].get<double>() >= 1.0) saw_full_window_not_steady = true;
+        }
+    }
+    CHECK_FALSE(f.daemon().campaign_active());
+    CHECK(acquiring_checks > 35 * 60);
+    CHECK(not_steady_checks > 0);
+    CHECK(steady_checks > 0);
+    CHECK(saw_full_window_not_steady);
+}
+
+TEST_CASE("status carries the measured chamber air, RH, air speed, mean skin temperature and heat flux with units and ages",
+          "[daemon][campaign]") {
+    DaemonFixture f;
+    REQUIRE(f.daemon().start_campaign(quick_plan("measured")).empty());
+    // Into acquiring: the chamber has settled and the manikin runs.
+    for (int i = 0; i < 4 * 3600 && f.daemon().status_json()["stage"] != "acquiring"; ++i) f.daemon().step_virtual(1.0);
+    for (int i = 0; i < 60; ++i) f.daemon().step_virtual(1.0);
+    REQUIRE(f.daemon().status_json()["stage"] == "acquiring");
+    const auto m = f.daemon().status_json()["measured"];
+    INFO(m.dump(2));
+    CHECK(m["chamber_air_temp_c"]["unit"] == "°C");
+    CHECK(m["chamber_air_temp_c"]["setpoint"].get<double>() == Approx(35.0));
+    CHECK(m["chamber_air_temp_c"]["value"].get<double>() == Approx(35.0).margin(1.5));
+    CHECK(m["chamber_air_temp_c"]["age_s"].get<double>() < 10.0);
+    CHECK(m["chamber_air_rh_pct"]["unit"] == "%");
+    CHECK(m["chamber_air_rh_pct"]["setpoint"].get<double>() == Approx(27.0));
+    CHECK(m["air_speed_m_s"]["unit"] == "m/s");
+    CHECK(m["air_speed_m_s"]["value"].is_number());
+    CHECK(m["mean_skin_temp_c"]["unit"] == "°C");
+    CHECK(m["mean_skin_temp_c"]["value"].get<double>() == Approx(35.0).margin(2.0));
+    CHECK(m["mean_skin_temp_c"]["zones_used"].get<int>() > 0);
+    CHECK(m["mean_heat_flux_w_m2"]["unit"] == "W/m²");
+    const auto live = f.daemon().live_json();
+    CHECK(live["windsonic/air_speed_m_s"]["unit"] == "m/s");
+    CHECK(live["manikin/z01.skin_temp_c"]["unit"] == "°C");
+}
+
+TEST_CASE("a misspelt campaign key is refused with file, line, column, key and the nearest known key", "[daemon][campaign]") {
+    const std::string text = "name = \"typo\"\nreplicate = 1\nbuiltin_cases = \"table-s3\"\n";
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan(text, "typo.toml"),
+                      Catch::Contains("typo.toml:2:1") && Catch::Contains("replicate: unknown key") &&
+                          Catch::Contains("did you mean 'replicates'?"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("name = \"t\"\n[[cases]]\nchamber_temp_c = 35\nchamber_rh_pct = 27\nwett = true\n",
+                                                    "cases.toml"),
+                      Catch::Contains("cases.toml:5:1") && Catch::Contains("cases.wett: unknown key") &&
+                          Catch::Contains("did you mean 'wet'?"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("name = \"t\"\ncolour = \"blue\"\nbuiltin_cases = \"table-s3\"\n", "c.toml"),
+                      Catch::Contains("colour: unknown key") && !Catch::Contains("did you mean"));
+    CHECK(manikind::edit_distance("replicate", "replicates") == 1);
+    CHECK(manikind::edit_distance("kitten", "sitting") == 3);
+    // The daemon's start_campaign path parses with the same parser: refused, nothing started.
+    DaemonFixture f;
+    bool shutdown = false;
+    manikind::ControlOptions o;
+    o.token = "s3cret";
+    const nlohmann::json request = {{"cmd", "start_campaign"}, {"token", "s3cret"}, {"plan_toml", text}, {"source", "typo.toml"}};
+    const auto reply = manikind::handle_request(f.daemon(), o, request.dump(), shutdown);
+    CHECK_FALSE(reply["ok"].get<bool>());
+    const auto error = reply["error"].get<std::string>();
+    CHECK(error.find("typo.toml:2:1") != std::string::npos);
+    CHECK(error.find("replicate: unknown key") != std::string::npos);
+    CHECK(f.daemon().status_json()["campaign"].is_null());
+    CHECK_FALSE(f.daemon().db().find_campaign("typo"));
 }
