@@ -235,13 +235,15 @@ struct ControlServer::Impl {
                                            "one was the longest idle",
                                            counters.max_clients));
             } else {
+                {  // counted before the client can read the refusal
+                    std::lock_guard lk(counters_lock);
+                    ++counters.refused_full;
+                }
                 say_goodbye(socket.native_handle(),
                             fmt::format("refused: {} clients are connected and busy (api.max_clients); try again shortly",
                                         counters.max_clients));
                 boost::system::error_code ignored;
                 socket.close(ignored);
-                std::lock_guard lk(counters_lock);
-                ++counters.refused_full;
                 return;
             }
         }
