@@ -29,6 +29,7 @@
 #include "daemon/core/lab_daemon.hpp"
 #include "daemon/core/logging.hpp"
 #include "daemon/core/user_error.hpp"
+#include "daemon/core/web_server.hpp"
 
 namespace {
 
@@ -63,6 +64,9 @@ int main(int argc, char** argv) {
     app.add_option("--config", config_file, "TOML configuration (default: the built-in simulated lab)");
     app.add_option("--socket", socket, "Control socket path (overrides [api] socket)");
     app.add_option("--database", database, "SQLite database (overrides [lab] database)");
+    std::string http_listen;
+    app.add_option("--http", http_listen, "Serve the operator console on HOST:PORT (loopback only; overrides [http] listen), "
+                                          "e.g. 127.0.0.1:8470; port 0 picks a free one");
     app.add_flag("--virtual", virtual_clock, "Simulated lab only: run the virtual clock as fast as the CPU allows");
     app.add_option("--speed", speed, "Simulated lab in real time: this many times the wall clock (faster: --virtual)")
         ->check(CLI::Range(0.1, 10.0));
@@ -87,6 +91,10 @@ int main(int argc, char** argv) {
         config::Config cfg = config_file.empty() ? config::default_config() : config::load_config(config_file);
         for (const auto& w : cfg.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
         if (!database.empty()) cfg.database = database;
+        if (!http_listen.empty()) {
+            cfg.http.listen = http_listen;
+            cfg.key_where["http.listen"] = "--http";
+        }
         if (!socket.empty()) {
             cfg.api.socket = socket;
             cfg.key_where["api.socket"] = "--socket";  // problems with it are the option's, not the file's
@@ -107,9 +115,16 @@ int main(int argc, char** argv) {
         ControlServer server(daemon, api);
         server.adopt_socket_lock(std::move(socket_lock));
         server.start();
+        std::unique_ptr<WebServer> console;
+        if (!cfg.http.listen.empty()) {
+            console = std::make_unique<WebServer>(daemon, api, parse_listen(cfg.http.listen, "http.listen"));
+            console->start();
+        }
         std::printf("manikind: %s lab, %s clock; database %s; control socket %s%s\n", cfg.mode.c_str(),
                     virtual_clock ? "virtual" : "real", daemon.database_path().c_str(), api.socket_path.c_str(),
                     api.tcp_port ? fmt::format(" and 127.0.0.1:{}", api.tcp_port).c_str() : "");
+        if (console) std::printf("manikind: console http://%s:%d/\n", cfg.http.listen.rfind("[", 0) == 0 ? "[::1]" : "127.0.0.1",
+                                 console->port());
         std::fflush(stdout);
         ::sd_notifyf(0, "READY=1\nSTATUS=%s lab, control socket %s", cfg.mode.c_str(), api.socket_path.c_str());
         // The watchdog (WatchdogSec=) is fed at a third of its period, and only while the daemon
@@ -139,7 +154,7 @@ int main(int argc, char** argv) {
             const double dt = cfg.simulation.step_s;
             std::string last_stage;
             for (;;) {
-                if (signalled() || server.shutdown_requested()) break;
+                if (signalled() || server.shutdown_requested() || (console && console->shutdown_requested())) break;
                 feed_watchdog();
                 daemon.step_virtual(dt);
                 const auto st = daemon.status_json();
@@ -158,13 +173,14 @@ int main(int argc, char** argv) {
                 pollfd p{sig_fd, POLLIN, 0};
                 ::poll(&p, 1, watchdog ? static_cast<int>(std::clamp<std::uint64_t>(watchdog_usec / 3000, 10, 500)) : 500);
                 feed_watchdog();
-                if (signalled() || server.shutdown_requested()) break;
+                if (signalled() || server.shutdown_requested() || (console && console->shutdown_requested())) break;
                 if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;
             }
         }
         if (exit_when_done && !campaign_name.empty() && !daemon.campaign_active()) print_results_summary(daemon, campaign_name);
         ::sd_notify(0, "STOPPING=1");
         std::printf("manikind: stopping\n");
+        if (console) console->stop();
         server.stop();
         daemon.stop();
         return 0;

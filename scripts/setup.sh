@@ -27,6 +27,8 @@ if [ "$with_tests" = yes ]; then
     mbpoll python3 python3-serial python3-pymodbus python3-serial-asyncio
     # systemd-analyze scores the shipped unit's sandbox (tests/daemon/systemd_unit_score.sh).
     systemd
+    # A real browser for the operator console, and a Prometheus parser for /metrics (tests/web/).
+    chromium chromium-driver python3-selenium python3-prometheus-client
   )
 fi
 missing=()

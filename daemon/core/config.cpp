@@ -239,6 +239,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*a, "api", "max_clients", c.api.max_clients, 1, 4096, "clients");
         r.number(*a, "api", "idle_timeout_s", c.api.idle_timeout_s, 1, 86400, "s");
     }
+    if (const auto* h = r.table(root, "", "http")) r.text(*h, "http", "listen", c.http.listen);
     r.warn_unknown(root, "");
     return c;
 }

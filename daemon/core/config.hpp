@@ -78,6 +78,11 @@ struct ApiConfig {
     double idle_timeout_s = 120;             // a client silent this long is disconnected
 };
 
+// The operator console (web page, WebSocket, /metrics): off unless `listen` is set.
+struct HttpConfig {
+    std::string listen;                      // "127.0.0.1:8470"; loopback addresses only; port 0: any free port
+};
+
 struct Config {
     std::string lab_name = "simulated lab";
     std::string mode = "simulated";        // simulated | real
@@ -89,6 +94,7 @@ struct Config {
     DeviceConfig devices;
     SimulationConfig simulation;
     ApiConfig api;
+    HttpConfig http;
     std::filesystem::path source_dir;      // relative paths in the file resolve from here
     std::vector<std::string> warnings;     // unknown keys and similar, with file:line
     // Where each key present in the text was: "devices.chamber.register_map" -> "file:line:column";

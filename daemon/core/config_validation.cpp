@@ -12,6 +12,7 @@
 #include <fmt/core.h>
 
 #include "daemon/core/config.hpp"
+#include "daemon/core/web_server.hpp"
 #include "daemon/core/register_map.hpp"
 #include "daemon/core/user_error.hpp"
 #include "sim/campaign/campaign_generator.hpp"
@@ -68,6 +69,13 @@ void check_entries(const Config& c, const char* key, const std::vector<std::stri
 void check_socket(const Config& c, std::vector<std::string>& problems) {
     // The daemon binds the path as given (relative: from its working directory) and writes
     // <socket>.token and takes <socket>.lock beside it; every one must fit in sun_path.
+    if (!c.http.listen.empty()) {
+        try {
+            parse_listen(c.http.listen, where_of(c, "http.listen") + ": http.listen");
+        } catch (const UserError& e) {
+            problems.push_back(e.what());
+        }
+    }
     const std::string socket = c.api.socket;
     if (socket.empty()) {
         problems.push_back(fmt::format("{}: api.socket: empty; give the control socket's path", where_of(c, "api.socket")));

@@ -30,7 +30,8 @@ nlohmann::json fail(const std::string& why) { return {{"ok", false}, {"error", w
 const std::map<std::string, bool>& commands() {  // name -> mutating
     static const std::map<std::string, bool> c = {{"status", false}, {"live", false},          {"results", false},
                                                   {"start_campaign", true}, {"abort", true}, {"pause", true},
-                                                  {"resume", true},  {"set_chamber", true},  {"shutdown", true}};
+                                                  {"resume", true},  {"set_chamber", true},  {"shutdown", true},
+                                                  {"alarms", false}, {"ack_alarm", true}};
     return c;
 }
 
@@ -96,6 +97,12 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
             return done(daemon.start_campaign(plan));
         }
         if (cmd == "abort") return done(daemon.abort(text("reason").value_or("aborted by the operator")));
+        if (cmd == "alarms") return {{"ok", true}, {"alarms", daemon.alarms_json()}};
+        if (cmd == "ack_alarm") {
+            const auto id = number("id");
+            if (!id) return fail("\"id\": expected the alarm's id (a number)");
+            return done(daemon.acknowledge_alarm(static_cast<std::int64_t>(*id)));
+        }
         if (cmd == "pause") return done(daemon.pause());
         if (cmd == "resume") return done(daemon.resume());
         if (cmd == "set_chamber") {

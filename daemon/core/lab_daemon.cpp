@@ -108,11 +108,44 @@ void LabDaemon::event(const std::string& severity, const std::string& kind, cons
     if (severity == "error") spdlog::error("{}: {}", kind, message);
     else if (severity == "warn") spdlog::warn("{}: {}", kind, message);
     else spdlog::debug("{}: {}", kind, message);
+    if (severity == "warn" || severity == "error") {
+        alarms_.push_back({next_alarm_id_++, clock_ ? clock_->utc_ns() : system_clock_.utc_ns(), severity, kind, message});
+        if (alarms_.size() > 200) alarms_.pop_front();
+    }
+}
+
+nlohmann::json LabDaemon::alarms_json() {
+    std::lock_guard lk(lock_);
+    nlohmann::json a = nlohmann::json::array();
+    for (const auto& al : alarms_)
+        a.push_back({{"id", al.id}, {"utc_ms", al.utc_ns / 1000000}, {"severity", al.severity == "error" ? "MAJOR" : "MINOR"},
+                     {"kind", al.kind}, {"message", al.message}, {"acknowledged", al.acknowledged}});
+    return a;
+}
+
+std::string LabDaemon::acknowledge_alarm(std::int64_t id) {
+    std::lock_guard lk(lock_);
+    for (auto& al : alarms_)
+        if (al.id == id) {
+            if (!al.acknowledged) {
+                al.acknowledged = true;
+                db_.add_event(std::nullopt, clock_->mono_ns(), clock_->utc_ns(), "info", "alarm_ack",
+                              fmt::format("alarm {} acknowledged: {}", id, al.message));
+            }
+            return {};
+        }
+    return fmt::format("no alarm with id {} (the newest 200 are kept)", id);
+}
+
+void LabDaemon::set_sample_listener(std::function<void()> listener) {
+    std::lock_guard lk(lock_);
+    sample_listener_ = std::move(listener);
 }
 
 void LabDaemon::on_sample(const drivers::Sample& s) {
     std::lock_guard lk(lock_);
     live_[s.device + "/" + s.channel] = s;
+    if (sample_listener_) sample_listener_();
     // Safety: enforced here, whatever a client asked for.
     if (s.device == "manikin" && s.quality != drivers::Quality::comm_error && acq_ && acq_->manikin().running_command()) {
         const auto& lim = o_.config.safety;

@@ -73,6 +73,13 @@ public:
     nlohmann::json live_json();
     nlohmann::json results_json(const std::string& campaign);   // latest stored results
 
+    // Alarms: every warn or error event since the daemon started (the newest 200), each with an
+    // id, for the console; acknowledging one records who saw it, it does not clear the cause.
+    nlohmann::json alarms_json();
+    std::string acknowledge_alarm(std::int64_t id);
+    // Called (under the daemon's lock: keep it to a flag and a post) after each new sample.
+    void set_sample_listener(std::function<void()> listener);
+
     // Virtual clock: steps until the queue is empty (or `max_virtual_s` passes). `on_trial` is
     // called after each trial with a one-line summary.
     void run_virtual(std::function<void(const std::string&)> on_trial = {}, double max_virtual_s = 1e12);
@@ -160,6 +167,16 @@ private:
     // The chamber setpoints last commanded (NaN until the first set_chamber).
     double chamber_setpoint_temp_c_ = std::numeric_limits<double>::quiet_NaN();
     double chamber_setpoint_rh_pct_ = std::numeric_limits<double>::quiet_NaN();
+
+    struct Alarm {
+        std::int64_t id;
+        std::int64_t utc_ns;
+        std::string severity, kind, message;
+        bool acknowledged = false;
+    };
+    std::deque<Alarm> alarms_;
+    std::int64_t next_alarm_id_ = 1;
+    std::function<void()> sample_listener_;
 
     std::thread tick_thread_;
     bool stop_ = false;

@@ -1,0 +1,186 @@
+#!/usr/bin/env python3
+"""The operator console in a real browser (Debian's chromium + chromedriver, python3-selenium)
+against manikind on the simulated lab: 35 zones whose values change, the stage advancing, the
+steady-state verdict following the daemon's rule, a device fault turning that device MAJOR or
+INVALID, a wrong token unable to abort and the right one able to, and no request leaving
+127.0.0.1. Exit 77 (skipped) only when the browser or selenium is not installed.
+
+usage: console_browser.py <manikind binary> [--screenshot PATH]
+"""
+import json
+import os
+import re
+import secrets
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
+try:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.by import By
+except ImportError:
+    print("skipped: python3-selenium is not installed (scripts/setup.sh --tests installs it)")
+    sys.exit(77)
+if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
+    print("skipped: chromium / chromium-driver not installed (scripts/setup.sh --tests installs them)")
+    sys.exit(77)
+
+failures = []
+
+
+def check(ok, what):
+    print(("ok   " if ok else "FAIL ") + what, flush=True)
+    if not ok:
+        failures.append(what)
+
+
+def wait_for(what, predicate, timeout_s=60.0):
+    """Polls a condition on real events (page updates, daemon state) until it holds."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.2)
+    check(False, f"{what} (within {timeout_s:.0f} s)")
+    return None
+
+
+def main():
+    daemon_bin = sys.argv[1]
+    screenshot = sys.argv[sys.argv.index("--screenshot") + 1] if "--screenshot" in sys.argv else None
+    work = tempfile.mkdtemp(prefix="manikind-console-")
+    token = secrets.token_hex(32)
+    cfg = os.path.join(work, "lab.toml")
+    with open(cfg, "w") as f:
+        f.write(f'[lab]\ndatabase = "{work}/d.db"\n[api]\nsocket = "{work}/d.sock"\ntoken = "{token}"\n'
+                f'[http]\nlisten = "127.0.0.1:0"\n'
+                # The manikin starts on a cold chamber here (no settling window, to reach acquiring
+                # quickly): its heaters run at full power (600 W/m²) at first, above the default limit.
+                f'[safety]\nmax_heater_power_w_m2 = 1000\n'
+                f'[simulation]\nruntime_dir = "{work}/sim"\nfaults = ["windsonic:silent@40"]\n')
+    os.chmod(cfg, 0o600)
+    plan = os.path.join(work, "campaign.toml")
+    with open(plan, "w") as f:
+        f.write('name = "console"\nreplicates = 1\ntrial_duration_min = 75\nsettle_window_min = 0\nsettle_band_c = 10\n'
+                '[[cases]]\nchamber_temp_c = 35\nchamber_rh_pct = 27\nskin_setpoint_c = 35\nwet = false\n')
+    daemon = subprocess.Popen([daemon_bin, "--config", cfg, "--speed", "10", "--campaign", plan],
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    driver = None
+    try:
+        port = None
+        for line in daemon.stdout:
+            m = re.search(r"console http://127\.0\.0\.1:(\d+)/", line)
+            if m:
+                port = int(m.group(1))
+                break
+        if port is None:
+            check(False, "manikind printed its console address")
+            return
+        base = f"http://127.0.0.1:{port}"
+
+        def status():
+            with urllib.request.urlopen(base + "/api/status", timeout=5) as r:
+                return json.load(r)
+
+        opts = webdriver.ChromeOptions()
+        opts.binary_location = CHROMIUM
+        for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1500,1300",
+                  f"--user-data-dir={work}/chromium"):
+            opts.add_argument(a)
+        opts.set_capability("goog:loggingPrefs", {"performance": "ALL"})
+        driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+        driver.get_log("performance")  # drop the browser's own start page requests
+        driver.get(base + "/")
+
+        updates = lambda: int(driver.find_element(By.TAG_NAME, "body").get_attribute("data-updates") or 0)
+        wait_for("the page receives updates over its WebSocket", lambda: updates() >= 1, 20)
+        zones = driver.find_elements(By.CSS_SELECTOR, "rect.zone")
+        check(len(zones) == 35, f"the body map draws 35 zones (found {len(zones)})")
+        values = lambda: driver.execute_script(
+            "return Array.from(document.querySelectorAll('rect.zone')).map(z => z.getAttribute('data-value'));")
+        first = wait_for("every zone shows a value", lambda: (lambda v: v if all(v) else None)(values()), 60)
+        if first:
+            wait_for("zone values change as the manikin reports", lambda: values() != first, 60)
+
+        stage = lambda: driver.execute_script("return document.getElementById('stage').textContent;")
+        seen = [stage()]
+        wait_for("the stage advances to acquiring", lambda: (seen.append(stage()) or seen[-1] == "acquiring"), 90)
+        check(len(set(seen)) >= 2, f"the page showed the stage advance: {' -> '.join(dict.fromkeys(seen))}")
+
+        # The verdict follows the daemon's rule (not time in stage): compare with the daemon's own status.
+        def verdict_matches():
+            s = status()
+            t = s.get("trial") or {}
+            if "steady" not in t:
+                return False
+            shown, bar, full = driver.execute_script(
+                "return [document.getElementById('steady-verdict').dataset.steady,"
+                " document.getElementById('steady-bar').offsetWidth, document.querySelector('.bar').offsetWidth];")
+            return shown == ("true" if t["steady"] else "false") and (t["steady"] or bar < full)
+        check(bool(wait_for("the steady-state verdict shows the daemon's rule", verdict_matches, 30)),
+              "steady-state verdict = the daemon's rule (not steady yet, bar short of full)")
+
+        # Read through script: the table is redrawn on every update, so element handles go stale.
+        severity = lambda: driver.execute_script(
+            "const e = document.getElementById('device-windsonic'); return e ? e.dataset.severity : null;")
+        got = wait_for("the silenced WindSonic turns MAJOR or INVALID", lambda: severity() in ("MAJOR", "INVALID") and severity(), 60)
+        if got:
+            check(True, f"the faulted device shows {got}")
+
+        if screenshot:  # for docs/: a running trial with its chamber history drawn
+            wait_for("the chamber chart is drawn", lambda: driver.execute_script(
+                "return document.querySelectorAll('#chart-temp polyline').length > 0;"), 30)
+            driver.save_screenshot(screenshot)
+            print(f"screenshot: {screenshot}")
+
+        token_box = driver.find_element(By.ID, "token")
+        result = lambda: driver.execute_script("return document.getElementById('command-result').textContent;")
+        token_box.send_keys("not-the-token")
+        driver.find_element(By.ID, "abort").click()
+        wait_for("a wrong token is refused", lambda: "refused" in result(), 10)
+        before = status()
+        if before.get("campaign") != "console":
+            with urllib.request.urlopen(base + "/api/alarms", timeout=5) as r:
+                print("alarms:", json.load(r))
+        check(before.get("campaign") == "console",
+              f"the campaign still runs after the wrong token (stage {before.get('stage')}, campaign {before.get('campaign')})")
+        token_box.clear()
+        token_box.send_keys(token)
+        driver.find_element(By.ID, "abort").click()
+        wait_for("the right token aborts", lambda: "abort: done" in result(), 10)
+        check(status().get("campaign") is None, "the campaign was aborted with the right token")
+
+        urls = []
+        for entry in driver.get_log("performance"):
+            msg = json.loads(entry["message"])["message"]
+            # Requests made by this page (the browser's own start page loads chrome:// resources).
+            if msg["method"] == "Network.requestWillBeSent" and msg["params"].get("documentURL", "").startswith(base):
+                urls.append(msg["params"]["request"]["url"])
+            elif msg["method"] == "Network.webSocketCreated":
+                urls.append(msg["params"]["url"])
+        outside = [u for u in urls if not (u.startswith(base + "/") or u.startswith(f"ws://127.0.0.1:{port}/"))]
+        check(len(urls) > 3 and not outside,
+              f"every request the page made stayed on 127.0.0.1:{port} ({len(urls)} requests; outside: {outside})")
+    finally:
+        if driver:
+            driver.quit()
+        daemon.terminate()
+        try:
+            daemon.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            daemon.kill()
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
+    if failures:
+        print(f"{len(failures)} check(s) failed")
+        sys.exit(1)
+    print("all checks passed")

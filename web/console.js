@@ -1,0 +1,340 @@
+// manikind console: live state over one WebSocket (/ws), commands through POST /api/command with
+// the API token. Everything comes from this daemon; nothing is loaded from anywhere else.
+"use strict";
+
+const STAGES = ["configuring", "chamber_settling", "manikin_starting", "acquiring", "stopping", "computing"];
+
+// Where each ANDI zone is drawn: [view, x, y, width, height]. Front view: the manikin's left on
+// the viewer's right; back view: its left on the viewer's left. Every zone appears once.
+const ZONE_SHAPES = {
+  face: ["front", 82, 8, 36, 42], scalp: ["back", 82, 8, 36, 42],
+  neck: ["front", 90, 50, 20, 14], upper_chest: ["front", 68, 64, 64, 46], abdomen: ["front", 70, 110, 60, 40],
+  pelvis_front: ["front", 70, 150, 60, 30], crotch: ["front", 92, 180, 16, 14],
+  upper_back: ["back", 68, 64, 64, 50], lower_back: ["back", 70, 114, 60, 40],
+  buttock_l: ["back", 70, 154, 30, 40], buttock_r: ["back", 100, 154, 30, 40],
+  shoulder_l: ["front", 132, 64, 20, 20], shoulder_r: ["front", 48, 64, 20, 20],
+  upper_arm_front_l: ["front", 134, 84, 18, 56], upper_arm_front_r: ["front", 48, 84, 18, 56],
+  upper_arm_back_l: ["back", 48, 70, 18, 70], upper_arm_back_r: ["back", 134, 70, 18, 70],
+  forearm_front_l: ["front", 137, 140, 16, 58], forearm_front_r: ["front", 47, 140, 16, 58],
+  forearm_back_l: ["back", 47, 140, 16, 58], forearm_back_r: ["back", 137, 140, 16, 58],
+  hand_l: ["front", 138, 198, 18, 30], hand_r: ["front", 44, 198, 18, 30],
+  thigh_front_l: ["front", 102, 194, 27, 96], thigh_front_r: ["front", 71, 194, 27, 96],
+  thigh_back_l: ["back", 71, 194, 27, 96], thigh_back_r: ["back", 102, 194, 27, 96],
+  calf_front_l: ["front", 104, 290, 23, 88], calf_front_r: ["front", 73, 290, 23, 88],
+  calf_back_l: ["back", 73, 290, 23, 88], calf_back_r: ["back", 104, 290, 23, 88],
+  foot_top_l: ["front", 102, 378, 30, 20], foot_top_r: ["front", 68, 378, 30, 20],
+  foot_sole_l: ["back", 68, 378, 30, 20], foot_sole_r: ["back", 102, 378, 30, 20],
+};
+
+const $ = (id) => document.getElementById(id);
+const SVG = "http://www.w3.org/2000/svg";
+let zones = [];
+let latest = null;
+const stageSeen = {};  // stage -> first time this page saw it (ms)
+
+function fmt(v, digits = 2) {
+  return v === null || v === undefined || Number.isNaN(v) ? "—" : Number(v).toFixed(digits);
+}
+function minutes(s) { return s === null || s === undefined ? "—" : (s / 60).toFixed(1) + " min"; }
+function el(tag, attrs = {}, text) {
+  const e = tag.startsWith("svg:") ? document.createElementNS(SVG, tag.slice(4)) : document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  return e;
+}
+
+// Blue (cold) to red (hot) through yellow, as the legend shows.
+function colour(fraction) {
+  const stops = [[44, 123, 182], [171, 217, 233], [255, 255, 191], [253, 174, 97], [215, 25, 28]];
+  const f = Math.min(1, Math.max(0, fraction)) * (stops.length - 1);
+  const i = Math.min(stops.length - 2, Math.floor(f));
+  const t = f - i;
+  const c = stops[i].map((a, k) => Math.round(a + (stops[i + 1][k] - a) * t));
+  return `rgb(${c[0]},${c[1]},${c[2]})`;
+}
+
+function drawBody() {
+  for (const view of ["front", "back"]) {
+    const svg = $("body-" + view);
+    svg.appendChild(el("svg:text", { x: 4, y: 12, class: "view-label" }, view));
+  }
+  for (const z of zones) {
+    const shape = ZONE_SHAPES[z.name];
+    if (!shape) continue;
+    const [view, x, y, w, h] = shape;
+    const r = el("svg:rect", { x, y, width: w, height: h, rx: Math.min(w, h) / 3, class: "zone nodata",
+                               id: "zone-" + z.zone, "data-zone": z.zone, "data-name": z.name });
+    r.appendChild(el("svg:title", {}, `${z.zone} ${z.name}`));
+    r.addEventListener("mouseenter", () => showZone(z));
+    $("body-" + view).appendChild(r);
+  }
+}
+
+function zoneValue(z, quantity) {
+  if (!latest) return null;
+  const key = `manikin/z${String(z.zone).padStart(2, "0")}.${quantity}`;
+  const v = latest.live[key];
+  return v ? v.value : null;
+}
+
+function showZone(z) {
+  const q = $("zone-quantity").value;
+  const unit = q === "skin_temp_c" ? "°C" : "W/m²";
+  $("zone-hover").textContent = `zone ${z.zone} ${z.name.replaceAll("_", " ")}: ${fmt(zoneValue(z, q))} ${unit}`;
+}
+
+function paintZones() {
+  const q = $("zone-quantity").value;
+  const values = zones.map((z) => zoneValue(z, q)).filter((v) => v !== null);
+  const lo = values.length ? Math.min(...values) : 0, hi = values.length ? Math.max(...values) : 1;
+  const span = hi - lo > 1e-9 ? hi - lo : 1;
+  for (const z of zones) {
+    const r = $("zone-" + z.zone);
+    if (!r) continue;
+    const v = zoneValue(z, q);
+    r.setAttribute("data-value", v === null ? "" : v.toFixed(3));
+    r.classList.toggle("nodata", v === null);
+    r.style.fill = v === null ? "" : colour((v - lo) / span);
+    r.firstChild.textContent = `${z.zone} ${z.name}: ${fmt(v)}`;
+  }
+  const legend = $("zone-legend");
+  legend.innerHTML = "";
+  // Positioned through the CSSOM: the page's Content-Security-Policy refuses style attributes.
+  const low = el("span", {}, fmt(lo)), high = el("span", {}, fmt(hi));
+  low.style.left = "0";
+  high.style.right = "0";
+  legend.appendChild(low);
+  legend.appendChild(high);
+}
+
+function renderTrial(s) {
+  const t = s.trial;
+  $("campaign-line").textContent = s.campaign
+    ? `${s.campaign}: ${s.trials_done} of ${s.trials_total} trials done` +
+      (t ? ` · case ${t.case} replicate ${t.replicate} · ${fmt(t.stage_elapsed_s, 0)} s in stage` : "") +
+      (s.paused ? " · PAUSED" : "")
+    : "no campaign running";
+  const tl = $("stage-timeline");
+  tl.innerHTML = "";
+  const current = STAGES.indexOf(s.stage);
+  if (!(s.stage in stageSeen)) stageSeen[s.stage] = Date.now();
+  STAGES.forEach((name, i) => {
+    const li = el("li", { "data-stage": name }, name.replaceAll("_", " "));
+    if (i < current) li.className = "done";
+    if (i === current) li.className = "current";
+    tl.appendChild(li);
+  });
+  $("stage").textContent = s.stage;
+
+  const verdict = $("steady-verdict");
+  if (t && t.limit_c !== undefined) {
+    verdict.textContent = t.steady ? "STEADY" : "not steady";
+    verdict.className = "badge " + (t.steady ? "steady" : "not-steady");
+    verdict.setAttribute("data-steady", t.steady ? "true" : "false");
+    $("steady-limit").textContent = fmt(t.limit_c, 2);
+    $("steady-window").textContent = fmt(t.window_s / 60, 0);
+    $("steady-min").textContent = fmt(t.min_duration_s / 60, 0);
+    const worst = t.worst_zone ? ` (zone ${t.worst_zone.zone} ${t.worst_zone.name})` : "";
+    $("steady-range").textContent = `${fmt(t.worst_zone_range_c, 3)} °C against ${fmt(t.limit_c, 2)} °C${worst}`;
+    $("steady-window-filled").textContent = `${fmt(100 * t.window_filled_fraction, 0)} % of ${fmt(t.window_s / 60, 0)} min`;
+    $("steady-elapsed").textContent = `${minutes(t.elapsed_s)} of at least ${minutes(t.min_duration_s)}`;
+    // Earliest time the rule can hold if every zone stays within the limit from now on.
+    const wait = Math.max(0, t.min_duration_s - t.elapsed_s, t.window_s * (1 - t.window_filled_fraction));
+    $("steady-eta").textContent = t.steady ? "reached" : (t.worst_zone_range_c !== null && t.worst_zone_range_c > t.limit_c
+      ? `in ≥ ${minutes(wait)} (a zone still varies beyond the limit)` : `in ${minutes(wait)}`);
+    $("steady-bar").style.width = `${Math.floor(100 * (t.steady_progress || 0))}%`;
+  } else {
+    verdict.textContent = "—";
+    verdict.className = "badge";
+    verdict.setAttribute("data-steady", "none");
+    $("steady-bar").style.width = "0%";
+  }
+}
+
+function renderMeasured(s) {
+  const m = s.measured || {};
+  const rows = [["air temperature (EE181)", m.chamber_air_temp_c], ["relative humidity (EE181)", m.chamber_air_rh_pct],
+                ["air speed (WindSonic)", m.air_speed_m_s], ["mean skin temperature", m.mean_skin_temp_c],
+                ["mean heat flux", m.mean_heat_flux_w_m2]];
+  const table = $("measured");
+  table.innerHTML = "";
+  table.appendChild(el("tr", {}, "")).innerHTML = "<th></th><th>value</th><th>setpoint</th><th>age</th>";
+  for (const [label, v] of rows) {
+    if (!v) continue;
+    const tr = el("tr");
+    tr.appendChild(el("th", {}, label));
+    tr.appendChild(el("td", {}, `${fmt(v.value)} ${v.unit}`));
+    tr.appendChild(el("td", {}, v.setpoint === undefined ? "" : `${fmt(v.setpoint, 1)} ${v.unit}`));
+    tr.appendChild(el("td", {}, v.age_s === null ? "—" : `${fmt(v.age_s, 0)} s`));
+    table.appendChild(tr);
+  }
+}
+
+function chart(id, points, measuredKey, setpointKey, unit) {
+  const svg = $(id);
+  svg.innerHTML = "";
+  const pts = points.filter((p) => p[measuredKey] !== null && p[measuredKey] !== undefined);
+  if (pts.length < 2) {
+    svg.appendChild(el("svg:text", { x: 8, y: 60 }, `${unit}: waiting for data`));
+    return;
+  }
+  const values = pts.map((p) => p[measuredKey]).concat(setpointKey ? pts.map((p) => p[setpointKey]).filter((v) => v !== null) : []);
+  const lo = Math.min(...values), hi = Math.max(...values), span = hi - lo > 1e-6 ? hi - lo : 1;
+  const t0 = pts[0].t_s, t1 = pts[pts.length - 1].t_s, tspan = t1 - t0 > 0 ? t1 - t0 : 1;
+  const xy = (p, k) => `${(40 + 355 * (p.t_s - t0) / tspan).toFixed(1)},${(110 - 100 * (p[k] - lo) / span).toFixed(1)}`;
+  svg.appendChild(el("svg:polyline", { class: "measured", points: pts.map((p) => xy(p, measuredKey)).join(" ") }));
+  if (setpointKey) {
+    const sp = pts.filter((p) => p[setpointKey] !== null && p[setpointKey] !== undefined);
+    if (sp.length > 1) svg.appendChild(el("svg:polyline", { class: "setpoint", points: sp.map((p) => xy(p, setpointKey)).join(" ") }));
+  }
+  svg.appendChild(el("svg:text", { x: 2, y: 12 }, `${fmt(hi, 1)}`));
+  svg.appendChild(el("svg:text", { x: 2, y: 112 }, `${fmt(lo, 1)}`));
+  svg.appendChild(el("svg:text", { x: 300, y: 12 }, `${unit}, last ${fmt(tspan / 60, 0)} min`));
+}
+
+async function renderHistory() {
+  const points = await (await fetch("/api/history")).json();
+  chart("chart-temp", points, "air_temp_c", "air_temp_setpoint_c", "air °C");
+  chart("chart-rh", points, "air_rh_pct", "air_rh_setpoint_pct", "RH %");
+  chart("chart-speed", points, "air_speed_m_s", null, "air speed m/s");
+}
+
+function renderDevices(s) {
+  const table = $("devices");
+  table.innerHTML = "<tr><th>device</th><th>severity</th><th>samples</th><th>errors</th><th>reconnects</th><th>last error</th></tr>";
+  for (const d of s.devices) {
+    const tr = el("tr", { id: "device-" + d.name, "data-severity": d.severity });
+    tr.appendChild(el("td", {}, d.name));
+    const sev = el("td");
+    sev.appendChild(el("span", { class: "badge " + d.severity, title: d.severity_reason }, d.severity));
+    tr.appendChild(sev);
+    tr.appendChild(el("td", {}, String(d.samples)));
+    tr.appendChild(el("td", {}, String(d.checksum_errors + d.timeouts + d.exceptions + d.malformed + d.device_faults)));
+    tr.appendChild(el("td", {}, String(d.reconnects)));
+    tr.appendChild(el("td", {}, d.last_error || ""));
+    table.appendChild(tr);
+  }
+}
+
+function renderAlarms(alarms) {
+  const table = $("alarms");
+  table.innerHTML = "<tr><th>time</th><th>severity</th><th>what</th><th></th></tr>";
+  for (const a of alarms.slice(-20).reverse()) {
+    const tr = el("tr", { "data-alarm": a.id });
+    tr.appendChild(el("td", {}, new Date(a.utc_ms).toLocaleTimeString()));
+    const sev = el("td");
+    sev.appendChild(el("span", { class: "badge " + a.severity }, a.severity));
+    tr.appendChild(sev);
+    tr.appendChild(el("td", {}, `${a.kind}: ${a.message}`));
+    const ack = el("td");
+    if (a.acknowledged) ack.textContent = "acknowledged";
+    else {
+      const b = el("button", {}, "Acknowledge");
+      b.addEventListener("click", () => command({ cmd: "ack_alarm", id: a.id }));
+      ack.appendChild(b);
+    }
+    tr.appendChild(ack);
+    table.appendChild(tr);
+  }
+}
+
+function renderQueue(s) {
+  const q = $("queue");
+  q.textContent = (s.campaign ? `running: ${s.campaign}` : "nothing running") +
+    (s.queued_campaigns && s.queued_campaigns.length ? ` · queued: ${s.queued_campaigns.join(", ")}` : "");
+}
+
+let resultsShownFor = null;
+async function renderResults(s) {
+  const name = s.campaign || null;
+  const key = `${name}:${s.trials_done}`;
+  if (key === resultsShownFor) return;
+  resultsShownFor = key;
+  const r = await fetch("/api/results" + (name ? "?campaign=" + encodeURIComponent(name) : ""));
+  if (!r.ok) {
+    $("results").innerHTML = "<tr><td>results appear when a campaign's cases have been analysed</td></tr>";
+    return;
+  }
+  const body = await r.json();
+  $("results-campaign").textContent = body.campaign;
+  const cases = (body.results && body.results.cases) || [];
+  const table = $("results");
+  table.innerHTML = "<tr><th>case</th><th>n</th><th>Q whole body</th><th>95 % CI</th></tr>";
+  for (const c of cases) {
+    const wb = c.whole_body || {};
+    const tr = el("tr");
+    tr.appendChild(el("td", {}, String(c.case)));
+    tr.appendChild(el("td", {}, String(c.n_replicates)));
+    tr.appendChild(el("td", {}, `${fmt(wb.q_w_m2)} W/m²`));
+    tr.appendChild(el("td", {}, `[${fmt(wb.ci_low_w_m2)}, ${fmt(wb.ci_high_w_m2)}]`));
+    table.appendChild(tr);
+  }
+  // Whole-body flux per case with its 95 % CI.
+  const svg = $("results-plot");
+  svg.innerHTML = "";
+  const ok = cases.filter((c) => c.whole_body && c.whole_body.q_w_m2 !== undefined);
+  if (!ok.length) return;
+  const lo = Math.min(...ok.map((c) => c.whole_body.ci_low_w_m2)), hi = Math.max(...ok.map((c) => c.whole_body.ci_high_w_m2));
+  const span = hi - lo > 1e-6 ? hi - lo : 1;
+  const y = (v) => 150 - 135 * (v - lo) / span;
+  ok.forEach((c, i) => {
+    const x = 40 + (350 * (i + 0.5)) / ok.length;
+    svg.appendChild(el("svg:line", { x1: x, x2: x, y1: y(c.whole_body.ci_low_w_m2), y2: y(c.whole_body.ci_high_w_m2), stroke: "#1d6fb8" }));
+    svg.appendChild(el("svg:circle", { cx: x, cy: y(c.whole_body.q_w_m2), r: 3, fill: "#1d6fb8" }));
+  });
+  svg.appendChild(el("svg:text", { x: 2, y: 14 }, fmt(hi, 0)));
+  svg.appendChild(el("svg:text", { x: 2, y: 152 }, fmt(lo, 0)));
+}
+
+async function command(body) {
+  body.token = $("token").value;
+  const out = $("command-result");
+  try {
+    const r = await fetch("/api/command", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+    const j = await r.json();
+    out.textContent = j.ok ? `${body.cmd}: done` : `${body.cmd} refused: ${j.error}`;
+    out.className = j.ok ? "ok" : "error";
+  } catch (e) {
+    out.textContent = `${body.cmd}: no answer (${e})`;
+    out.className = "error";
+  }
+}
+
+function onUpdate(msg) {
+  latest = msg;
+  const s = msg.status;
+  $("lab").textContent = `${s.mode} lab · ${s.clock} clock · t = ${fmt(s.time_s, 0)} s`;
+  renderTrial(s);
+  renderMeasured(s);
+  renderDevices(s);
+  renderQueue(s);
+  renderAlarms(msg.alarms || []);
+  paintZones();
+  document.body.setAttribute("data-updates", String(Number(document.body.getAttribute("data-updates") || 0) + 1));
+}
+
+function connect() {
+  const ws = new WebSocket(`ws://${location.host}/ws`);
+  ws.onopen = () => { $("connection").textContent = "live"; $("connection").className = "badge NO_ALARM"; };
+  ws.onmessage = (e) => onUpdate(JSON.parse(e.data));
+  ws.onclose = () => {
+    $("connection").textContent = "disconnected: retrying";
+    $("connection").className = "badge INVALID";
+    setTimeout(connect, 2000);
+  };
+}
+
+async function main() {
+  zones = await (await fetch("/api/zones")).json();
+  drawBody();
+  $("zone-quantity").addEventListener("change", paintZones);
+  $("pause").addEventListener("click", () => command({ cmd: "pause" }));
+  $("resume").addEventListener("click", () => command({ cmd: "resume" }));
+  $("abort").addEventListener("click", () => command({ cmd: "abort", reason: "aborted from the console" }));
+  connect();
+  renderHistory();
+  setInterval(renderHistory, 5000);
+  setInterval(() => { if (latest) renderResults(latest.status); }, 5000);
+}
+
+document.addEventListener("DOMContentLoaded", main);
