@@ -146,8 +146,9 @@ void print_status(const nlohmann::json& s) {
                     d["reconnects"].get<unsigned long long>(), d["device_faults"].get<unsigned long long>(),
                     d["last_error"].get<std::string>().c_str());
     const auto& r = s["recorder"];
-    std::printf("recorder: %llu samples committed, %llu dropped\n", r["committed"].get<unsigned long long>(),
-                r["dropped"].get<unsigned long long>());
+    std::printf("recorder: %llu samples committed, %llu not stored (%llu queue full, %llu re-sent duplicates, %llu lost)\n",
+                r["committed"].get<unsigned long long>(), r["dropped"].get<unsigned long long>(),
+                r.value("dropped_queue_full", 0ULL), r.value("duplicates", 0ULL), r.value("lost_after_retries", 0ULL));
 }
 
 }  // namespace

@@ -136,13 +136,15 @@ std::string prometheus_text(const nlohmann::json& status, const nlohmann::json& 
         out += fmt::format("manikind_recorder_accepted_rows_total {}\n", counter(r, "accepted"));
         family("manikind_recorder_committed_rows_total", "counter", "Readings committed to the database.");
         out += fmt::format("manikind_recorder_committed_rows_total {}\n", counter(r, "committed"));
-        family("manikind_recorder_dropped_rows_total", "counter", "Readings not stored (queue full, re-sent, duplicate).");
+        family("manikind_recorder_dropped_rows_total", "counter",
+               "Readings not stored, whatever the cause (queue full, re-sent duplicates, lost after retries).");
         out += fmt::format("manikind_recorder_dropped_rows_total {}\n", counter(r, "dropped"));
+        family("manikind_recorder_duplicate_rows_total", "counter", "Re-sent readings skipped: already stored.");
+        out += fmt::format("manikind_recorder_duplicate_rows_total {}\n", counter(r, "duplicates"));
+        family("manikind_recorder_queue_full_rows_total", "counter", "Readings dropped because the recorder queue was full.");
+        out += fmt::format("manikind_recorder_queue_full_rows_total {}\n", counter(r, "dropped_queue_full"));
         family("manikind_recorder_queue_rows", "gauge", "Readings accepted but not yet committed.");
-        out += fmt::format("manikind_recorder_queue_rows {}\n",
-                           counter(r, "accepted") >= counter(r, "committed") + counter(r, "dropped")
-                               ? counter(r, "accepted") - counter(r, "committed") - counter(r, "dropped")
-                               : 0);
+        out += fmt::format("manikind_recorder_queue_rows {}\n", counter(r, "queue_rows"));
     }
     family("manikind_trial_stage", "gauge", "1 for the trial stage the daemon is in.");
     const std::string stage = status.value("stage", "idle");

@@ -590,7 +590,14 @@ nlohmann::json LabDaemon::status_json() {
                            {"last_error", s.last_error}});
     j["devices"] = devices;
     const auto rs = recorder_->stats();
-    j["recorder"] = {{"accepted", rs.accepted}, {"committed", rs.committed}, {"dropped", rs.dropped + dropped_samples_}};
+    // Every reading not stored is counted here, whatever the cause (not only logged).
+    j["recorder"] = {{"accepted", rs.accepted},
+                     {"committed", rs.committed},
+                     {"dropped", rs.dropped + dropped_samples_ + rs.duplicates + rs.lost},
+                     {"dropped_queue_full", rs.dropped + dropped_samples_},
+                     {"duplicates", rs.duplicates},
+                     {"lost_after_retries", rs.lost},
+                     {"queue_rows", rs.queue_depth}};
     j["safety_tripped"] = safety_tripped_;
     j["measured"] = measured_json_locked();
     return j;

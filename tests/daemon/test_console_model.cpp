@@ -36,7 +36,7 @@ TEST_CASE("device severity: INVALID when disconnected, MAJOR when stale, MINOR f
 TEST_CASE("Prometheus text: one TYPE per family, label values escaped, NaN spelt as the format says", "[daemon][console]") {
     nlohmann::json status = {{"devices", nlohmann::json::array({device("odd\"name\\", true, false, 3)})},
                              {"stage", "acquiring"},
-                             {"recorder", {{"accepted", 10u}, {"committed", 7u}, {"dropped", 1u}}}};
+                             {"recorder", {{"accepted", 10u}, {"committed", 7u}, {"dropped", 4u}, {"duplicates", 3u}, {"queue_rows", 2u}}}};
     nlohmann::json live = {{"manikin/z01.skin_temp_c", {{"value", 34.5}, {"quality", "good"}, {"age_s", 2.0}}},
                            {"windsonic/air_speed_m_s", {{"value", nullptr}, {"quality", "comm_error"}, {"age_s", 9.0}}}};
     const std::string text = manikind::console::prometheus_text(status, live);
@@ -46,7 +46,9 @@ TEST_CASE("Prometheus text: one TYPE per family, label values escaped, NaN spelt
     CHECK(text.find("channel=\"air_speed_m_s\",quality=\"comm_error\"} NaN\n") != std::string::npos);
     CHECK(text.find("manikind_trial_stage{stage=\"acquiring\"} 1\n") != std::string::npos);
     CHECK(text.find("manikind_trial_stage{stage=\"idle\"} 0\n") != std::string::npos);
-    CHECK(text.find("manikind_recorder_queue_rows 2\n") != std::string::npos);  // 10 accepted - 7 committed - 1 dropped
+    CHECK(text.find("manikind_recorder_queue_rows 2\n") != std::string::npos);
+    CHECK(text.find("manikind_recorder_duplicate_rows_total 3\n") != std::string::npos);
+    CHECK(text.find("manikind_recorder_dropped_rows_total 4\n") != std::string::npos);
     std::size_t types = 0;
     for (auto p = text.find("# TYPE manikind_live_value "); p != std::string::npos; p = text.find("# TYPE manikind_live_value ", p + 1))
         ++types;

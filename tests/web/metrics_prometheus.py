@@ -71,6 +71,9 @@ def main():
         check(families["manikind_device_samples"].type == "counter", "device samples is a counter")
         skin = [s for s in families["manikind_live_value"].samples if s.labels["channel"].endswith(".skin_temp_c")]
         check(len(skin) == 35 and all(15 < s.value < 45 for s in skin), f"35 skin temperatures in range ({len(skin)})")
+        dropped = families["manikind_recorder_dropped_rows"].samples[0].value
+        duplicates = families["manikind_recorder_duplicate_rows"].samples[0].value
+        check(dropped >= duplicates, f"re-sent duplicates are counted among rows not stored ({duplicates} of {dropped})")
         stages = [s for s in families["manikind_trial_stage"].samples if s.value == 1]
         check(len(stages) == 1, f"exactly one stage is current: {[s.labels['stage'] for s in stages]}")
         total = families["manikind_campaign_trials_total"].samples[0].value
