@@ -138,6 +138,16 @@ bool wait_for(int fd, short events, client_clock::time_point deadline) {
 
 }  // namespace
 
+sockaddr_un unix_address(const std::string& path, const std::string& what) {
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    if (path.size() >= sizeof addr.sun_path)
+        throw UserError(fmt::format("{} path is {} characters, over the limit of {}: {}", what, path.size(),
+                                    sizeof addr.sun_path - 1, path));
+    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    return addr;
+}
+
 nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohmann::json& request, double timeout_s) {
     const std::string path = socket_path.string();
     const std::string cmd = request.value("cmd", std::string("?"));
@@ -148,12 +158,7 @@ nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohm
                                      "or overloaded: see its log (journalctl -u manikind), or try a longer --timeout",
                                      path, timeout_s, waiting_for, cmd));
     };
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    if (path.size() >= sizeof addr.sun_path)
-        throw UserError(fmt::format("socket path is {} characters, over the limit of {}: {}", path.size(),
-                                    sizeof addr.sun_path - 1, path));
-    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    sockaddr_un addr = unix_address(path, "socket");
     const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
     if (fd < 0) throw UserError(fmt::format("cannot create a socket: {}", std::strerror(errno)));
     struct Closer {

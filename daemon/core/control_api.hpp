@@ -10,6 +10,8 @@
 // Mutating commands need the configured token. Errors are {"ok":false,"error":"..."} and change
 // nothing. Messages longer than max_message_bytes are refused and the connection closed. The
 // limits on clients (count, idle time, unread replies) are in ControlOptions; docs/daemon.md.
+#include <sys/un.h>
+
 #include <atomic>
 #include <filesystem>
 #include <functional>
@@ -76,6 +78,10 @@ private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };
+
+// The address of a Unix socket path; throws UserError naming `what` when the path is too long
+// for sockaddr_un (107 characters).
+struct sockaddr_un unix_address(const std::string& path, const std::string& what);
 
 // Client side (the `manikin` CLI): sends one request, returns the reply. Throws UserError when
 // the daemon is not reachable, or has not answered within `timeout_s` (saying what it waited for).

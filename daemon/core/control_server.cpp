@@ -335,12 +335,7 @@ void ControlServer::adopt_socket_lock(InstanceLock lock) { impl_->socket_lock = 
 void ControlServer::start() {
     Impl& s = *impl_;
     const std::string path = s.o.socket_path.string();
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    if (path.size() >= sizeof addr.sun_path)
-        throw UserError(fmt::format("control socket path is {} characters, over the limit of {}: {}", path.size(),
-                                    sizeof addr.sun_path - 1, path));
-    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    sockaddr_un addr = unix_address(path, "control socket");
 
     // One daemon per socket. Under the lock, an existing socket file is stale only if no one answers.
     if (!s.socket_lock.held()) s.socket_lock = InstanceLock::acquire(s.o.socket_path, "control socket");

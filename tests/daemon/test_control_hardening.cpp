@@ -73,6 +73,24 @@ std::string read_until_closed(int fd, double limit_s) {
     }
 }
 
+std::string first_line(const fs::path& p) {
+    std::ifstream in(p);
+    std::string line;
+    std::getline(in, line);
+    return line;
+}
+
+// A Unix socket bound at `path` (listening or not): a stale leftover, or another program's.
+int bound_socket(const fs::path& path, bool listening) {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
+    REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+    if (listening) REQUIRE(::listen(fd, 4) == 0);
+    return fd;
+}
+
 // Aborts through the API and returns how long the answer took.
 double timed_abort(const fs::path& socket, const std::string& token, nlohmann::json& reply) {
     const auto t0 = clock_type::now();
@@ -187,12 +205,7 @@ TEST_CASE("the CLI's call gives up after its timeout and says what it waited for
     DaemonFixture f;
     // A socket that listens but never answers: a hung daemon.
     const fs::path path = f.dir() / "hung.sock";
-    const int listener = ::socket(AF_UNIX, SOCK_STREAM, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
-    REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
-    REQUIRE(::listen(listener, 4) == 0);
+    const int listener = bound_socket(path, true);
     const auto t0 = clock_type::now();
     try {
         call_daemon(path, {{"cmd", "abort"}}, 0.3);
@@ -238,24 +251,14 @@ TEST_CASE("a stale socket is replaced; a live one or a file that is not a socket
     o.token = random_token();
     SECTION("stale: a socket file no one listens on") {
         o.socket_path = f.dir() / "stale.sock";
-        const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-        sockaddr_un addr{};
-        addr.sun_family = AF_UNIX;
-        std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", o.socket_path.c_str());
-        REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
-        ::close(fd);  // the killed daemon's leftover
+        ::close(bound_socket(o.socket_path, false));  // the killed daemon's leftover
         ControlServer server(f.daemon(), o);
         server.start();
         CHECK(call_daemon(o.socket_path, {{"cmd", "status"}}, 5.0)["ok"] == true);
     }
     SECTION("live: another program listens there") {
         o.socket_path = f.dir() / "live.sock";
-        const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-        sockaddr_un addr{};
-        addr.sun_family = AF_UNIX;
-        std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", o.socket_path.c_str());
-        REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
-        REQUIRE(::listen(fd, 4) == 0);
+        const int fd = bound_socket(o.socket_path, true);
         ControlServer server(f.daemon(), o);
         CHECK_THROWS_WITH(server.start(), Catch::Contains("another process answers on"));
         CHECK(fs::is_socket(o.socket_path));
@@ -266,10 +269,7 @@ TEST_CASE("a stale socket is replaced; a live one or a file that is not a socket
         std::ofstream(o.socket_path) << "keep me\n";
         ControlServer server(f.daemon(), o);
         CHECK_THROWS_WITH(server.start(), Catch::Contains("exists and is not a socket"));
-        std::ifstream in(o.socket_path);
-        std::string line;
-        std::getline(in, line);
-        CHECK(line == "keep me");
+        CHECK(first_line(o.socket_path) == "keep me");
     }
 }
 
@@ -283,20 +283,14 @@ TEST_CASE("the token file is never written through a symlink nor kept readable b
         fs::permissions(target, fs::perms(0644));
         fs::create_symlink(target, token_file);
         CHECK_THROWS_WITH(manikind::load_or_create_token("", socket), Catch::Contains("symbolic link"));
-        std::ifstream in(target);
-        std::string line;
-        std::getline(in, line);
-        CHECK(line == "precious");
+        CHECK(first_line(target) == "precious");
         CHECK((fs::status(target).permissions() & fs::perms::all) == fs::perms(0644));
     }
     SECTION("a 0644 file at the token path: refused, neither written nor widened") {
         std::ofstream(token_file) << "old\n";
         fs::permissions(token_file, fs::perms(0644));
         CHECK_THROWS_WITH(manikind::load_or_create_token("", socket), Catch::Contains("mode 0644"));
-        std::ifstream in(token_file);
-        std::string line;
-        std::getline(in, line);
-        CHECK(line == "old");
+        CHECK(first_line(token_file) == "old");
         CHECK((fs::status(token_file).permissions() & fs::perms::all) == fs::perms(0644));
     }
     SECTION("no file, or the daemon's own 0600 file: a fresh 0600 token") {

@@ -9,14 +9,14 @@ usage: console_browser.py <manikind binary> [--screenshot PATH]
 """
 import json
 import os
-import re
 import secrets
-import shutil
-import subprocess
 import sys
 import tempfile
 import time
 import urllib.request
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import check, run, start_daemon, stop_daemon, wait_for  # noqa: E402
 
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 try:
@@ -30,25 +30,7 @@ if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
     print("skipped: chromium / chromium-driver not installed (scripts/setup.sh --tests installs them)")
     sys.exit(77)
 
-failures = []
 
-
-def check(ok, what):
-    print(("ok   " if ok else "FAIL ") + what, flush=True)
-    if not ok:
-        failures.append(what)
-
-
-def wait_for(what, predicate, timeout_s=60.0):
-    """Polls a condition on real events (page updates, daemon state) until it holds."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.2)
-    check(False, f"{what} (within {timeout_s:.0f} s)")
-    return None
 
 
 def main():
@@ -69,16 +51,9 @@ def main():
     with open(plan, "w") as f:
         f.write('name = "console"\nreplicates = 1\ntrial_duration_min = 75\nsettle_window_min = 0\nsettle_band_c = 10\n'
                 '[[cases]]\nchamber_temp_c = 35\nchamber_rh_pct = 27\nskin_setpoint_c = 35\nwet = false\n')
-    daemon = subprocess.Popen([daemon_bin, "--config", cfg, "--speed", "10", "--campaign", plan],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    daemon, port = start_daemon([daemon_bin, "--config", cfg, "--speed", "10"])
     driver = None
     try:
-        port = None
-        for line in daemon.stdout:
-            m = re.search(r"console http://127\.0\.0\.1:(\d+)/", line)
-            if m:
-                port = int(m.group(1))
-                break
         if port is None:
             check(False, "manikind printed its console address")
             return
@@ -110,6 +85,12 @@ def main():
 
         stage = lambda: driver.execute_script("return document.getElementById('stage').textContent;")
         seen = [stage()]
+        check(seen[0] == "idle", f"before the campaign the page shows the daemon idle ({seen[0]})")
+        # The campaign starts only now, with the page watching, through the same API the page uses.
+        with open(plan) as f:
+            body = json.dumps({"cmd": "start_campaign", "token": token, "plan_toml": f.read(), "source": plan}).encode()
+        with urllib.request.urlopen(urllib.request.Request(base + "/api/command", data=body, method="POST"), timeout=10) as r:
+            check(json.load(r).get("ok") is True, "the campaign was started through POST /api/command")
         wait_for("the stage advances to acquiring", lambda: (seen.append(stage()) or seen[-1] == "acquiring"), 90)
         check(len(set(seen)) >= 2, f"the page showed the stage advance: {' -> '.join(dict.fromkeys(seen))}")
 
@@ -170,17 +151,8 @@ def main():
     finally:
         if driver:
             driver.quit()
-        daemon.terminate()
-        try:
-            daemon.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
-        shutil.rmtree(work, ignore_errors=True)
+        stop_daemon(daemon, work)
 
 
 if __name__ == "__main__":
-    main()
-    if failures:
-        print(f"{len(failures)} check(s) failed")
-        sys.exit(1)
-    print("all checks passed")
+    run(main)

@@ -7,15 +7,15 @@ not installed.
 usage: metrics_prometheus.py <manikind binary>
 """
 import os
-import re
 import secrets
-import shutil
-import subprocess
 import sys
 import tempfile
 import time
 import urllib.error
 import urllib.request
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import check, run, start_daemon, stop_daemon, wait_for  # noqa: E402
 
 try:
     from prometheus_client.parser import text_string_to_metric_families
@@ -23,28 +23,14 @@ except ImportError:
     print("skipped: python3-prometheus-client is not installed (scripts/setup.sh --tests installs it)")
     sys.exit(77)
 
-failures = []
-
-
-def check(ok, what):
-    print(("ok   " if ok else "FAIL ") + what, flush=True)
-    if not ok:
-        failures.append(what)
 
 
 def main():
     work = tempfile.mkdtemp(prefix="manikind-metrics-")
     token = secrets.token_hex(32)
-    daemon = subprocess.Popen([sys.argv[1], "--socket", f"{work}/d.sock", "--database", f"{work}/d.db", "--http",
-                               "127.0.0.1:0", "--speed", "10", "--campaign", "builtin:table-s3"],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    daemon, port = start_daemon([sys.argv[1], "--socket", f"{work}/d.sock", "--database", f"{work}/d.db", "--http",
+                                 "127.0.0.1:0", "--speed", "10", "--campaign", "builtin:table-s3"])
     try:
-        port = None
-        for line in daemon.stdout:
-            m = re.search(r"console http://127\.0\.0\.1:(\d+)/", line)
-            if m:
-                port = int(m.group(1))
-                break
         check(port is not None, "manikind printed its console address")
         base = f"http://127.0.0.1:{port}"
 
@@ -92,17 +78,8 @@ def main():
         except urllib.error.HTTPError as e:
             check(e.code == 403, f"a POST from another Origin is refused ({e.code})")
     finally:
-        daemon.terminate()
-        try:
-            daemon.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
-        shutil.rmtree(work, ignore_errors=True)
+        stop_daemon(daemon, work)
 
 
 if __name__ == "__main__":
-    main()
-    if failures:
-        print(f"{len(failures)} check(s) failed")
-        sys.exit(1)
-    print("all checks passed")
+    run(main)
