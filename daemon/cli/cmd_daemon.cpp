@@ -3,6 +3,7 @@
 // results, campaigns, export.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -346,6 +347,54 @@ void add_daemon_commands(CLI::App& app) {
                 std::printf("%-28s %-20s %5d/%-5d %6d  %s\n", r["name"].get<std::string>().c_str(),
                             r["created_utc"].get<std::string>().c_str(), r["trials_done"].get<int>(), r["trials_total"].get<int>(),
                             r["trials_failed_or_aborted"].get<int>(), r["state"].get<std::string>().c_str());
+        });
+    }
+    {
+        auto db = std::make_shared<std::string>("manikind.db");
+        auto wanted = std::make_shared<std::vector<std::string>>();
+        auto last_min = std::make_shared<double>(60.0);
+        auto json = std::make_shared<bool>(false);
+        auto* cmd = app.add_subcommand("log", "The idle log: readings recorded outside trials ([lab] idle_log_period_s), "
+                                              "as CSV (utc, channel, value, unit, quality)");
+        cmd->add_option("--db", *db, "The daemon's database")->capture_default_str();
+        cmd->add_option("--channel", *wanted, "DEVICE/CHANNEL, e.g. chamber/air_temp_pv_c (repeatable; default: every channel)");
+        cmd->add_option("--last-min", *last_min, "Minutes back from the newest reading")->capture_default_str()->check(CLI::PositiveNumber);
+        cmd->add_flag("--json", *json, "One JSON object per channel instead of CSV");
+        cmd->callback([db, wanted, last_min, json] {
+            if (!std::filesystem::exists(*db)) throw UserError(fmt::format("{}: no such database", *db));
+            auto database = recorder::Database::open(*db);
+            std::vector<recorder::ChannelRow> chosen;
+            for (const auto& ch : database.channels()) {
+                const std::string key = ch.device_name + "/" + ch.name;
+                if (wanted->empty() || std::find(wanted->begin(), wanted->end(), key) != wanted->end()) chosen.push_back(ch);
+            }
+            for (const auto& w : *wanted)
+                if (std::none_of(chosen.begin(), chosen.end(), [&](const auto& ch) { return ch.device_name + "/" + ch.name == w; }))
+                    throw UserError(fmt::format("--channel {}: no such channel in {} (see `manikin live` for names)", w, *db));
+            // The window ends at the newest idle reading of the chosen channels.
+            std::int64_t newest = 0;
+            std::vector<std::vector<recorder::SampleRow>> rows;
+            for (const auto& ch : chosen) {
+                rows.push_back(database.idle_samples(ch.id, 0));
+                if (!rows.back().empty()) newest = std::max(newest, rows.back().back().utc_ns);
+            }
+            const auto since = newest - static_cast<std::int64_t>(*last_min * 60e9);
+            nlohmann::json out = nlohmann::json::array();
+            if (!*json) std::printf("utc_s,channel,value,unit,quality\n");
+            for (std::size_t i = 0; i < chosen.size(); ++i) {
+                const std::string key = chosen[i].device_name + "/" + chosen[i].name;
+                nlohmann::json points = nlohmann::json::array();
+                for (const auto& r : rows[i]) {
+                    if (r.utc_ns < since) continue;
+                    if (*json)
+                        points.push_back({static_cast<double>(r.utc_ns) * 1e-9, std::isnan(r.value) ? nlohmann::json(nullptr) : nlohmann::json(r.value), r.quality});
+                    else
+                        std::printf("%.3f,%s,%.6g,%s,%d\n", static_cast<double>(r.utc_ns) * 1e-9, key.c_str(), r.value,
+                                    chosen[i].unit.c_str(), r.quality);
+                }
+                if (*json) out.push_back({{"channel", key}, {"unit", chosen[i].unit}, {"points_utc_s_value_quality", points}});
+            }
+            if (*json) std::printf("%s\n", out.dump().c_str());
         });
     }
     {

@@ -149,6 +149,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         std::string db = c.database.string();
         r.text(*lab, "lab", "database", db);
         c.database = db;
+        r.number(*lab, "lab", "idle_log_period_s", c.idle_log_period_s, 0.0, 3600.0, "s");
     }
     if (const auto* log = r.table(root, "", "logging"))
         r.text(*log, "logging", "level", c.log_level, {"trace", "debug", "info", "warn", "error"});

@@ -88,6 +88,7 @@ struct Config {
     std::string mode = "simulated";        // simulated | real
     std::string log_level = "info";
     std::filesystem::path database = "manikind.db";
+    double idle_log_period_s = 10.0;       // outside trials, one reading per channel this often (0: off)
     SafetyLimits safety;
     SteadyStateRule steady_state;
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)

@@ -164,7 +164,16 @@ void LabDaemon::on_sample(const drivers::Sample& s) {
     if (s.device == "datalogger" && s.channel.ends_with("air_temp_c") && s.quality == drivers::Quality::good &&
         s.channel == "ee181_1.air_temp_c")
         enclosure_range_.push(s.mono_ns, s.value);
-    if (trial_id_ == 0) return;
+    if (trial_id_ == 0) {
+        // Outside trials: the idle log, one reading per channel per idle_log_period_s.
+        const double period_s = o_.config.idle_log_period_s;
+        if (period_s <= 0) return;
+        const auto [it, first] = idle_logged_ns_.try_emplace(s.device + "/" + s.channel, s.mono_ns);
+        if (!first) {
+            if (static_cast<double>(s.mono_ns - it->second) < period_s * 1e9) return;
+            it->second = s.mono_ns;
+        }
+    }
     recorder::SampleRow row{trial_id_, channel_id(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
                             static_cast<std::uint8_t>(s.quality)};
     if (!recorder_->push(row)) {

@@ -90,6 +90,8 @@ public:
     bool campaign_active();
 
     recorder::Database& db() { return db_; }
+    // Returns when every sample recorded so far is committed (exports and tests read after it).
+    void flush_recorder();
     Acquisition& acquisition() { return *acq_; }
     const std::filesystem::path& database_path() const { return db_path_; }
     std::optional<std::string> last_campaign() const { return last_campaign_; }
@@ -123,7 +125,6 @@ private:
     };
     SteadyCheck check_steady_window_locked(std::int64_t now_ns);
     nlohmann::json measured_json_locked() const;
-    void flush_recorder();
 
     DaemonOptions o_;
     std::filesystem::path db_path_;
@@ -155,6 +156,7 @@ private:
     // Live values and detectors.
     std::map<std::string, drivers::Sample> live_;
     std::map<std::string, std::int64_t> channel_ids_;
+    std::map<std::string, std::int64_t> idle_logged_ns_;  // channel -> last idle-log reading (mono)
     std::map<std::string, std::int64_t> device_ids_;
     std::vector<SlidingRange> skin_range_;
     SlidingRange enclosure_range_;

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "../daemon/daemon_process.hpp"
+#include "daemon/core/lab_daemon.hpp"
 #include "run_cli.hpp"
 
 using manikind::test::DaemonProcess;
@@ -73,4 +74,33 @@ TEST_CASE("manikin campaigns lists a database's campaigns; status, trial watch a
     }
     CHECK(run_manikin("campaigns --db " + (dir / "none.db").string() + " 2>/dev/null").exit_code == 2);
     fs::remove_all(dir);
+}
+
+TEST_CASE("manikin log prints the idle log as CSV for the channels asked, and names a channel that does not exist",
+          "[cli][idle]") {
+    const auto dir = std::filesystem::temp_directory_path() / ("manikind-test-idle-log-" + std::to_string(::getpid()));
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    const std::string db = (dir / "d.db").string();
+    {
+        // Ten virtual minutes with no campaign: the idle log is all there is.
+        auto c = manikind::config::default_config();
+        c.database = db;
+        c.simulation.runtime_dir = (dir / "sim").string();
+        c.log_level = "error";
+        c.idle_log_period_s = 30.0;
+        manikind::LabDaemon d({c, true, 1.0});
+        for (int i = 0; i < 600; ++i) d.step_virtual(1.0);
+    }
+    auto r = manikind::test::run_manikin("log --db " + db + " --channel chamber/air_temp_pv_c");
+    REQUIRE(r.exit_code == 0);
+    std::size_t lines = 0;
+    for (std::size_t p = r.out.find('\n'); p != std::string::npos; p = r.out.find('\n', p + 1)) ++lines;
+    CHECK(r.out.rfind("utc_s,channel,value,unit,quality\n", 0) == 0);
+    CHECK(lines == 1 + 20);  // the header and one reading per 30 s over 600 s
+    CHECK(r.out.find(",chamber/air_temp_pv_c,22,°C,0\n") != std::string::npos);
+    r = manikind::test::run_manikin("log --db " + db + " --channel nope/x 2>&1");
+    CHECK(r.exit_code != 0);
+    CHECK(r.out.find("--channel nope/x: no such channel") != std::string::npos);
+    std::filesystem::remove_all(dir);
 }

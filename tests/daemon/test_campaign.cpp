@@ -220,3 +220,35 @@ TEST_CASE("a misspelt campaign key is refused with file, line, column, key and t
     CHECK(f.daemon().status_json()["campaign"].is_null());
     CHECK_FALSE(f.daemon().db().find_campaign("typo"));
 }
+
+TEST_CASE("outside trials the daemon keeps an idle log: one reading per channel per idle_log_period_s, none "
+          "during a trial, none when 0",
+          "[daemon][campaign][idle]") {
+    using manikind::test::DaemonFixture;
+    DaemonFixture f([](manikind::config::Config& c) { c.idle_log_period_s = 10.0; });
+    for (int i = 0; i < 120; ++i) f.daemon().step_virtual(1.0);
+    f.daemon().flush_recorder();
+    auto& db = f.daemon().db();
+    std::int64_t chamber_pv = -1;
+    for (const auto& ch : db.channels())
+        if (ch.device_name == "chamber" && ch.name == "air_temp_pv_c") chamber_pv = ch.id;
+    REQUIRE(chamber_pv > 0);
+    const auto rows = db.idle_samples(chamber_pv, 0);
+    // 120 s polled every second, kept every 10 s: 12 readings (the first at once), 10 s apart.
+    CHECK(rows.size() >= 11);
+    CHECK(rows.size() <= 13);
+    for (std::size_t i = 1; i < rows.size(); ++i) CHECK(rows[i].mono_ns - rows[i - 1].mono_ns >= 10'000'000'000LL);
+    REQUIRE(f.daemon().start_campaign(manikind::test::quick_plan("idle")).empty());
+    f.daemon().step_virtual(1.0);  // the tick at its end creates the trial
+    REQUIRE(f.daemon().status_json().contains("trial"));
+    f.daemon().flush_recorder();
+    const auto trial_began = db.idle_sample_count();
+    for (int i = 0; i < 60; ++i) f.daemon().step_virtual(1.0);
+    f.daemon().flush_recorder();
+    CHECK(db.idle_sample_count() == trial_began);  // a trial's readings go to its samples, not the idle log
+
+    DaemonFixture off([](manikind::config::Config& c) { c.idle_log_period_s = 0.0; });
+    for (int i = 0; i < 30; ++i) off.daemon().step_virtual(1.0);
+    off.daemon().flush_recorder();
+    CHECK(off.daemon().db().idle_sample_count() == 0);
+}

@@ -105,8 +105,22 @@ CREATE INDEX events_by_trial_time ON events (trial_id, mono_ns);
 CREATE INDEX results_by_campaign_time ON results (campaign_id, computed_utc_ns);
 )sql";
 
+// Version 3: the idle log. Readings outside any trial (before, between and after campaigns) at
+// [lab] idle_log_period_s, so the chamber's history before a trial is kept. Keyed by wall time:
+// the monotonic clock restarts with the daemon.
+constexpr const char* migration_3 = R"sql(
+CREATE TABLE idle_samples (
+    channel_id INTEGER NOT NULL REFERENCES channels(id),
+    utc_ns INTEGER NOT NULL,
+    mono_ns INTEGER NOT NULL,
+    value REAL,
+    quality INTEGER NOT NULL DEFAULT 0,
+    PRIMARY KEY (channel_id, utc_ns)
+) WITHOUT ROWID;
+)sql";
+
 // Append only: a released migration is never edited, a change is a new entry.
-constexpr std::array<const char*, 2> all_migrations{migration_1, migration_2};
+constexpr std::array<const char*, 3> all_migrations{migration_1, migration_2, migration_3};
 
 std::int64_t utc_now_ns() {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
@@ -137,6 +151,7 @@ struct Database::Impl {
     // string literals or static strings only.
     std::unordered_map<std::string_view, sqlite3_stmt*> statements;
     sqlite3_stmt* insert_sample = nullptr;  // the hot one, kept out of the map lookup
+    sqlite3_stmt* insert_idle_sample = nullptr;  // rows with trial_id 0: the idle log
 
     ~Impl() {
         for (auto& [sql, s] : statements) sqlite3_finalize(s);
@@ -317,6 +332,9 @@ Database Database::open(const std::filesystem::path& path) {
     migrate(*impl);
     impl->insert_sample = impl->statement(
         "INSERT OR IGNORE INTO samples (trial_id, channel_id, mono_ns, utc_ns, value, quality) VALUES (?, ?, ?, ?, ?, ?)");
+    impl->insert_idle_sample = impl->statement(
+        // Same parameter numbers as insert_sample (?1, the trial, unused): one binding loop serves both.
+        "INSERT OR IGNORE INTO idle_samples (channel_id, mono_ns, utc_ns, value, quality) VALUES (?2, ?3, ?4, ?5, ?6)");
     return Database(std::move(impl));
 }
 
@@ -444,11 +462,11 @@ std::int64_t Database::channel_id(std::int64_t device_id, const std::string& nam
 
 std::size_t Database::insert_samples(std::span<const SampleRow> rows) {
     Transaction tx(*impl_);
-    sqlite3_stmt* s = impl_->insert_sample;
     std::size_t duplicates = 0;
     // Every parameter is bound for every row, so no clear_bindings; reset before the check so
     // the statement is reusable whatever happens.
     for (const auto& r : rows) {
+        sqlite3_stmt* s = r.trial_id == 0 ? impl_->insert_idle_sample : impl_->insert_sample;
         sqlite3_bind_int64(s, 1, r.trial_id);
         sqlite3_bind_int64(s, 2, r.channel_id);
         sqlite3_bind_int64(s, 3, r.mono_ns);
@@ -572,6 +590,21 @@ std::vector<SampleRow> Database::samples(std::int64_t trial_id, std::int64_t cha
     while (q.step())
         out.push_back({trial_id, channel_id, q.integer(0), q.integer(1), q.real(2), static_cast<std::uint8_t>(q.integer(3))});
     return out;
+}
+
+std::vector<SampleRow> Database::idle_samples(std::int64_t channel_id, std::int64_t since_utc_ns) {
+    Query q(*impl_, "SELECT mono_ns, utc_ns, value, quality FROM idle_samples WHERE channel_id = ? AND utc_ns >= ? ORDER BY utc_ns");
+    q.bind(channel_id, since_utc_ns);
+    std::vector<SampleRow> out;
+    while (q.step())
+        out.push_back({0, channel_id, q.integer(0), q.integer(1), q.real(2), static_cast<std::uint8_t>(q.integer(3))});
+    return out;
+}
+
+std::int64_t Database::idle_sample_count() {
+    Query q(*impl_, "SELECT count(*) FROM idle_samples");
+    q.step();
+    return q.integer(0);
 }
 
 std::int64_t Database::sample_count(std::int64_t trial_id) {

@@ -23,7 +23,7 @@ namespace manikind::recorder {
 enum class Quality : std::uint8_t { good = 0, stale = 1, out_of_range = 2, comm_error = 3 };
 
 struct SampleRow {
-    std::int64_t trial_id = 0;
+    std::int64_t trial_id = 0;  // 0: outside any trial, stored in the idle log (idle_samples)
     std::int64_t channel_id = 0;
     std::int64_t mono_ns = 0;  // CLOCK_MONOTONIC: orders samples within a trial
     std::int64_t utc_ns = 0;   // wall clock, for people
@@ -151,6 +151,9 @@ public:
     std::vector<ChannelRow> channels();                         // by device name, channel name
     std::vector<SampleRow> samples(std::int64_t trial_id, std::int64_t channel_id);  // by mono_ns
     std::int64_t sample_count(std::int64_t trial_id);
+    // The idle log (rows pushed with trial_id 0): one channel's readings since a wall time.
+    std::vector<SampleRow> idle_samples(std::int64_t channel_id, std::int64_t since_utc_ns);
+    std::int64_t idle_sample_count();
     std::vector<EventRow> events(std::optional<std::int64_t> trial_id);  // empty: all events; by mono_ns
     std::optional<ResultRow> latest_result(std::int64_t campaign_id);
 
