@@ -256,7 +256,6 @@ async function renderResults(s) {
     return;
   }
   const body = await r.json();
-  $("results-campaign").textContent = body.campaign;
   const cases = (body.results && body.results.cases) || [];
   const table = $("results");
   table.innerHTML = "<tr><th>case</th><th>n</th><th>Q whole body</th><th>95 % CI</th></tr>";
@@ -269,21 +268,31 @@ async function renderResults(s) {
     tr.appendChild(el("td", {}, `[${fmt(wb.ci_low_w_m2)}, ${fmt(wb.ci_high_w_m2)}]`));
     table.appendChild(tr);
   }
-  // Whole-body flux per case with its 95 % CI.
+  $("results-campaign").textContent = body.campaign + (body.results.interim ? " (so far: interim, updated after each trial)" : "");
+  drawParity(body.results.twin_parity || []);
+}
+
+// Measured whole-body flux (with its 95 % CI) against the baseline twin's, per case; the
+// diagonal is agreement. Points off it are what `manikin reconcile` explains.
+function drawParity(points) {
   const svg = $("results-plot");
   svg.innerHTML = "";
-  const ok = cases.filter((c) => c.whole_body && c.whole_body.q_w_m2 !== undefined);
-  if (!ok.length) return;
-  const lo = Math.min(...ok.map((c) => c.whole_body.ci_low_w_m2)), hi = Math.max(...ok.map((c) => c.whole_body.ci_high_w_m2));
-  const span = hi - lo > 1e-6 ? hi - lo : 1;
-  const y = (v) => 150 - 135 * (v - lo) / span;
-  ok.forEach((c, i) => {
-    const x = 40 + (350 * (i + 0.5)) / ok.length;
-    svg.appendChild(el("svg:line", { x1: x, x2: x, y1: y(c.whole_body.ci_low_w_m2), y2: y(c.whole_body.ci_high_w_m2), stroke: "#1d6fb8" }));
-    svg.appendChild(el("svg:circle", { cx: x, cy: y(c.whole_body.q_w_m2), r: 3, fill: "#1d6fb8" }));
-  });
-  svg.appendChild(el("svg:text", { x: 2, y: 14 }, fmt(hi, 0)));
-  svg.appendChild(el("svg:text", { x: 2, y: 152 }, fmt(lo, 0)));
+  if (!points.length) return;
+  const all = points.flatMap((p) => [p.twin_w_m2, p.measured_w_m2 - p.U_w_m2, p.measured_w_m2 + p.U_w_m2]);
+  const lo = Math.min(...all), hi = Math.max(...all), span = hi - lo > 1e-6 ? hi - lo : 1;
+  const x = (v) => 50 + 330 * (v - lo) / span, y = (v) => 145 - 130 * (v - lo) / span;
+  svg.appendChild(el("svg:line", { x1: x(lo), y1: y(lo), x2: x(hi), y2: y(hi), stroke: "#999", "stroke-dasharray": "4 3" }));
+  for (const p of points) {
+    const g = el("svg:g", { class: "parity-point", "data-case": p.case });
+    g.appendChild(el("svg:line", { x1: x(p.twin_w_m2), x2: x(p.twin_w_m2), y1: y(p.measured_w_m2 - p.U_w_m2),
+                                   y2: y(p.measured_w_m2 + p.U_w_m2), stroke: "#1d6fb8" }));
+    g.appendChild(el("svg:circle", { cx: x(p.twin_w_m2), cy: y(p.measured_w_m2), r: 3, fill: "#1d6fb8" }));
+    g.appendChild(el("svg:title", {}, `case ${p.case}: measured ${fmt(p.measured_w_m2)} ± ${fmt(p.U_w_m2)} W/m², twin ${fmt(p.twin_w_m2)} W/m²`));
+    svg.appendChild(g);
+  }
+  svg.appendChild(el("svg:text", { x: 2, y: 14 }, `measured ${fmt(hi, 0)}`));
+  svg.appendChild(el("svg:text", { x: 2, y: 150 }, fmt(lo, 0)));
+  svg.appendChild(el("svg:text", { x: 250, y: 158 }, "baseline twin, W/m² →"));
 }
 
 async function command(body) {

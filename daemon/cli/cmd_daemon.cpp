@@ -283,7 +283,8 @@ void add_daemon_commands(CLI::App& app) {
                 std::printf("%s\n", r["results"].dump(2).c_str());
                 return;
             }
-            std::printf("campaign %s\n  case  n   Q_WB W/m²   U (95 %%)   95 %% CI\n", r["campaign"].get<std::string>().c_str());
+            std::printf("campaign %s%s\n  case  n   Q_WB W/m²   U (95 %%)   95 %% CI\n", r["campaign"].get<std::string>().c_str(),
+                        r["results"].value("interim", false) ? " (interim: the trials done so far)" : "");
             for (const auto& cs : r["results"]["cases"]) {
                 const auto& wb = cs["whole_body"];
                 std::printf("  %4d  %d  %9.2f  %9.2f   [%.2f, %.2f]\n", cs.value("case", 0), cs.value("n_replicates", 0),

@@ -10,6 +10,7 @@
 #include "analysis/analyze.hpp"
 #include "analysis/zone_map.hpp"
 #include "daemon/core/database_export.hpp"
+#include "daemon/core/results_parity.hpp"
 #include "daemon/core/user_error.hpp"
 
 namespace manikind {
@@ -338,6 +339,32 @@ void LabDaemon::finish_trial(const std::string& state, const std::string& reason
     current_.reset();
     ++trials_done_;
     stage_ = Stage::idle;
+    if (state == "done" && interim_results_.value_or(!o_.virtual_clock) && !queue_.empty()) start_interim_results();
+}
+
+// Results so far, after each trial in real time (a lab waits 75 min per trial; the console shows
+// each case's flux and the parity plot as they come). On its own thread and database connection:
+// the tick and the safety checks never wait for an analysis. On the virtual clock only the final
+// results are computed (a demo would spend its time re-analysing).
+void LabDaemon::start_interim_results() {
+    if (interim_thread_.joinable()) {
+        if (!interim_done_) return;  // the previous one is still running: the next trial will catch up
+        interim_thread_.join();
+    }
+    interim_done_ = false;
+    interim_thread_ = std::thread([this, name = plan_->name, campaign_id = campaign_id_, utc = clock_->utc_ns()] {
+        try {
+            auto db = recorder::Database::open(db_path_);
+            const auto result = analysis::analyze_campaign(campaign_from_database(db, name));
+            auto j = analysis::to_json(result);
+            j["interim"] = true;
+            j["twin_parity"] = twin_parity_json(result);
+            db.store_result(campaign_id, j.dump(), utc);
+        } catch (const std::exception& e) {
+            spdlog::warn("interim results for '{}': {}", name, e.what());
+        }
+        interim_done_ = true;
+    });
 }
 
 void LabDaemon::flush_recorder() { recorder_->flush(); }
@@ -349,7 +376,10 @@ void LabDaemon::finish_campaign(const std::string& state) {
         try {
             const auto campaign = campaign_from_database(db_, plan_->name);
             const auto result = analysis::analyze_campaign(campaign);
-            db_.store_result(campaign_id_, analysis::to_json(result).dump(), clock_->utc_ns());
+            auto j = analysis::to_json(result);
+            j["interim"] = false;
+            j["twin_parity"] = twin_parity_json(result);
+            db_.store_result(campaign_id_, j.dump(), clock_->utc_ns());
             event("info", "results", fmt::format("'{}': results stored", plan_->name));
         } catch (const std::exception& e) {
             event("error", "results", std::string("could not compute results: ") + e.what());
@@ -526,6 +556,7 @@ double LabDaemon::seconds_since_tick() const {
 }
 
 void LabDaemon::stop() {
+    if (interim_thread_.joinable()) interim_thread_.join();
     {
         std::lock_guard lk(lock_);
         stop_ = true;

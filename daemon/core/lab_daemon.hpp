@@ -79,6 +79,8 @@ public:
     std::string acknowledge_alarm(std::int64_t id);
     // Called (under the daemon's lock: keep it to a flag and a post) after each new sample.
     void set_sample_listener(std::function<void()> listener);
+    // Results so far after each trial, on their own thread. Default: in real time only.
+    void set_interim_results(bool on) { interim_results_ = on; }
 
     // Virtual clock: steps until the queue is empty (or `max_virtual_s` passes). `on_trial` is
     // called after each trial with a one-line summary.
@@ -111,6 +113,7 @@ private:
     void event(const std::string& severity, const std::string& kind, const std::string& message);
     void finish_trial(const std::string& state, const std::string& reason);
     void finish_campaign(const std::string& state);
+    void start_interim_results();
     void begin_campaign(const CampaignPlan& plan);
     void safety_stop(const std::string& why);
     double stage_elapsed_s() const;
@@ -182,6 +185,9 @@ private:
 
     std::thread tick_thread_;
     bool stop_ = false;
+    std::thread interim_thread_;
+    std::atomic<bool> interim_done_{true};
+    std::optional<bool> interim_results_;
     std::atomic<std::int64_t> last_tick_steady_ns_{0};
 };
 
