@@ -72,6 +72,11 @@ function drawBody() {
 
 function zoneValue(z, quantity) {
   if (!latest) return null;
+  if (quantity === "residual") {  // measured minus the baseline twin at the live conditions
+    const measured = zoneValue(z, "heat_flux_w_m2");
+    const twin = latest.twin_q_w_m2 ? latest.twin_q_w_m2[String(z.zone)] : undefined;
+    return measured === null || twin === undefined || twin === null ? null : measured - twin;
+  }
   const key = `manikin/z${String(z.zone).padStart(2, "0")}.${quantity}`;
   const v = latest.live[key];
   return v ? v.value : null;
@@ -86,7 +91,12 @@ function showZone(z) {
 function paintZones() {
   const q = $("zone-quantity").value;
   const values = zones.map((z) => zoneValue(z, q)).filter((v) => v !== null);
-  const lo = values.length ? Math.min(...values) : 0, hi = values.length ? Math.max(...values) : 1;
+  let lo = values.length ? Math.min(...values) : 0, hi = values.length ? Math.max(...values) : 1;
+  if (q === "residual") {  // symmetric about zero: blue below the twin, red above
+    const m = Math.max(Math.abs(lo), Math.abs(hi), 1e-6);
+    lo = -m;
+    hi = m;
+  }
   const span = hi - lo > 1e-9 ? hi - lo : 1;
   for (const z of zones) {
     const r = $("zone-" + z.zone);

@@ -4,6 +4,10 @@
 
 #include <cmath>
 
+#include "analysis/zone_map.hpp"
+#include "daemon/core/twin_store.hpp"
+#include "physics/twin/twin.hpp"
+
 namespace manikind::console {
 
 const char* to_string(Severity s) {
@@ -90,6 +94,40 @@ nlohmann::json ChamberHistory::to_json() const {
     nlohmann::json a = nlohmann::json::array();
     for (const auto& p : points_) a.push_back(p);
     return a;
+}
+
+nlohmann::json twin_zone_fluxes(const nlohmann::json& live, bool wet) {
+    // The mean of the good readings of every channel whose key matches (device/prefix*suffix).
+    auto mean = [&](const std::string& device_prefix, const std::string& suffix) -> std::optional<double> {
+        double sum = 0;
+        int n = 0;
+        for (const auto& [key, v] : live.items())
+            if (key.rfind(device_prefix, 0) == 0 && key.size() >= suffix.size() &&
+                key.compare(key.size() - suffix.size(), suffix.size(), suffix) == 0 && v.value("quality", "") == "good" &&
+                v.contains("value") && v["value"].is_number()) {
+                sum += v["value"].get<double>();
+                ++n;
+            }
+        if (n == 0) return std::nullopt;
+        return sum / n;
+    };
+    physics::twin::TrialConditions c;
+    const auto air = mean("datalogger/ee181_", ".air_temp_c"), rh = mean("datalogger/ee181_", ".air_rh_pct");
+    if (!air || !rh) return nullptr;
+    c.air_temp_c = *air;
+    c.air_rh_pct = *rh;
+    c.wall_temp_c = mean("datalogger/wall_tc_", ".wall_temp_c");
+    c.air_speed_m_s = mean("windsonic/", "air_speed_m_s");
+    c.wettedness = wet ? 1.0 : 0.0;
+    for (const auto& z : analysis::andi35_zone_map().zones) {
+        const auto skin = mean(fmt::format("manikin/z{:02d}.", z.zone), "skin_temp_c");
+        if (!skin) return nullptr;
+        c.zones.push_back({z.zone, z.segment, z.region, z.area_m2, *skin});
+    }
+    static const auto baseline = twin_store::load_twin_version("baseline");
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto& f : physics::twin::predict(baseline, c)) out[std::to_string(f.zone)] = f.q_total_w_m2;
+    return out;
 }
 
 std::string prometheus_text(const nlohmann::json& status, const nlohmann::json& live) {

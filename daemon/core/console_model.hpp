@@ -42,6 +42,12 @@ private:
     std::deque<nlohmann::json> points_;
 };
 
+// The baseline twin's heat flux for every zone at the live conditions (EE181 air temperature and
+// RH, wall thermocouples, WindSonic air speed, each zone's live skin temperature; wet or dry as
+// the running case): {"1": W/m², ...}, or null while an input is missing. The console colours
+// zones by measured minus this.
+nlohmann::json twin_zone_fluxes(const nlohmann::json& live, bool wet);
+
 // Prometheus text exposition format 0.0.4: device counters and severities, live values with
 // their age, recorder rows, the trial stage and campaign progress.
 std::string prometheus_text(const nlohmann::json& status, const nlohmann::json& live);

@@ -585,7 +585,7 @@ nlohmann::json LabDaemon::status_json() {
     j["trials_total"] = trials_total_;
     if (current_) {
         j["trial"] = {{"case", current_->c.id}, {"replicate", current_->replicate}, {"id", trial_id_},
-                      {"stage_elapsed_s", stage_elapsed_s()}};
+                      {"wet", current_->c.wet}, {"stage_elapsed_s", stage_elapsed_s()}};
         if (stage_ == Stage::acquiring) {
             const SteadyCheck c = check_steady_window_locked(paused_ ? paused_at_ns_ : clock_->mono_ns());
             const double limit_c = o_.config.steady_state.max_skin_fluctuation_c;

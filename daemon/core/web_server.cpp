@@ -103,11 +103,15 @@ struct WebServer::Impl {
     nlohmann::json update_message() {
         auto live = daemon.live_json();
         history.add(std::chrono::duration<double>(steady::now().time_since_epoch()).count(), live);
+        auto s = status();
+        const bool wet = s.contains("trial") && s["trial"].value("wet", false);
+        auto twin = console::twin_zone_fluxes(live, wet);
         return {{"type", "update"},
                 {"server_utc_ms", std::chrono::duration_cast<std::chrono::milliseconds>(
                                       std::chrono::system_clock::now().time_since_epoch())
                                       .count()},
-                {"status", status()},
+                {"status", s},
+                {"twin_q_w_m2", std::move(twin)},
                 {"live", std::move(live)},
                 {"alarms", daemon.alarms_json()}};
     }

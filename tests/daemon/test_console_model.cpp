@@ -2,6 +2,8 @@
 // severities by the documented rules, the Prometheus exposition's escaping, the chamber history.
 #include <catch2/catch.hpp>
 
+#include <fmt/format.h>
+
 #include "daemon/core/console_model.hpp"
 
 using manikind::console::ChamberHistory;
@@ -65,4 +67,23 @@ TEST_CASE("chamber history keeps one point per step over the last hour", "[daemo
     CHECK(points.back()["t_s"] == 7200.0);
     CHECK(points.back()["air_temp_c"] == Approx(27.2));
     CHECK(points.back()["air_rh_pct"].is_null());  // a channel not seen is null, not zero
+}
+
+TEST_CASE("the twin's zone fluxes at live conditions: every zone once inputs are there, null while one is missing",
+          "[daemon][console]") {
+    nlohmann::json live = {{"datalogger/ee181_1.air_temp_c", {{"value", 30.0}, {"quality", "good"}}},
+                           {"datalogger/ee181_1.air_rh_pct", {{"value", 40.0}, {"quality", "good"}}},
+                           {"windsonic/air_speed_m_s", {{"value", 0.1}, {"quality", "good"}}}};
+    CHECK(manikind::console::twin_zone_fluxes(live, false).is_null());  // no skin temperatures yet
+    for (int z = 1; z <= 35; ++z)
+        live[fmt::format("manikin/z{:02d}.skin_temp_c", z)] = {{"value", 34.0}, {"quality", "good"}};
+    const auto dry = manikind::console::twin_zone_fluxes(live, false);
+    const auto wet = manikind::console::twin_zone_fluxes(live, true);
+    REQUIRE(dry.size() == 35);
+    // Skin 4 °C above the air loses heat by convection and radiation; a wet skin loses more
+    // (evaporation at 40 % RH).
+    for (const auto& [zone, q] : dry.items()) {
+        CHECK(q.get<double>() > 0.0);
+        CHECK(wet[zone].get<double>() > q.get<double>());
+    }
 }

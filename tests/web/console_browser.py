@@ -82,6 +82,13 @@ def main():
         first = wait_for("every zone shows a value", lambda: (lambda v: v if all(v) else None)(values()), 60)
         if first:
             wait_for("zone values change as the manikin reports", lambda: values() != first, 60)
+        # Coloured by the residual against the twin (measured heat flux minus the baseline twin at
+        # the live conditions), then back to skin temperature.
+        choose = "const s = document.getElementById('zone-quantity'); s.value = arguments[0]; s.dispatchEvent(new Event('change'));"
+        driver.execute_script(choose, "residual")
+        check(bool(wait_for("every zone shows its residual against the twin", lambda: all(values()), 30)),
+              "every zone shows its residual against the twin")
+        driver.execute_script(choose, "skin_temp_c")
 
         stage = lambda: driver.execute_script("return document.getElementById('stage').textContent;")
         seen = [stage()]
