@@ -6,6 +6,8 @@
 
 #include <filesystem>
 
+#include <fmt/format.h>
+
 #include "daemon/core/control_api.hpp"
 #include "daemon_fixture.hpp"
 
@@ -80,4 +82,26 @@ TEST_CASE("control server: Unix socket is 0660 and answers newline-delimited JSO
     CHECK(reply["status"]["mode"] == "simulated");
     CHECK(manikind::call_daemon(o.socket_path, {{"cmd", "shutdown"}, {"token", "t"}})["ok"] == true);
     CHECK(server.shutdown_requested());
+}
+
+TEST_CASE("control API: alarms list every warning, and acknowledging one needs the token and is recorded",
+          "[daemon][api]") {
+    DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"windsonic:silent@5"}; });
+    for (int i = 0; i < 30; ++i) f.daemon().step_virtual(1.0);  // the WindSonic falls silent, goes stale
+    const auto listed = ask(f, R"({"cmd":"alarms"})");
+    REQUIRE(listed["ok"] == true);
+    REQUIRE_FALSE(listed["alarms"].empty());
+    const auto& first = listed["alarms"][0];
+    CHECK(first["message"].get<std::string>().find("windsonic") != std::string::npos);
+    CHECK(first["acknowledged"] == false);
+    const auto id = first["id"].get<long>();
+    CHECK(ask(f, fmt::format(R"({{"cmd":"ack_alarm","id":{}}})", id))["error"] == "wrong or missing token");
+    CHECK(ask(f, R"({"cmd":"ack_alarm","token":"s3cret","id":999999})")["error"].get<std::string>().find("no alarm with id") !=
+          std::string::npos);
+    CHECK(ask(f, fmt::format(R"({{"cmd":"ack_alarm","token":"s3cret","id":{}}})", id))["ok"] == true);
+    CHECK(ask(f, R"({"cmd":"alarms"})")["alarms"][0]["acknowledged"] == true);
+    bool recorded = false;
+    for (const auto& e : f.daemon().db().events(std::nullopt))
+        if (e.kind == "alarm_ack") recorded = true;
+    CHECK(recorded);
 }
