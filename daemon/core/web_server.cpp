@@ -37,6 +37,13 @@ std::chrono::nanoseconds seconds(double s) {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(s));
 }
 
+double utc_ms() {
+    return static_cast<double>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                   std::chrono::system_clock::now().time_since_epoch())
+                                   .count()) *
+           1e-3;
+}
+
 bool is_loopback(const std::string& host) {
     boost::system::error_code ec;
     const auto addr = asio::ip::make_address(host, ec);
@@ -85,6 +92,7 @@ struct WebServer::Impl {
     int bound_port = 0;
     std::atomic<bool> shutdown{false};
     std::atomic<bool> sample_pending{false};
+    std::atomic<double> pending_since_utc_ms{0};  // wall time the oldest unsent sample reached the daemon
     std::size_t clients = 0;  // HTTP and WebSocket sessions (server thread only)
     std::list<std::weak_ptr<WsSession>> sockets;
     steady::time_point last_push{};
@@ -359,22 +367,26 @@ struct WebServer::Impl {
         });
     }
 
-    // Updates go out when a sample arrives (at most every 50 ms) and at least once a second.
+    // Updates go out when a sample arrives (a burst coalesced over 20 ms: the issue asks under 50 ms from sample to screen) and at least once a second.
     void broadcast() {
         last_push = steady::now();
-        sample_pending = false;
+        // The oldest sample in this update reached the daemon then: the page (and bench_console)
+        // measures sample-to-screen latency from it.
+        const double oldest_sample_utc_ms = sample_pending.exchange(false) ? pending_since_utc_ms.load() : 0.0;
         sockets.remove_if([](const std::weak_ptr<WsSession>& w) {
             auto s = w.lock();
             return !s || !s->open;
         });
         if (sockets.empty()) return;
-        const auto message = std::make_shared<const std::string>(update_message().dump());
+        auto update = update_message();
+        update["oldest_new_sample_utc_ms"] = oldest_sample_utc_ms > 0 ? nlohmann::json(oldest_sample_utc_ms) : nlohmann::json(nullptr);
+        const auto message = std::make_shared<const std::string>(update.dump());
         for (auto& w : sockets)
             if (auto s = w.lock()) s->send(message);
     }
     void on_sample_posted() {
         if (push_scheduled) return;
-        const auto due = last_push + std::chrono::milliseconds(50);
+        const auto due = last_push + std::chrono::milliseconds(20);
         if (steady::now() >= due) return broadcast();
         push_scheduled = true;
         push_timer->expires_at(due);
@@ -418,7 +430,10 @@ void WebServer::start() {
     s.tick_timer.emplace(*s.io);
     s.accept_retry.emplace(*s.io);
     s.daemon.set_sample_listener([&s] {
-        if (!s.sample_pending.exchange(true)) asio::post(*s.io, [&s] { s.on_sample_posted(); });
+        if (!s.sample_pending.exchange(true)) {
+            s.pending_since_utc_ms = utc_ms();
+            asio::post(*s.io, [&s] { s.on_sample_posted(); });
+        }
     });
     s.accept();
     s.tick();

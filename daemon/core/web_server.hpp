@@ -6,8 +6,8 @@
 //   GET  /metrics               Prometheus text format (docs/daemon.md, "Metrics")
 //   POST /api/command           a control-API request ({"cmd":..., "token":...}): the same code
 //                               path, token and safety limits as the Unix socket
-//   GET  /ws                    WebSocket: an update (status + live) on every new sample, at
-//                               most every 50 ms, and at least every second
+//   GET  /ws                    WebSocket: an update (status + live) on every new sample (bursts
+//                               coalesced over 20 ms), and at least every second
 // Reading needs no token; anything that changes state needs the API token. Requests whose Host
 // is not this loopback address (DNS rebinding) or whose Origin is another site are refused.
 // Clients follow the control API's rules: a cap, an idle timeout, and a bound on unsent updates.
