@@ -145,7 +145,8 @@ void LabDaemon::set_sample_listener(std::function<void()> listener) {
 
 void LabDaemon::on_sample(const drivers::Sample& s) {
     std::lock_guard lk(lock_);
-    live_[s.device + "/" + s.channel] = s;
+    const std::string key = s.device + "/" + s.channel;
+    live_[key] = s;
     if (sample_listener_) sample_listener_();
     // Safety: enforced here, whatever a client asked for.
     if (s.device == "manikin" && s.quality != drivers::Quality::comm_error && acq_ && acq_->manikin().running_command()) {
@@ -169,7 +170,7 @@ void LabDaemon::on_sample(const drivers::Sample& s) {
         // Outside trials: the idle log, one reading per channel per idle_log_period_s.
         const double period_s = o_.config.idle_log_period_s;
         if (period_s <= 0) return;
-        const auto [it, first] = idle_logged_ns_.try_emplace(s.device + "/" + s.channel, s.mono_ns);
+        const auto [it, first] = idle_logged_ns_.try_emplace(key, s.mono_ns);
         if (!first) {
             if (static_cast<double>(s.mono_ns - it->second) < period_s * 1e9) return;
             it->second = s.mono_ns;

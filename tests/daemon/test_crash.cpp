@@ -12,37 +12,10 @@
 #include <string>
 
 #include "daemon/core/recorder/database.hpp"
+#include "daemon_process.hpp"
 
 namespace fs = std::filesystem;
-
-namespace {
-
-struct Child {
-    pid_t pid = -1;
-    FILE* out = nullptr;
-};
-
-// Starts the real daemon binary with stdout on a pipe (reading it blocks on real events).
-Child spawn(const std::vector<std::string>& args) {
-    int fds[2];
-    REQUIRE(::pipe(fds) == 0);
-    const pid_t pid = ::fork();
-    REQUIRE(pid >= 0);
-    if (pid == 0) {
-        ::dup2(fds[1], STDOUT_FILENO);
-        ::close(fds[0]);
-        ::close(fds[1]);
-        std::vector<char*> argv;
-        for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-        argv.push_back(nullptr);
-        ::execv(argv[0], argv.data());
-        ::_exit(127);
-    }
-    ::close(fds[1]);
-    return {pid, ::fdopen(fds[0], "r")};
-}
-
-}  // namespace
+using manikind::test::DaemonProcess;
 
 TEST_CASE("kill -9 mid-trial: restart marks the trial interrupted, committed samples intact", "[daemon][crash]") {
     const fs::path dir = fs::temp_directory_path() / ("manikind-crash-" + std::to_string(::getpid()));
@@ -57,34 +30,22 @@ TEST_CASE("kill -9 mid-trial: restart marks the trial interrupted, committed sam
     const std::vector<std::string> common = {bin, "--virtual", "--database", db_path, "--socket", (dir / "d.sock").string()};
     auto args = common;
     args.insert(args.end(), {"--campaign", (dir / "plan.toml").string()});
-    Child child = spawn(args);
+    auto child = DaemonProcess::spawn(args);
 
     // Read the daemon's progress lines until the trial is acquiring, then kill it without warning.
-    long committed_before_kill = -1;
-    char line[512];
-    while (std::fgets(line, sizeof line, child.out)) {
-        const std::string s = line;
-        if (s.find("acquiring trial") != std::string::npos) {
-            committed_before_kill = std::stol(s.substr(s.find("committed=") + 10));
-            break;
-        }
-    }
+    REQUIRE(child.read_until("acquiring trial"));
+    const std::string& out = child.output();
+    const long committed_before_kill = std::stol(out.substr(out.rfind("committed=") + 10));
     REQUIRE(committed_before_kill > 0);
-    ::kill(child.pid, SIGKILL);
-    int status = 0;
-    ::waitpid(child.pid, &status, 0);
-    std::fclose(child.out);
+    ::kill(child.pid(), SIGKILL);
+    const int status = child.wait();
     CHECK(WIFSIGNALED(status));
 
     // Restart: the daemon marks what was running as interrupted, then (no campaign) exits.
     auto restart = common;
     restart.push_back("--exit-when-done");
-    Child again = spawn(restart);
-    while (std::fgets(line, sizeof line, again.out)) {
-    }
-    ::waitpid(again.pid, &status, 0);
-    std::fclose(again.out);
-    CHECK(WEXITSTATUS(status) == 0);
+    auto again = DaemonProcess::spawn(restart);
+    CHECK(WEXITSTATUS(again.wait()) == 0);
 
     auto db = manikind::recorder::Database::open(db_path);
     CHECK(db.integrity_check() == "ok");
