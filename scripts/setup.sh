@@ -20,6 +20,8 @@ packages=(
   build-essential cmake ninja-build pkg-config git
   libmodbus-dev libboost-dev libsqlite3-dev sqlite3 libsystemd-dev
   libspdlog-dev libfmt-dev catch2 libtomlplusplus-dev nlohmann-json3-dev libcli11-dev libeigen3-dev
+  # `manikin export --format hdf5`.
+  libhdf5-dev
 )
 if [ "$with_tests" = yes ]; then
   packages+=(
@@ -29,6 +31,9 @@ if [ "$with_tests" = yes ]; then
     systemd
     # A real browser for the operator console, and a Prometheus parser for /metrics (tests/web/).
     chromium chromium-driver python3-selenium python3-prometheus-client
+    # The tools labs read exports with (tests/export/): h5py, pandas and GNU Octave; rsvg-convert
+    # renders every SVG the tool writes so a malformed one fails (tests/plot/).
+    python3-h5py python3-pandas octave librsvg2-bin
   )
 fi
 missing=()
