@@ -7,6 +7,8 @@
 #include <cstdio>
 #include <cstring>
 
+#include "protocol/fixed_point.hpp"
+
 namespace manikind::protocol::manikin_can {
 namespace {
 
@@ -91,15 +93,15 @@ std::variant<Message, DecodeError> decode(const can_frame& f) {
     if (id == id_heartbeat) {
         if (!need(6)) return DecodeError{"heartbeat needs 6 bytes"};
         if (!valid_mode(f.data[0])) return DecodeError{"heartbeat: unknown control mode"};
-        return Message{Heartbeat{static_cast<ControlMode>(f.data[0]), f.data[1], get_u16(f.data + 2), get_u16(f.data + 4) * 0.01}};
+        return Message{Heartbeat{static_cast<ControlMode>(f.data[0]), f.data[1], get_u16(f.data + 2), scaled_value(get_u16(f.data + 4), 0.01)}};
     }
     if (id > id_zone_status_base && id <= id_zone_status_base + zone_count) {
         if (!need(8)) return DecodeError{"zone status needs 8 bytes"};
         ZoneStatus z;
         z.zone = static_cast<int>(id - id_zone_status_base);
-        z.skin_temp_c = static_cast<std::int16_t>(get_u16(f.data + 0)) * 0.01;
-        z.heat_flux_w_m2 = static_cast<std::int16_t>(get_u16(f.data + 2)) * 0.1;
-        z.heater_power_w_m2 = get_u16(f.data + 4) * 0.1;
+        z.skin_temp_c = scaled_value(static_cast<std::int16_t>(get_u16(f.data + 0)), 0.01);
+        z.heat_flux_w_m2 = scaled_value(static_cast<std::int16_t>(get_u16(f.data + 2)), 0.1);
+        z.heater_power_w_m2 = scaled_value(get_u16(f.data + 4), 0.1);
         z.sweat_rate_g_m2_h = f.data[6] * 2.0;
         z.flags = f.data[7];
         return Message{z};
@@ -110,9 +112,9 @@ std::variant<Message, DecodeError> decode(const can_frame& f) {
         Setpoint s;
         s.zone = static_cast<int>(id - id_setpoint_base);
         s.mode = static_cast<ControlMode>(f.data[0]);
-        s.value = static_cast<std::int16_t>(get_u16(f.data + 1)) * (s.mode == ControlMode::constant_heat_flux ? 0.1 : 0.01);
+        s.value = scaled_value(static_cast<std::int16_t>(get_u16(f.data + 1)), s.mode == ControlMode::constant_heat_flux ? 0.1 : 0.01);
         s.sweating = f.data[3] != 0;
-        s.sweat_rate_g_m2_h = get_u16(f.data + 4) * 0.1;
+        s.sweat_rate_g_m2_h = scaled_value(get_u16(f.data + 4), 0.1);
         return Message{s};
     }
     if (id == id_control) {

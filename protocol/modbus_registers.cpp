@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "protocol/fixed_point.hpp"
+
 namespace manikind::protocol::modbus_registers {
 namespace {
 
@@ -41,7 +43,7 @@ double decode(const RegisterSpec& s, std::span<const std::uint16_t> r) {
         case RegisterType::uint32: raw = join(r, s.word_order); break;
         case RegisterType::float32: raw = std::bit_cast<float>(join(r, s.word_order)); break;
     }
-    return raw * s.scale + s.offset;
+    return scaled_value(raw, s.scale, s.offset);
 }
 
 std::vector<std::uint16_t> encode(const RegisterSpec& s, double value) {
