@@ -1,20 +1,27 @@
 #pragma once
 // A campaign in memory, as read from or written to the interchange format
-// `manikin-recording/1` (FORMATS.md section 1): campaign.json + trials/<id>.csv.
+// `manikin-recording/2` (docs/formats.md section 1): campaign.json + trials/<id>.csv.
+// Version 1 (no UTC column, no per-instrument channels) is still read.
 //
 // Samples are stored column-wise (one vector per channel) because everything downstream
 // (steady state, window means) walks one channel over time. Empty CSV cells are NaN.
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "analysis/zone_map.hpp"
 
 namespace manikind::analysis {
 
-inline constexpr const char* kRecordingFormat = "manikin-recording/1";
+inline constexpr const char* kRecordingFormat = "manikin-recording/2";
+inline constexpr const char* kRecordingFormatV1 = "manikin-recording/1";
+
+// One sign for heat flux in every file and command: what the manikin's heaters make up for.
+inline constexpr const char* kHeatFluxSign = "positive = heat lost by the body (skin to environment)";
 
 // A Type B specification: the manufacturer's limit ±(accuracy + accuracy_of_reading x |reading|).
 enum class Distribution {
@@ -57,7 +64,22 @@ struct TrialInfo {
     std::optional<double> chamber_setpoint_temp_c;
     std::optional<double> chamber_setpoint_rh_pct;
     std::string started_utc;
+    std::optional<std::int64_t> t0_utc_ns;  // wall time at t_s = 0 (format 2: "t0_utc")
 };
+
+// One instrument channel as recorded (format 2), e.g. device "datalogger", name
+// "ee181_1.air_temp_c". In the trial CSV its column is "<device>.<name>", followed by
+// "<device>.<name>.q" with the quality code of each value.
+struct RecordedChannel {
+    std::string device;
+    std::string name;
+    std::string unit;
+    std::string column() const { return device + "." + name; }
+};
+
+// Quality codes in ".q" columns: the recorder's (0 good, 1 stale, 2 out of range, 3
+// communication error); kNoSample where no sample fell in the row's interval (an empty cell).
+inline constexpr std::uint8_t kNoSample = 255;
 
 // One trial's samples. `skin_temp_c[z]` and `heat_flux_w_m2[z]` are indexed like the zone
 // map (zone number - 1); all vectors have `t_s.size()` entries.
@@ -69,6 +91,10 @@ struct TrialData {
     std::vector<double> wall_temp_c;     // empty when the file has no such column
     std::vector<std::vector<double>> skin_temp_c;
     std::vector<std::vector<double>> heat_flux_w_m2;
+    std::vector<std::int64_t> utc_ns;    // format 2 "utc" column; empty when the file has none
+    // Per recorded channel, indexed like Campaign::channels (empty vectors in format 1).
+    std::vector<std::vector<double>> channel_values;
+    std::vector<std::vector<std::uint8_t>> channel_quality;
 
     std::size_t rows() const { return t_s.size(); }
 };
@@ -83,6 +109,8 @@ struct Campaign {
     ZoneMap zone_map;
     bool zone_map_inline = false;      // written back inline rather than by name
     std::map<std::string, InstrumentSpec> instruments;  // every channel, defaults filled in
+    std::vector<RecordedChannel> channels;                // format 2: every instrument channel in the CSVs
+    std::map<std::string, std::string> provenance;        // program, database, twin_version, config_sha256, ...
     std::vector<Trial> trials;
     std::vector<std::string> warnings; // unknown keys and the like, with the file named
 };
@@ -99,7 +127,13 @@ struct ReadOptions {
 Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options = {});
 
 // Parses one trial CSV (exposed for tests and tools). `display_name` is used in messages.
-TrialData read_trial_csv(const std::filesystem::path& file, const ZoneMap& map, const std::string& display_name);
+// `channels` are the recorded channels campaign.json declares (format 2).
+TrialData read_trial_csv(const std::filesystem::path& file, const ZoneMap& map, const std::string& display_name,
+                         const std::vector<RecordedChannel>& channels = {});
+
+// ISO 8601 UTC with milliseconds ("2026-11-24T01:35:07.250Z") and back; nullopt when malformed.
+std::string iso_utc_ms(std::int64_t utc_ns);
+std::optional<std::int64_t> parse_iso_utc(std::string_view text);
 
 // Writes campaign.json and trials/<id>.csv into `folder` (created if needed). Numbers are
 // written with the shortest representation that reads back to the same double, so a

@@ -1,4 +1,4 @@
-// Reader for `manikin-recording/1` (FORMATS.md section 1).
+// Reader for `manikin-recording/2` and `/1` (docs/formats.md section 1).
 //
 // Trial CSVs are streamed: read in fixed-size chunks, split into lines in place, each cell
 // parsed with std::from_chars straight out of the chunk (no per-line std::string, no
@@ -12,6 +12,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <set>
 #include <sstream>
@@ -85,11 +86,11 @@ private:
     bool eof_ = false;
 };
 
-enum class Role { time, air_temp, air_rh, air_speed, wall_temp, skin, flux };
+enum class Role { time, air_temp, air_rh, air_speed, wall_temp, skin, flux, utc, channel, quality };
 
 struct Column {
     Role role;
-    std::size_t zone_index = 0;  // for skin and flux
+    std::size_t zone_index = 0;  // for skin and flux; the recorded channel's index for channel and quality
     std::string name;
 };
 
@@ -108,7 +109,10 @@ int zone_column_number(std::string_view name, std::string_view& kind) {
     return (name[1] - '0') * 10 + (name[2] - '0');
 }
 
-std::vector<Column> parse_header(std::string_view line, const ZoneMap& map, const std::string& file) {
+std::vector<Column> parse_header(std::string_view line, const ZoneMap& map, const std::string& file,
+                                 const std::vector<RecordedChannel>& channels) {
+    std::map<std::string, std::size_t> channel_index;
+    for (std::size_t k = 0; k < channels.size(); ++k) channel_index[channels[k].column()] = k;
     std::vector<Column> columns;
     std::set<std::string> seen;
     std::size_t start = 0;
@@ -126,6 +130,11 @@ std::vector<Column> parse_header(std::string_view line, const ZoneMap& map, cons
         else if (name == "air_rh_pct") columns.push_back({Role::air_rh, 0, name});
         else if (name == "air_speed_m_s") columns.push_back({Role::air_speed, 0, name});
         else if (name == "wall_temp_c") columns.push_back({Role::wall_temp, 0, name});
+        else if (name == "utc") columns.push_back({Role::utc, 0, name});
+        else if (const auto it = channel_index.find(name); it != channel_index.end())
+            columns.push_back({Role::channel, it->second, name});
+        else if (name.size() > 2 && name.ends_with(".q") && channel_index.count(name.substr(0, name.size() - 2)))
+            columns.push_back({Role::quality, channel_index.at(name.substr(0, name.size() - 2)), name});
         else if (zone > 0 && (kind == "skin_c" || kind == "flux_w_m2")) {
             if (static_cast<std::size_t>(zone) > map.size())
                 throw InputError(file, 1, column, name,
@@ -133,8 +142,9 @@ std::vector<Column> parse_header(std::string_view line, const ZoneMap& map, cons
             columns.push_back({kind == "skin_c" ? Role::skin : Role::flux, static_cast<std::size_t>(zone - 1), name});
         } else {
             throw InputError(file, 1, column, name,
-                             "unknown column; expected t_s, air_temp_c, air_rh_pct, air_speed_m_s, wall_temp_c, "
-                             "zNN_skin_c or zNN_flux_w_m2");
+                             "unknown column; expected t_s, utc, air_temp_c, air_rh_pct, air_speed_m_s, wall_temp_c, "
+                             "zNN_skin_c, zNN_flux_w_m2 or a channel campaign.json lists under \"channels\" "
+                             "(<device>.<channel> and <device>.<channel>.q)");
         }
         if (comma == std::string_view::npos) break;
         start = comma + 1;
@@ -186,7 +196,22 @@ std::vector<std::string> trial_csv_columns(const ZoneMap& map, bool with_air_spe
     return names;
 }
 
-TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const std::string& file) {
+// A quality cell: empty (no sample in the interval) or a code 0..254.
+bool parse_quality(std::string_view cell, std::uint8_t& code) {
+    cell = trim(cell);
+    if (cell.empty()) {
+        code = kNoSample;
+        return true;
+    }
+    unsigned v = 0;
+    const auto [ptr, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), v);
+    if (ec != std::errc() || ptr != cell.data() + cell.size() || v >= kNoSample) return false;
+    code = static_cast<std::uint8_t>(v);
+    return true;
+}
+
+TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const std::string& file,
+                         const std::vector<RecordedChannel>& channels) {
     FilePtr f(std::fopen(path.c_str(), "rb"));
     if (!f) throw InputError(file, 0, 0, "", fmt::format("cannot open the trial file: {}", std::strerror(errno)));
     ChunkedLineReader reader(f.get());
@@ -200,11 +225,14 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
     }
     // A UTF-8 byte-order mark from a spreadsheet export is not part of the first name.
     if (line.size() >= 3 && line.substr(0, 3) == "\xEF\xBB\xBF") line.remove_prefix(3);
-    const std::vector<Column> columns = parse_header(line, map, file);
+    const std::vector<Column> columns = parse_header(line, map, file, channels);
 
     TrialData data;
     data.skin_temp_c.resize(map.size());
     data.heat_flux_w_m2.resize(map.size());
+    data.channel_values.resize(channels.size());
+    data.channel_quality.resize(channels.size());
+    std::vector<bool> has_values(channels.size()), has_quality(channels.size());
     // Where each column's values go, resolved once.
     std::vector<std::vector<double>*> target(columns.size());
     for (std::size_t c = 0; c < columns.size(); ++c) {
@@ -216,6 +244,15 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
             case Role::wall_temp: target[c] = &data.wall_temp_c; break;
             case Role::skin: target[c] = &data.skin_temp_c[columns[c].zone_index]; break;
             case Role::flux: target[c] = &data.heat_flux_w_m2[columns[c].zone_index]; break;
+            case Role::channel:
+                target[c] = &data.channel_values[columns[c].zone_index];
+                has_values[columns[c].zone_index] = true;
+                break;
+            case Role::utc:
+            case Role::quality:
+                target[c] = nullptr;  // not numbers: parsed below by role
+                if (columns[c].role == Role::quality) has_quality[columns[c].zone_index] = true;
+                break;
         }
     }
     std::size_t time_column = 0;
@@ -235,6 +272,26 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
                                  fmt::format("too many fields: the header has {} columns", columns.size()));
             const std::string_view cell =
                 line.substr(start, comma == std::string_view::npos ? std::string_view::npos : comma - start);
+            if (!target[c]) {
+                if (columns[c].role == Role::utc) {
+                    const auto utc = parse_iso_utc(trim(cell));
+                    if (!utc)
+                        throw InputError(file, line_no, start + 1, "utc",
+                                         fmt::format("expected an ISO 8601 UTC time like 2026-11-24T01:35:07.250Z, found '{}'",
+                                                     shorten(cell)));
+                    data.utc_ns.push_back(*utc);
+                } else {
+                    std::uint8_t code = 0;
+                    if (!parse_quality(cell, code))
+                        throw InputError(file, line_no, start + 1, columns[c].name,
+                                         fmt::format("expected a quality code (0 good, 1 stale, 2 out of range, 3 "
+                                                     "communication error) or an empty cell, found '{}'", shorten(cell)));
+                    data.channel_quality[columns[c].zone_index].push_back(code);
+                }
+                if (comma == std::string_view::npos) break;
+                start = comma + 1;
+                continue;
+            }
             double value = 0.0;
             if (!parse_cell(cell, value))
                 throw InputError(file, line_no, start + 1, columns[c].name,
@@ -254,6 +311,12 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
         if (c + 1 != columns.size())
             throw InputError(file, line_no, line.size() + 1, "",
                              fmt::format("too few fields: found {}, the header has {} columns", c + 1, columns.size()));
+    }
+    // A declared channel whose column or quality column is absent reads as "no sample".
+    for (std::size_t k = 0; k < channels.size(); ++k) {
+        if (!has_values[k]) data.channel_values[k].assign(data.t_s.size(), kNaN);
+        if (!has_quality[k])
+            data.channel_quality[k].assign(data.t_s.size(), has_values[k] ? std::uint8_t{0} : kNoSample);
     }
     return data;
 }
@@ -379,6 +442,29 @@ InstrumentSpec parse_instrument(const json& v, const std::string& channel, const
     return spec;
 }
 
+std::vector<RecordedChannel> parse_channels(const json& arr, const CampaignJson& cj) {
+    const Located at = locate(cj.text(), "\"channels\"");
+    if (!arr.is_array()) cj.fail("channels", "expected an array of {\"device\", \"channel\", \"unit\"}", at);
+    std::vector<RecordedChannel> out;
+    std::set<std::string> seen;
+    for (std::size_t i = 0; i < arr.size(); ++i) {
+        const std::string path = fmt::format("channels[{}].", i);
+        const auto& e = arr[i];
+        if (!e.is_object()) cj.fail(fmt::format("channels[{}]", i), "expected an object", at);
+        for (const char* key : {"device", "channel", "unit"})
+            if (!e.contains(key)) cj.fail(path + key, "required key is missing", at);
+        RecordedChannel ch{cj.string(e, "device", path, at), cj.string(e, "channel", path, at), cj.string(e, "unit", path, at)};
+        if (ch.device.empty() || ch.name.empty() || ch.device.find_first_of(",\"\n") != std::string::npos ||
+            ch.name.find_first_of(",\"\n") != std::string::npos)
+            cj.fail(path + "channel", "device and channel must be non-empty and contain no comma, quote or newline", at);
+        if (e.contains("column") && cj.string(e, "column", path, at) != ch.column())
+            cj.fail(path + "column", fmt::format("expected \"{}\" (device.channel)", ch.column()), at);
+        if (!seen.insert(ch.column()).second) cj.fail(path + "channel", fmt::format("'{}' is listed twice", ch.column()), at);
+        out.push_back(std::move(ch));
+    }
+    return out;
+}
+
 TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson& cj, std::vector<std::string>& warnings) {
     const std::string path = fmt::format("trials[{}].", index);
     if (!t.is_object()) cj.fail(fmt::format("trials[{}]", index), "expected an object");
@@ -409,8 +495,12 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
         if (cs.contains("rh_pct")) info.chamber_setpoint_rh_pct = cj.number(cs, "rh_pct", path + "chamber_setpoint.", at);
     }
     if (t.contains("started_utc")) info.started_utc = cj.string(t, "started_utc", path, at);
+    if (t.contains("t0_utc")) {
+        info.t0_utc_ns = parse_iso_utc(cj.string(t, "t0_utc", path, at));
+        if (!info.t0_utc_ns) cj.fail(path + "t0_utc", "expected an ISO 8601 UTC time like 2026-11-24T01:35:07.250Z", at);
+    }
     static const std::set<std::string> known{"id", "case", "replicate", "file", "skin_setpoint_c", "wet",
-                                             "wettedness", "chamber_setpoint", "started_utc"};
+                                             "wettedness", "chamber_setpoint", "started_utc", "t0_utc"};
     for (const auto& [key, value] : t.items()) {
         (void)value;
         if (!known.count(key))
@@ -448,8 +538,10 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
     Campaign campaign;
     if (!doc.contains("format")) cj.fail("format", fmt::format("required key is missing (expected \"{}\")", kRecordingFormat));
     const std::string format = cj.string(doc, "format", "", locate(cj.text(), "\"format\""));
-    if (format != kRecordingFormat)
-        cj.fail("format", fmt::format("unsupported format '{}'; this program reads '{}'", format, kRecordingFormat),
+    if (format != kRecordingFormat && format != kRecordingFormatV1)
+        cj.fail("format",
+                fmt::format("unsupported format '{}'; this program reads '{}' and '{}'", format, kRecordingFormat,
+                            kRecordingFormatV1),
                 locate(cj.text(), "\"format\""));
     campaign.name = doc.contains("name") ? cj.string(doc, "name", "", locate(cj.text(), "\"name\""))
                                          : folder.filename().string();
@@ -487,7 +579,21 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
         }
     }
 
-    static const std::set<std::string> known_top{"format", "name", "zone_map", "instruments", "trials"};
+    if (doc.contains("channels")) campaign.channels = parse_channels(doc.at("channels"), cj);
+    if (doc.contains("provenance")) {
+        const auto& p = doc.at("provenance");
+        if (!p.is_object()) cj.fail("provenance", "expected an object", locate(cj.text(), "\"provenance\""));
+        for (const auto& [key, value] : p.items())
+            campaign.provenance[key] = value.is_string() ? value.get<std::string>() : value.dump();
+    }
+    if (doc.contains("heat_flux_sign") && doc.at("heat_flux_sign") != kHeatFluxSign)
+        cj.fail("heat_flux_sign",
+                fmt::format("this program reads heat flux as '{}', the file says {}", kHeatFluxSign,
+                            doc.at("heat_flux_sign").dump()),
+                locate(cj.text(), "\"heat_flux_sign\""));
+
+    static const std::set<std::string> known_top{"format", "name", "zone_map", "instruments", "trials",
+                                                 "channels", "provenance", "heat_flux_sign"};
     for (const auto& [key, value] : doc.items()) {
         (void)value;
         if (!known_top.count(key)) {
@@ -522,7 +628,7 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
     for (auto& info : infos) {
         const std::filesystem::path csv = folder / info.file;
         Trial trial;
-        trial.data = read_trial_csv(csv, campaign.zone_map, csv.string());
+        trial.data = read_trial_csv(csv, campaign.zone_map, csv.string(), campaign.channels);
         trial.info = std::move(info);
         campaign.trials.push_back(std::move(trial));
     }

@@ -1,4 +1,4 @@
-// Writer for `manikin-recording/1` (FORMATS.md section 1), and the instrument-spec helpers.
+// Writer for `manikin-recording/2` (docs/formats.md section 1), and the instrument-spec helpers.
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -70,10 +70,12 @@ void append_number(std::string& out, double v) {
     out.append(buf, ptr);
 }
 
-void write_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const TrialData& d) {
+void write_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const std::vector<RecordedChannel>& channels,
+                     const TrialData& d) {
     const bool with_speed = !d.air_speed_m_s.empty();
     const bool with_wall = !d.wall_temp_c.empty();
-    std::vector<const std::vector<double>*> cols{&d.t_s, &d.air_temp_c, &d.air_rh_pct};
+    const bool with_utc = !d.utc_ns.empty();
+    std::vector<const std::vector<double>*> cols{&d.air_temp_c, &d.air_rh_pct};
     if (with_speed) cols.push_back(&d.air_speed_m_s);
     if (with_wall) cols.push_back(&d.wall_temp_c);
     if (d.skin_temp_c.size() != map.size() || d.heat_flux_w_m2.size() != map.size())
@@ -81,26 +83,45 @@ void write_trial_csv(const std::filesystem::path& path, const ZoneMap& map, cons
                                                 d.skin_temp_c.size(), map.size()));
     for (const auto& c : d.skin_temp_c) cols.push_back(&c);
     for (const auto& c : d.heat_flux_w_m2) cols.push_back(&c);
+    const std::size_t n = d.t_s.size();
     for (const auto* c : cols)
-        if (c->size() != d.t_s.size())
-            throw std::invalid_argument(fmt::format("{}: a channel has {} samples, t_s has {}", path.string(), c->size(),
-                                                    d.t_s.size()));
+        if (c->size() != n)
+            throw std::invalid_argument(fmt::format("{}: a channel has {} samples, t_s has {}", path.string(), c->size(), n));
+    if (with_utc && d.utc_ns.size() != n)
+        throw std::invalid_argument(fmt::format("{}: utc has {} rows, t_s has {}", path.string(), d.utc_ns.size(), n));
+    const bool with_channels = !channels.empty();
+    if (with_channels) {
+        if (d.channel_values.size() != channels.size() || d.channel_quality.size() != channels.size())
+            throw std::invalid_argument(fmt::format("{}: trial data has {} recorded channels, the campaign {}", path.string(),
+                                                    d.channel_values.size(), channels.size()));
+        for (std::size_t k = 0; k < channels.size(); ++k)
+            if (d.channel_values[k].size() != n || d.channel_quality[k].size() != n)
+                throw std::invalid_argument(fmt::format("{}: channel {} has {} rows, t_s has {}", path.string(),
+                                                        channels[k].column(), d.channel_values[k].size(), n));
+    }
 
     std::unique_ptr<std::FILE, FileCloser> f(std::fopen(path.c_str(), "wb"));
     if (!f) throw InputError(path.string(), 0, 0, "", fmt::format("cannot write: {}", std::strerror(errno)));
-    std::string out;
+    std::string out = "t_s";
+    if (with_utc) out += ",utc";
     const auto names = trial_csv_columns(map, with_speed, with_wall);
-    for (std::size_t i = 0; i < names.size(); ++i) {
-        if (i) out += ',';
-        out += names[i];
-    }
+    for (std::size_t i = 1; i < names.size(); ++i) out += ',' + names[i];  // names[0] is t_s
+    for (const auto& ch : channels) out += fmt::format(",{0},{0}.q", ch.column());
     out += '\n';
     // Written in blocks so memory stays flat however long the trial.
     constexpr std::size_t kFlushBytes = 1 << 18;
-    for (std::size_t r = 0; r < d.t_s.size(); ++r) {
-        for (std::size_t c = 0; c < cols.size(); ++c) {
-            if (c) out += ',';
-            append_number(out, (*cols[c])[r]);
+    for (std::size_t r = 0; r < n; ++r) {
+        append_number(out, d.t_s[r]);
+        if (with_utc) out += ',' + iso_utc_ms(d.utc_ns[r]);
+        for (const auto* c : cols) {
+            out += ',';
+            append_number(out, (*c)[r]);
+        }
+        for (std::size_t k = 0; with_channels && k < channels.size(); ++k) {
+            out += ',';
+            append_number(out, d.channel_values[k][r]);
+            out += ',';
+            if (const auto q = d.channel_quality[k][r]; q != kNoSample) out += std::to_string(q);
         }
         out += '\n';
         if (out.size() >= kFlushBytes) {
@@ -137,6 +158,14 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
         instruments[channel] = s;
     }
     doc["instruments"] = instruments;
+    doc["heat_flux_sign"] = kHeatFluxSign;
+    if (!campaign.channels.empty()) {
+        json channels = json::array();
+        for (const auto& ch : campaign.channels)
+            channels.push_back({{"column", ch.column()}, {"device", ch.device}, {"channel", ch.name}, {"unit", ch.unit}});
+        doc["channels"] = channels;
+    }
+    if (!campaign.provenance.empty()) doc["provenance"] = campaign.provenance;
     json trials = json::array();
     for (const auto& t : campaign.trials) {
         const auto& i = t.info;
@@ -154,10 +183,11 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
             e["chamber_setpoint"] = cs;
         }
         if (!i.started_utc.empty()) e["started_utc"] = i.started_utc;
+        if (i.t0_utc_ns) e["t0_utc"] = iso_utc_ms(*i.t0_utc_ns);
         trials.push_back(e);
         const std::filesystem::path csv = folder / file;
         std::filesystem::create_directories(csv.parent_path());
-        write_trial_csv(csv, campaign.zone_map, t.data);
+        write_trial_csv(csv, campaign.zone_map, campaign.channels, t.data);
     }
     doc["trials"] = trials;
     std::ofstream out(folder / "campaign.json", std::ios::binary);

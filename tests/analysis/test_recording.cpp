@@ -1,5 +1,5 @@
-// manikin-recording/1: round trip, the embedded zone map, and bad input that names file,
-// line, column and field (hand-made campaigns in tests/data/recordings).
+// manikin-recording/2 (and /1, the hand-made campaigns in tests/data/recordings): round trip,
+// the embedded zone map, and bad input that names file, line, column and field.
 #include <atomic>
 #include <cmath>
 #include <filesystem>
@@ -127,6 +127,94 @@ TEST_CASE("round trip: write a campaign, read it back, identical numbers") {
     CHECK(spec.distribution == an::Distribution::normal_k2);
 }
 
+TEST_CASE("format 2 round trip: per-instrument channels with quality, UTC, provenance") {
+    auto campaign = an::make_synthetic_campaign(1, 2);
+    campaign.channels = {{"datalogger", "ee181_1.air_temp_c", "°C"}, {"manikin", "z01.sweat_rate_g_m2_h", "g/(m² h)"}};
+    campaign.provenance = {{"program", "manikind test"}, {"config_sha256", std::string(64, 'a')}};
+    const std::int64_t t0_utc_ns = 1795000000123000000;  // 2026-11-18, with milliseconds
+    for (auto& trial : campaign.trials) {
+        auto& d = trial.data;
+        trial.info.t0_utc_ns = t0_utc_ns;
+        for (const double t : d.t_s) d.utc_ns.push_back(t0_utc_ns + static_cast<std::int64_t>(t * 1e9));
+        d.channel_values.assign(2, std::vector<double>(d.rows(), 0.1));
+        d.channel_quality.assign(2, std::vector<std::uint8_t>(d.rows(), 0));
+        d.channel_values[0][1] = 22.05;
+        d.channel_quality[0][2] = 2;  // out of range, value kept
+        d.channel_values[1][3] = std::numeric_limits<double>::quiet_NaN();
+        d.channel_quality[1][3] = an::kNoSample;
+    }
+    TempDir dir;
+    an::write_campaign(dir.path, campaign);
+    std::ifstream csv(dir.path / "trials" / (campaign.trials[0].info.id + ".csv"));
+    std::string header, row1;
+    std::getline(csv, header);
+    std::getline(csv, row1);
+    CHECK(header.starts_with("t_s,utc,air_temp_c,"));
+    CHECK(header.ends_with(",datalogger.ee181_1.air_temp_c,datalogger.ee181_1.air_temp_c.q,"
+                           "manikin.z01.sweat_rate_g_m2_h,manikin.z01.sweat_rate_g_m2_h.q"));
+    CHECK(row1.find(",2026-11-18T") != std::string::npos);
+
+    const auto back = an::read_campaign(dir.path);
+    REQUIRE(back.channels.size() == 2);
+    CHECK(back.channels[1].unit == "g/(m² h)");
+    CHECK(back.provenance.at("config_sha256") == std::string(64, 'a'));
+    REQUIRE(back.trials.size() == campaign.trials.size());
+    for (std::size_t t = 0; t < back.trials.size(); ++t) {
+        const auto& a = campaign.trials[t].data;
+        const auto& b = back.trials[t].data;
+        CHECK(back.trials[t].info.t0_utc_ns == t0_utc_ns);
+        // Millisecond resolution: the synthetic grid is whole seconds, so exact.
+        CHECK(a.utc_ns == b.utc_ns);
+        for (std::size_t k = 0; k < 2; ++k) {
+            CHECK(same(a.channel_values[k], b.channel_values[k]));
+            CHECK(a.channel_quality[k] == b.channel_quality[k]);
+        }
+        CHECK(same(a.heat_flux_w_m2[0], b.heat_flux_w_m2[0]));
+    }
+}
+
+TEST_CASE("format 2 bad input: an undeclared channel, a bad quality code, a bad UTC time") {
+    auto campaign = an::make_synthetic_campaign(1, 1);
+    campaign.channels = {{"csat3b", "ux_m_s", "m/s"}};
+    auto& d = campaign.trials[0].data;
+    for (const double t : d.t_s) d.utc_ns.push_back(static_cast<std::int64_t>(t * 1e9));
+    d.channel_values.assign(1, std::vector<double>(d.rows(), 0.25));
+    d.channel_quality.assign(1, std::vector<std::uint8_t>(d.rows(), 0));
+    TempDir dir;
+    an::write_campaign(dir.path, campaign);
+    const fs::path csv = dir.path / "trials" / (campaign.trials[0].info.id + ".csv");
+    std::ifstream in(csv);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    auto error_with = [&](const std::string& from, const std::string& to) {
+        std::string edited = text;
+        edited.replace(edited.find(from), from.size(), to);
+        std::ofstream(csv, std::ios::trunc) << edited;
+        try {
+            (void)an::read_campaign(dir.path);
+        } catch (const an::InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    CHECK_THAT(error_with("csat3b.ux_m_s,", "csat3b.uy_m_s,"), Catch::Contains(":1:") && Catch::Contains("unknown column"));
+    CHECK_THAT(error_with(",0.25,0\n", ",0.25,ok\n"),
+               Catch::Contains(":2:") && Catch::Contains("csat3b.ux_m_s.q") && Catch::Contains("quality code"));
+    CHECK_THAT(error_with("1970-01-01T00:00:00.000Z", "1970-13-01T00:00:00Z"),
+               Catch::Contains(":2:") && Catch::Contains("utc") && Catch::Contains("ISO 8601"));
+}
+
+TEST_CASE("ISO 8601 UTC: written with milliseconds, read back; malformed times refused") {
+    CHECK(an::iso_utc_ms(0) == "1970-01-01T00:00:00.000Z");
+    CHECK(an::iso_utc_ms(1795000000123456789) == "2026-11-18T11:06:40.123Z");
+    CHECK(an::parse_iso_utc("2026-11-18T11:06:40.123Z") == 1795000000123000000);
+    CHECK(an::parse_iso_utc("2026-11-18T11:06:40Z") == 1795000000000000000);
+    CHECK(an::parse_iso_utc("1969-12-31T23:59:59.5Z") == -500000000);
+    CHECK_FALSE(an::parse_iso_utc("2026-02-30T00:00:00Z"));
+    CHECK_FALSE(an::parse_iso_utc("2026-11-18T11:06:40"));
+    CHECK_FALSE(an::parse_iso_utc("2026-11-18T11:06:40.Z"));
+    CHECK_FALSE(an::parse_iso_utc(""));
+}
+
 TEST_CASE("round trip of an inline zone map") {
     const auto original = an::read_campaign(recordings("good-2zone"));
     CHECK(original.zone_map_inline);
@@ -203,9 +291,9 @@ TEST_CASE("bad input: a missing campaign folder, bad JSON, wrong format") {
         CHECK(std::string(e.what()).find("invalid JSON") != std::string::npos);
     }
     {
-        std::ofstream(dir.path / "campaign.json") << "{\"format\": \"manikin-recording/2\", \"trials\": []}";
+        std::ofstream(dir.path / "campaign.json") << "{\"format\": \"manikin-recording/3\", \"trials\": []}";
     }
-    CHECK_THROWS_WITH(an::read_campaign(dir.path), Catch::Contains("unsupported format 'manikin-recording/2'"));
+    CHECK_THROWS_WITH(an::read_campaign(dir.path), Catch::Contains("unsupported format 'manikin-recording/3'"));
 }
 
 TEST_CASE("bad input anywhere means nothing is imported, and good input still reads") {
