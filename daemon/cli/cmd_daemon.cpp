@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -24,6 +25,7 @@
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/control_api.hpp"
 #include "daemon/core/database_export.hpp"
+#include "daemon/core/hdf5_export.hpp"
 #include "daemon/core/recorder/database.hpp"
 #include "daemon/core/user_error.hpp"
 
@@ -399,20 +401,48 @@ void add_daemon_commands(CLI::App& app) {
         });
     }
     {
-        auto db = std::make_shared<std::string>("manikind.db");
-        auto campaign = std::make_shared<std::string>(), dir = std::make_shared<std::string>();
-        auto* cmd = app.add_subcommand("export", "Write a recorded campaign from the database in the interchange format "
-                                                 "(campaign.json + trials/*.csv)");
-        cmd->add_option("campaign", *campaign, "Campaign name")->required();
-        cmd->add_option("dir", *dir, "Output folder")->required();
-        cmd->add_option("--db", *db, "The daemon's database")->capture_default_str();
-        cmd->callback([db, campaign, dir] {
-            if (!std::filesystem::exists(*db)) throw UserError(fmt::format("{}: no such database", *db));
-            auto database = recorder::Database::open(*db);
-            const auto c = campaign_from_database(database, *campaign);
-            analysis::write_campaign(*dir, c);
-            std::printf("%zu trials of '%s' written to %s (analyse with: manikin analyze %s)\n", c.trials.size(),
-                        campaign->c_str(), dir->c_str(), dir->c_str());
+        struct ExportOptions {
+            std::string db = "manikind.db", campaign, out, format = "csv";
+            bool json = false;
+        };
+        auto o = std::make_shared<ExportOptions>();
+        auto* cmd = app.add_subcommand("export", "Write a recorded campaign from the database: every channel with its unit and "
+                                                 "quality, UTC beside trial time (CSV folder or one HDF5 file)");
+        cmd->add_option("campaign", o->campaign, "Campaign name (manikin campaigns --db FILE lists them)")->required();
+        cmd->add_option("out", o->out, "Output: a folder for csv (campaign.json + trials/*.csv), a file for hdf5")->required();
+        cmd->add_option("--db", o->db, "The daemon's database")->capture_default_str();
+        cmd->add_option("--format", o->format, "csv: manikin-recording/2, read by manikin analyze, pandas, MATLAB; "
+                                               "hdf5: manikin-hdf5/1 with the analysis beside the data")
+            ->check(CLI::IsMember({"csv", "hdf5"}))
+            ->capture_default_str();
+        cmd->add_flag("--json", o->json, "Print what was written as one JSON object");
+        cmd->footer(std::string("The formats are in docs/formats.md (section 1 and \"HDF5\"). Heat flux: ") + analysis::kHeatFluxSign +
+                    ".\nExamples:\n  manikin export --db lab.db validation-2026 recordings/validation-2026\n"
+                    "  manikin export --db lab.db validation-2026 validation-2026.h5 --format hdf5");
+        cmd->callback([o] {
+            if (!std::filesystem::exists(o->db)) throw UserError(fmt::format("{}: no such database", o->db));
+            auto database = recorder::Database::open(o->db);
+            auto c = campaign_from_database(database, o->campaign);
+            c.provenance["exported_utc"] = analysis::iso_utc_ms(
+                std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+            std::size_t rows = 0;
+            for (const auto& t : c.trials) rows += t.data.rows();
+            if (o->format == "hdf5") {
+                const auto analysis = analysis::analyze_campaign(c);
+                write_campaign_hdf5(o->out, c, analysis::to_json(analysis));
+            } else {
+                analysis::write_campaign(o->out, c);
+            }
+            if (o->json) {
+                const nlohmann::json doc{{"campaign", o->campaign}, {"format", o->format == "hdf5" ? kHdf5Format : analysis::kRecordingFormat},
+                                         {"path", o->out}, {"trials", c.trials.size()}, {"rows", rows},
+                                         {"channels", c.channels.size()}, {"provenance", c.provenance}};
+                std::printf("%s\n", doc.dump(2).c_str());
+            } else {
+                std::printf("%zu trials of '%s' (%zu rows, %zu recorded channels) written to %s\n", c.trials.size(),
+                            o->campaign.c_str(), rows, c.channels.size(), o->out.c_str());
+                if (o->format == "csv") std::printf("analyse with: manikin analyze %s\n", o->out.c_str());
+            }
         });
     }
 }

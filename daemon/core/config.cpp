@@ -1,4 +1,5 @@
 #include "daemon/core/config.hpp"
+#include "daemon/core/sha256.hpp"
 
 #include <sys/stat.h>
 
@@ -141,6 +142,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
     c.key_where.clear();
     c.source_name = source_name;
     c.file_mode = 0;
+    c.source_sha256 = sha256_hex(toml_text);
     Reader r(root, source_name, c);
     r.record_positions(root, "");
     if (const auto* lab = r.table(root, "", "lab")) {

@@ -103,6 +103,7 @@ struct Config {
     std::map<std::string, std::string> key_where;
     std::string source_name;               // the file in messages (empty: nothing parsed yet)
     unsigned file_mode = 0;                // permission bits of the file load_config read (0: not from a file)
+    std::string source_sha256;             // SHA-256 of the TOML text parsed last: exports' provenance
 };
 
 // The text of config/manikind.toml, embedded at build time (CMake writes it into the build tree).

@@ -7,6 +7,7 @@
 #include <ctime>
 #include <limits>
 #include <map>
+#include <optional>
 
 #include "analysis/zone_map.hpp"
 #include "daemon/core/user_error.hpp"
@@ -24,31 +25,56 @@ std::string iso_utc(std::int64_t utc_ns) {
     return buf;
 }
 
-// Mean of good samples in each (t - period, t] bin relative to `t0_ns`; NaN where none.
-std::vector<double> binned(const std::vector<recorder::SampleRow>& rows, std::int64_t t0_ns, std::size_t n, double period_s) {
-    std::vector<double> sum(n, 0.0), count(n, 0.0);
+// One channel on the trial's grid: row i covers (t_i - period, t_i] with t_i = i x period
+// after `t0_ns`. The value is the mean of the good samples in it (the recorded value itself
+// when one sample fell in it); when none was good, the last sample's value and quality.
+struct BinnedChannel {
+    std::vector<double> value;
+    std::vector<std::uint8_t> quality;  // analysis::kNoSample where no sample fell in the row
+};
+
+BinnedChannel binned(const std::vector<recorder::SampleRow>& rows, std::int64_t t0_ns, std::size_t n, double period_s) {
+    constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+    std::vector<double> sum(n, 0.0);
+    std::vector<int> good(n, 0);
+    BinnedChannel out{std::vector<double>(n, kNaN), std::vector<std::uint8_t>(n, analysis::kNoSample)};
     for (const auto& r : rows) {
-        if (r.quality != 0 || !std::isfinite(r.value)) continue;
         const double t = static_cast<double>(r.mono_ns - t0_ns) * 1e-9;
         if (t < -period_s) continue;
         const auto i = static_cast<long>(std::ceil(t / period_s - 1e-9));
         if (i < 0 || static_cast<std::size_t>(i) >= n) continue;
-        sum[static_cast<std::size_t>(i)] += r.value;
-        count[static_cast<std::size_t>(i)] += 1.0;
+        const auto k = static_cast<std::size_t>(i);
+        if (r.quality == 0 && std::isfinite(r.value)) {
+            sum[k] += r.value;
+            ++good[k];
+        } else if (good[k] == 0) {
+            out.value[k] = r.value;
+            out.quality[k] = r.quality == 0 ? std::uint8_t{3} : r.quality;  // a "good" NaN is a lost reading
+        }
     }
-    std::vector<double> out(n, std::numeric_limits<double>::quiet_NaN());
-    for (std::size_t i = 0; i < n; ++i)
-        if (count[i] > 0) out[i] = sum[i] / count[i];
+    for (std::size_t k = 0; k < n; ++k)
+        if (good[k] > 0) {
+            out.value[k] = good[k] == 1 ? sum[k] : sum[k] / good[k];
+            out.quality[k] = 0;
+        }
     return out;
 }
 
-std::vector<double> mean_of(const std::vector<std::vector<double>>& series, std::size_t n) {
+// Good values only, for the analysis columns (a flagged reading never enters a mean).
+std::vector<double> good_values(const BinnedChannel& c) {
+    std::vector<double> out = c.value;
+    for (std::size_t i = 0; i < out.size(); ++i)
+        if (c.quality[i] != 0) out[i] = std::numeric_limits<double>::quiet_NaN();
+    return out;
+}
+
+std::vector<double> mean_of(const std::vector<const BinnedChannel*>& series, std::size_t n) {
     std::vector<double> out(n, std::numeric_limits<double>::quiet_NaN());
     for (std::size_t i = 0; i < n; ++i) {
         double s = 0;
         int k = 0;
-        for (const auto& v : series)
-            if (std::isfinite(v[i])) s += v[i], ++k;
+        for (const auto* c : series)
+            if (c->quality[i] == 0 && std::isfinite(c->value[i])) s += c->value[i], ++k;
         if (k) out[i] = s / k;
     }
     return out;
@@ -69,55 +95,109 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         conditions[cs.id] = nlohmann::json::parse(cs.conditions_json, nullptr, false);
         case_number[cs.id] = conditions[cs.id].value("id", static_cast<int>(cs.position + 1));
     }
-    std::map<std::string, std::int64_t> channel;  // "device/name" -> id
-    for (const auto& ch : db.channels()) channel[ch.device_name + "/" + ch.name] = ch.id;
-    auto series = [&](std::int64_t trial, const std::string& key, std::int64_t t0, std::size_t n) {
-        const auto it = channel.find(key);
-        if (it == channel.end()) return std::vector<double>(n, std::numeric_limits<double>::quiet_NaN());
-        return binned(db.samples(trial, it->second), t0, n, period_s);
+    const std::vector<recorder::ChannelRow> all_channels = db.channels();
+
+    // The finished trials and their time bases (the manikin's start to the trial's end).
+    struct Span {
+        recorder::TrialRow row;
+        std::int64_t start_mono_ns, end_mono_ns, start_utc_ns;
     };
+    std::vector<Span> spans;
     for (const auto& t : db.trials(campaign_id.value())) {
         if (t.state != "done") continue;
-        std::optional<std::int64_t> start_ns, end_ns;
+        std::optional<recorder::EventRow> start, end;
         for (const auto& e : db.events(t.id)) {
-            if (e.kind == "stage" && e.message == "acquiring") start_ns = e.mono_ns;
-            if (e.kind == "stage" && e.message == "stopping") end_ns = e.mono_ns;
+            if (e.kind == "stage" && e.message == "acquiring") start = e;
+            if (e.kind == "stage" && e.message == "stopping") end = e;
         }
-        if (!start_ns || !end_ns || *end_ns <= *start_ns) continue;
-        const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(*end_ns - *start_ns) * 1e-9 / period_s)) + 1;
+        if (!start || !end || end->mono_ns <= start->mono_ns) continue;
+        spans.push_back({t, start->mono_ns, end->mono_ns, start->utc_ns});
+    }
+    if (spans.empty()) throw UserError(fmt::format("campaign '{}' has no finished trial yet", name));
+
+    // Every channel with samples in any exported trial gets a column in every trial (a fixed
+    // set, so a script reads each trial alike).
+    std::vector<std::vector<BinnedChannel>> per_trial(spans.size());
+    std::vector<bool> recorded(all_channels.size(), false);
+    for (std::size_t s = 0; s < spans.size(); ++s) {
+        const auto& sp = spans[s];
+        const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(sp.end_mono_ns - sp.start_mono_ns) * 1e-9 / period_s)) + 1;
+        for (std::size_t k = 0; k < all_channels.size(); ++k) {
+            const auto rows = db.samples(sp.row.id, all_channels[k].id);
+            if (!rows.empty()) recorded[k] = true;
+            per_trial[s].push_back(binned(rows, sp.start_mono_ns, n, period_s));
+        }
+    }
+    std::vector<std::size_t> exported;  // indexes into all_channels
+    for (std::size_t k = 0; k < all_channels.size(); ++k)
+        if (recorded[k]) {
+            exported.push_back(k);
+            c.channels.push_back({all_channels[k].device_name, all_channels[k].name, all_channels[k].unit});
+        }
+    std::map<std::string, std::size_t> index_of;  // "device/name" -> index into all_channels
+    for (std::size_t k = 0; k < all_channels.size(); ++k) index_of[all_channels[k].device_name + "/" + all_channels[k].name] = k;
+
+    for (std::size_t s = 0; s < spans.size(); ++s) {
+        const auto& sp = spans[s];
+        auto& bins = per_trial[s];
+        const std::size_t n = bins.empty() ? 0 : bins.front().value.size();
+        const auto find = [&](const std::string& key) -> const BinnedChannel* {
+            const auto it = index_of.find(key);
+            return it == index_of.end() || !recorded[it->second] ? nullptr : &bins[it->second];
+        };
         analysis::Trial trial;
-        const nlohmann::json& cond = conditions[t.case_id];
-        trial.info.case_id = case_number[t.case_id];
-        trial.info.replicate = static_cast<int>(t.replicate);
-        trial.info.id = fmt::format("c{:02d}-r{}", trial.info.case_id, t.replicate);
+        const nlohmann::json& cond = conditions[sp.row.case_id];
+        trial.info.case_id = case_number[sp.row.case_id];
+        trial.info.replicate = static_cast<int>(sp.row.replicate);
+        trial.info.id = fmt::format("c{:02d}-r{}", trial.info.case_id, sp.row.replicate);
         trial.info.file = "trials/" + trial.info.id + ".csv";
         trial.info.skin_setpoint_c = cond.value("skin_setpoint_c", 35.0);
         trial.info.wettedness = cond.value("wet", false) ? 1.0 : 0.0;
         trial.info.chamber_setpoint_temp_c = cond.value("chamber_temp_c", 0.0);
         trial.info.chamber_setpoint_rh_pct = cond.value("chamber_rh_pct", 0.0);
-        trial.info.started_utc = t.started_utc_ns ? iso_utc(*t.started_utc_ns) : "";
+        trial.info.started_utc = sp.row.started_utc_ns ? iso_utc(*sp.row.started_utc_ns) : "";
+        trial.info.t0_utc_ns = sp.start_utc_ns;
         auto& d = trial.data;
-        for (std::size_t i = 0; i < n; ++i) d.t_s.push_back(static_cast<double>(i) * period_s);
-        std::vector<std::vector<double>> temps, rhs, walls;
+        for (std::size_t i = 0; i < n; ++i) {
+            d.t_s.push_back(static_cast<double>(i) * period_s);
+            d.utc_ns.push_back(sp.start_utc_ns + static_cast<std::int64_t>(std::llround(static_cast<double>(i) * period_s * 1e9)));
+        }
+        // The analysis columns: air and wall as the mean of their instruments (Text S3.2).
+        std::vector<const BinnedChannel*> temps, rhs, walls;
         for (int k = 1; k <= 8; ++k) {
-            if (channel.count(fmt::format("datalogger/ee181_{}.air_temp_c", k)))
-                temps.push_back(series(t.id, fmt::format("datalogger/ee181_{}.air_temp_c", k), *start_ns, n));
-            if (channel.count(fmt::format("datalogger/ee181_{}.air_rh_pct", k)))
-                rhs.push_back(series(t.id, fmt::format("datalogger/ee181_{}.air_rh_pct", k), *start_ns, n));
-            if (channel.count(fmt::format("datalogger/wall_tc_{}.wall_temp_c", k)))
-                walls.push_back(series(t.id, fmt::format("datalogger/wall_tc_{}.wall_temp_c", k), *start_ns, n));
+            if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_temp_c", k))) temps.push_back(b);
+            if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_rh_pct", k))) rhs.push_back(b);
+            if (const auto* b = find(fmt::format("datalogger/wall_tc_{}.wall_temp_c", k))) walls.push_back(b);
         }
         d.air_temp_c = mean_of(temps, n);
         d.air_rh_pct = mean_of(rhs, n);
         if (!walls.empty()) d.wall_temp_c = mean_of(walls, n);
-        if (channel.count("windsonic/air_speed_m_s")) d.air_speed_m_s = series(t.id, "windsonic/air_speed_m_s", *start_ns, n);
+        if (const auto* b = find("windsonic/air_speed_m_s")) d.air_speed_m_s = good_values(*b);
+        const std::vector<double> missing(n, std::numeric_limits<double>::quiet_NaN());
         for (const auto& z : c.zone_map.zones) {
-            d.skin_temp_c.push_back(series(t.id, fmt::format("manikin/z{:02d}.skin_temp_c", z.zone), *start_ns, n));
-            d.heat_flux_w_m2.push_back(series(t.id, fmt::format("manikin/z{:02d}.heat_flux_w_m2", z.zone), *start_ns, n));
+            const auto* skin = find(fmt::format("manikin/z{:02d}.skin_temp_c", z.zone));
+            const auto* flux = find(fmt::format("manikin/z{:02d}.heat_flux_w_m2", z.zone));
+            d.skin_temp_c.push_back(skin ? good_values(*skin) : missing);
+            d.heat_flux_w_m2.push_back(flux ? good_values(*flux) : missing);
+        }
+        for (const std::size_t k : exported) {
+            d.channel_values.push_back(std::move(bins[k].value));
+            d.channel_quality.push_back(std::move(bins[k].quality));
         }
         c.trials.push_back(std::move(trial));
     }
-    if (c.trials.empty()) throw UserError(fmt::format("campaign '{}' has no finished trial yet", name));
+
+    // Provenance: what made these numbers.
+    c.provenance["program"] = std::string("manikind ") + MANIKIND_VERSION;
+    c.provenance["database"] = db.path().filename().string();
+    c.provenance["twin_version"] = db.latest_twin_version().value_or("baseline");
+    const std::int64_t first_start_utc_ns = spans.front().start_utc_ns;
+    std::int64_t config_utc_ns = 0;  // the configuration the daemon ran under at the first trial
+    for (const auto& e : db.events(std::nullopt))
+        if (e.kind == "config" && e.utc_ns <= first_start_utc_ns && e.utc_ns >= config_utc_ns && e.message.starts_with("sha256 ")) {
+            c.provenance["config_sha256"] = e.message.substr(7, 64);
+            config_utc_ns = e.utc_ns;
+        }
     return c;
 }
 

@@ -82,6 +82,9 @@ LabDaemon::LabDaemon(DaemonOptions options)
         device_ids_[st.name] = db_.device_id(st.name, st.name == "manikin" ? "can" : (st.name == "chamber" || st.name == "datalogger") ? "modbus" : "serial",
                       st.transport);
     event("info", "daemon", fmt::format("started ({} lab, database {})", o_.config.mode, db_path_.string()));
+    // Exports name the configuration their trials ran under by this fingerprint (provenance).
+    if (!o_.config.source_sha256.empty())
+        event("info", "config", fmt::format("sha256 {} {}", o_.config.source_sha256, o_.config.source_name));
 }
 
 LabDaemon::~LabDaemon() {

@@ -1,0 +1,207 @@
+// Data out (issue 16): a campaign recorded by the daemon on the simulated lab, exported to CSV
+// (manikin-recording/2) and HDF5, read back; every recorded channel equals the database's
+// samples, with UTC, units, quality and provenance. The SQLite views give the same table.
+#include <catch2/catch.hpp>
+
+#include <sqlite3.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <memory>
+
+#include <fmt/format.h>
+
+#include <nlohmann/json.hpp>
+
+#include "analysis/recording.hpp"
+#include "daemon/core/hdf5_export.hpp"
+#include "daemon/core/recorder/database.hpp"
+#include "run_cli.hpp"
+
+namespace fs = std::filesystem;
+namespace an = manikind::analysis;
+using manikind::test::run_manikin;
+
+namespace {
+
+struct TempDir {
+    fs::path path = fs::temp_directory_path() / ("manikind-export-" + std::to_string(::getpid()));
+    TempDir() { fs::remove_all(path); }
+    ~TempDir() { fs::remove_all(path); }
+};
+
+// One campaign recorded once for every test in this file (the demo: daemon, devices over their
+// transports, virtual clock).
+const fs::path& recorded_database() {
+    static TempDir dir;
+    static const fs::path db = [] {
+        const auto r = run_manikin("demo --cases 2 --replicates 1 --out " + dir.path.string() + " > /dev/null");
+        REQUIRE(r.exit_code == 0);
+        return dir.path / "manikind.db";
+    }();
+    return db;
+}
+
+std::string only_campaign(manikind::recorder::Database& db) {
+    const auto campaigns = db.campaigns();
+    REQUIRE(campaigns.size() == 1);
+    return campaigns.front().name;
+}
+
+}  // namespace
+
+TEST_CASE("export: CSV and HDF5 carry every recorded channel exactly as the database holds it", "[cli][export]") {
+    const fs::path db_path = recorded_database();
+    auto db = manikind::recorder::Database::open(db_path);
+    const std::string campaign = only_campaign(db);
+    const fs::path out = db_path.parent_path() / "export-test";
+    fs::remove_all(out);
+
+    auto csv_run = run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "csv").string() + " --json");
+    REQUIRE(csv_run.exit_code == 0);
+    const auto csv_doc = nlohmann::json::parse(csv_run.out);
+    CHECK(csv_doc.at("format") == "manikin-recording/2");
+    auto h5_run = run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "c.h5").string() +
+                              " --format hdf5 --json");
+    REQUIRE(h5_run.exit_code == 0);
+    CHECK(nlohmann::json::parse(h5_run.out).at("format") == "manikin-hdf5/1");
+    const fs::path h5 = out / "c.h5";
+
+    const an::Campaign back = an::read_campaign(out / "csv");
+    REQUIRE(back.trials.size() == 2);
+    // Every channel the daemon recorded: probes one by one, CSAT3B components, wall
+    // thermocouples, heater power and sweat rate per zone.
+    std::map<std::string, std::int64_t> channel_id;
+    for (const auto& ch : db.channels()) channel_id[ch.device_name + "." + ch.name] = ch.id;
+    REQUIRE(back.channels.size() == channel_id.size());
+    for (const char* needed : {"datalogger.ee181_2.air_rh_pct", "csat3b.uz_m_s", "csat3b.sonic_temp_c",
+                               "datalogger.wall_tc_4.wall_temp_c", "manikin.z35.heater_power_w_m2",
+                               "manikin.z01.sweat_rate_g_m2_h"})
+        CHECK(channel_id.count(needed) == 1);
+    CHECK(back.provenance.at("program").starts_with("manikind "));
+    CHECK(back.provenance.at("config_sha256").size() == 64);
+    CHECK(manikind::hdf5_read_string_attribute(h5, "/", "config_sha256") == back.provenance.at("config_sha256"));
+    CHECK(manikind::hdf5_read_string_attribute(h5, "/", "format") == "manikin-hdf5/1");
+
+    std::size_t compared = 0;
+    const auto trials = db.trials(db.find_campaign(campaign).value());
+    for (const auto& trial : back.trials) {
+        // The trial's database row and time base: its "acquiring" event at the exported t0.
+        std::int64_t t0_mono = -1, t0_utc = -1;
+        const std::int64_t trial_id = [&] {
+            for (const auto& t : trials)
+                for (const auto& e : db.events(t.id))
+                    if (e.kind == "stage" && e.message == "acquiring" && trial.info.t0_utc_ns &&
+                        *trial.info.t0_utc_ns / 1000000 == e.utc_ns / 1000000) {
+                        t0_mono = e.mono_ns;
+                        t0_utc = e.utc_ns;
+                        return t.id;
+                    }
+            return std::int64_t{-1};
+        }();
+        REQUIRE(trial_id > 0);
+        const auto& d = trial.data;
+        REQUIRE(d.utc_ns.size() == d.rows());
+        CHECK(d.utc_ns[0] == t0_utc / 1000000 * 1000000);  // millisecond resolution
+        const std::string group = "/trials/" + trial.info.id + "/";
+        CHECK(manikind::hdf5_read_doubles(h5, group + "t_s") == d.t_s);
+        CHECK(manikind::hdf5_read_int64(h5, group + "utc_ns").front() == t0_utc);
+        for (std::size_t k = 0; k < back.channels.size(); ++k) {
+            const auto& ch = back.channels[k];
+            const auto h5_values = manikind::hdf5_read_doubles(h5, group + ch.column());
+            const auto h5_quality = manikind::hdf5_read_uint8(h5, group + ch.column() + ".q");
+            REQUIRE(h5_values.size() == d.rows());
+            for (const auto& s : db.samples(trial_id, channel_id.at(ch.column()))) {
+                const std::int64_t since = s.mono_ns - t0_mono;
+                if (since < 0 || since % 5000000000 != 0) continue;  // on the grid: one sample per row here
+                const auto r = static_cast<std::size_t>(since / 5000000000);
+                if (r >= d.rows()) continue;
+                INFO(ch.column() << " row " << r);
+                CHECK(d.channel_values[k][r] == s.value);  // exact: shortest round-trip text
+                CHECK(h5_values[r] == s.value);
+                CHECK(d.channel_quality[k][r] == s.quality);
+                CHECK(h5_quality[r] == s.quality);
+                ++compared;
+            }
+        }
+    }
+    // 157 channels x ~900 rows x 2 trials: a test that compared nothing cannot pass.
+    CHECK(compared > 200000);
+}
+
+TEST_CASE("export: the HDF5 file holds the analysis beside the data, as analyze --json gives it", "[cli][export]") {
+    const fs::path db_path = recorded_database();
+    auto db = manikind::recorder::Database::open(db_path);
+    const std::string campaign = only_campaign(db);
+    const fs::path out = db_path.parent_path() / "export-analysis";
+    fs::remove_all(out);
+    REQUIRE(run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "csv").string() + " > /dev/null")
+                .exit_code == 0);
+    REQUIRE(run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "c.h5").string() +
+                        " --format hdf5 > /dev/null")
+                .exit_code == 0);
+    const auto analyze = run_manikin("analyze " + (out / "csv").string() + " --json");
+    REQUIRE(analyze.exit_code == 0);
+    const auto expected = nlohmann::json::parse(analyze.out);
+    const auto stored = nlohmann::json::parse(manikind::hdf5_read_string(out / "c.h5", "/results/analysis_json"));
+    REQUIRE(stored.at("cases").size() == expected.at("cases").size());
+    const auto q = manikind::hdf5_read_doubles(out / "c.h5", "/results/q_wb_w_m2");
+    const auto u95 = manikind::hdf5_read_doubles(out / "c.h5", "/results/u95_w_m2");
+    for (std::size_t c = 0; c < q.size(); ++c) {
+        CHECK(q[c] == expected["cases"][c]["whole_body"]["q_w_m2"].get<double>());
+        CHECK(u95[c] == expected["cases"][c]["whole_body"]["U"].get<double>());
+    }
+}
+
+TEST_CASE("export: bad input is refused with the reason and nothing half-written", "[cli][export]") {
+    const fs::path db_path = recorded_database();
+    const fs::path out = db_path.parent_path() / "export-bad";
+    fs::remove_all(out);
+    CHECK(run_manikin("export --db " + db_path.string() + " no-such-campaign " + (out / "x.h5").string() + " --format hdf5")
+              .exit_code == 2);
+    CHECK_FALSE(fs::exists(out / "x.h5"));
+    CHECK(run_manikin("export --db " + (out / "missing.db").string() + " c " + (out / "y").string()).exit_code == 2);
+    CHECK(run_manikin("export --db " + db_path.string() + " c " + (out / "y").string() + " --format parquet").exit_code != 0);
+}
+
+TEST_CASE("SQLite views: trial_table has a row per 5-s step and a column per channel, equal to the CSV export",
+          "[cli][export]") {
+    const fs::path db_path = recorded_database();
+    auto db = manikind::recorder::Database::open(db_path);
+    const std::string campaign = only_campaign(db);
+    const fs::path out = db_path.parent_path() / "export-views";
+    fs::remove_all(out);
+    REQUIRE(run_manikin("export --db " + db_path.string() + " " + campaign + " " + out.string() + " > /dev/null").exit_code == 0);
+    const an::Campaign exported = an::read_campaign(out);
+
+    sqlite3* raw = nullptr;
+    REQUIRE(sqlite3_open_v2(db_path.c_str(), &raw, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK);
+    std::unique_ptr<sqlite3, decltype(&sqlite3_close)> con(raw, sqlite3_close);
+    const auto& trial = exported.trials.front();
+    const auto& ch = exported.channels.front();
+    const std::string sql = fmt::format(
+        "SELECT t.t_s, t.\"{0}\", t.\"{0}.q\" FROM trial_table t JOIN trial_info i ON i.trial_id = t.trial_id "
+        "WHERE i.case_number = {1} AND i.replicate = {2} AND t.t_s >= 0 ORDER BY t.t_s",
+        ch.column(), trial.info.case_id, trial.info.replicate);
+    sqlite3_stmt* q = nullptr;
+    REQUIRE(sqlite3_prepare_v2(con.get(), sql.c_str(), -1, &q, nullptr) == SQLITE_OK);
+    std::size_t r = 0, equal = 0;
+    while (sqlite3_step(q) == SQLITE_ROW && r < trial.data.rows()) {
+        CHECK(sqlite3_column_double(q, 0) == trial.data.t_s[r]);
+        if (sqlite3_column_double(q, 1) == trial.data.channel_values[0][r]) ++equal;
+        CHECK(sqlite3_column_int(q, 2) == trial.data.channel_quality[0][r]);
+        ++r;
+    }
+    sqlite3_finalize(q);
+    CHECK(r == trial.data.rows());
+    CHECK(equal == r);
+
+    // Per-case results as the daemon stored them.
+    REQUIRE(sqlite3_prepare_v2(con.get(), "SELECT count(*), min(u95_w_m2) FROM case_results", -1, &q, nullptr) == SQLITE_OK);
+    REQUIRE(sqlite3_step(q) == SQLITE_ROW);
+    CHECK(sqlite3_column_int(q, 0) == 2);
+    CHECK(sqlite3_column_double(q, 1) > 0.0);
+    sqlite3_finalize(q);
+}
