@@ -129,6 +129,9 @@ public:
     // samples so far are in the old unit).
     std::int64_t device_id(const std::string& name, const std::string& kind, const std::string& address);
     std::int64_t channel_id(std::int64_t device_id, const std::string& name, const std::string& unit);
+    // The analysts' view trial_table has a column per channel; rebuilt when the channels change
+    // (open and channel_id call it; a no-op when current).
+    void refresh_trial_table();
 
     // Samples in one transaction (the Recorder's writer calls this; other callers may too).
     // A row whose (trial_id, channel_id, mono_ns) is already stored is skipped, keeping the
@@ -142,6 +145,7 @@ public:
     // Idempotent for the same text; a different text under an existing (name, version) is a UserError.
     std::int64_t store_twin_version(const std::string& name, std::int64_t version, const std::string& toml);
     std::optional<std::string> twin_version_toml(const std::string& name, std::int64_t version);
+    std::optional<std::string> latest_twin_version();  // "name vN" of the newest stored, if any
 
     // Queries.
     std::vector<CampaignRow> campaigns();

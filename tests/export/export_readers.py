@@ -1,0 +1,163 @@
+#!/usr/bin/python3
+"""The tools labs read exports with, on a campaign the daemon recorded (issue 16).
+
+    export_readers.py MANIKIN h5py|pandas|octave
+
+h5py:   every dataset of the HDF5 export equals the CSV export's column and the database's
+        samples (read with Python's own sqlite3, not our code); units and provenance attributes.
+pandas: docs/examples/pandas_trial_table.py runs against the database; its numbers equal the
+        CSV export's.
+octave: docs/examples/octave_read_hdf5.m runs in GNU Octave on the HDF5 export; its numbers
+        equal h5py's.
+Exit 77 (skipped) only when the tool itself is not installed.
+"""
+import csv
+import math
+import os
+import re
+import shutil
+import sqlite3
+import subprocess
+import sys
+import tempfile
+
+manikin, mode = sys.argv[1], sys.argv[2]
+repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def skip(why):
+    print(f"SKIP: {why}")
+    sys.exit(77)
+
+
+def fail(why):
+    print(f"FAIL: {why}")
+    sys.exit(1)
+
+
+if mode == "h5py":
+    try:
+        import h5py
+    except ImportError:
+        skip("python3-h5py is not installed (scripts/setup.sh --tests installs it)")
+elif mode == "pandas":
+    try:
+        import pandas  # noqa: F401
+    except ImportError:
+        skip("python3-pandas is not installed (scripts/setup.sh --tests installs it)")
+elif mode == "octave":
+    if not shutil.which("octave-cli"):
+        skip("GNU Octave is not installed (scripts/setup.sh --tests installs it)")
+    try:
+        import h5py
+    except ImportError:
+        skip("python3-h5py is not installed")
+else:
+    fail(f"unknown mode {mode}")
+
+work = tempfile.mkdtemp(prefix="manikind-export-readers-")
+try:
+    subprocess.run([manikin, "demo", "--cases", "2", "--replicates", "1", "--out", work], check=True,
+                   stdout=subprocess.DEVNULL)
+    db = os.path.join(work, "manikind.db")
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    (campaign,) = con.execute("SELECT name FROM campaigns").fetchone()
+    subprocess.run([manikin, "export", "--db", db, campaign, os.path.join(work, "csv")], check=True,
+                   stdout=subprocess.DEVNULL)
+    h5_path = os.path.join(work, "campaign.h5")
+    subprocess.run([manikin, "export", "--db", db, campaign, h5_path, "--format", "hdf5"], check=True,
+                   stdout=subprocess.DEVNULL)
+
+    def csv_columns(trial_id):
+        with open(os.path.join(work, "csv", "trials", trial_id + ".csv"), newline="") as f:
+            rows = list(csv.reader(f))
+        return {name: [r[i] for r in rows[1:]] for i, name in enumerate(rows[0])}
+
+    if mode == "h5py":
+        checked = 0
+        with h5py.File(h5_path, "r") as f:
+            if f.attrs["format"] != "manikin-hdf5/1":
+                fail(f"format attribute {f.attrs['format']!r}")
+            if len(f.attrs["config_sha256"]) != 64 or not f.attrs["program"].startswith("manikind "):
+                fail("provenance attributes missing")
+            units = dict(con.execute(
+                "SELECT d.name || '.' || c.name, c.unit FROM channels c JOIN devices d ON d.id = c.device_id"))
+            for trial_id, group in f["trials"].items():
+                cols = csv_columns(trial_id)
+                t0 = con.execute(
+                    "SELECT e.mono_ns, e.trial_id FROM events e JOIN trials t ON t.id = e.trial_id "
+                    "WHERE e.kind = 'stage' AND e.message = 'acquiring' AND t.replicate = ? AND "
+                    "json_extract((SELECT conditions_json FROM cases WHERE id = t.case_id), '$.id') = ?",
+                    (int(group.attrs["replicate"]), int(group.attrs["case"]))).fetchone()
+                if t0 is None:
+                    fail(f"{trial_id}: no acquiring event for case {group.attrs['case']}")
+                t0_mono, db_trial = t0
+                data = {name: dataset[:] for name, dataset in group.items()}  # one read per dataset
+                for name, values in data.items():
+                    if name.endswith(".q") or name in ("utc_ns",):
+                        continue
+                    if name not in cols:
+                        fail(f"{trial_id}/{name}: in the HDF5 file, not in the CSV")
+                    for i, text in enumerate(cols[name]):
+                        value = float(text) if text else math.nan
+                        if not (value == values[i] or (math.isnan(value) and math.isnan(values[i]))):
+                            fail(f"{trial_id}/{name} row {i}: CSV {text!r}, HDF5 {values[i]!r}")
+                        checked += 1
+                    if name in units and group[name].attrs["unit"] != units[name]:
+                        fail(f"{trial_id}/{name}: unit {group[name].attrs['unit']!r}, database {units[name]!r}")
+                # Every sample on the grid, straight from the database.
+                for column, mono_ns, value, quality in con.execute(
+                        "SELECT d.name || '.' || c.name, s.mono_ns, s.value, s.quality FROM samples s "
+                        "JOIN channels c ON c.id = s.channel_id JOIN devices d ON d.id = c.device_id "
+                        "WHERE s.trial_id = ? AND s.mono_ns >= ? AND (s.mono_ns - ?) % 5000000000 = 0",
+                        (db_trial, t0_mono, t0_mono)):
+                    row = (mono_ns - t0_mono) // 5000000000
+                    if row >= len(data["t_s"]):
+                        continue
+                    if data[column][row] != value or data[column + ".q"][row] != quality:
+                        fail(f"{trial_id}/{column} row {row}: HDF5 {data[column][row]!r}, database {value!r}")
+                    checked += 1
+        if checked < 200000:
+            fail(f"only {checked} values compared")
+        print(f"h5py: {checked} values equal to the CSV export and the database")
+
+    elif mode == "pandas":
+        run = subprocess.run(["/usr/bin/python3", os.path.join(repo, "docs", "examples", "pandas_trial_table.py"), db],
+                             capture_output=True, text=True)
+        print(run.stdout, run.stderr)
+        if run.returncode != 0:
+            fail("the pandas example failed")
+        first_trial = sorted(os.listdir(os.path.join(work, "csv", "trials")))[0][:-4]
+        cols = csv_columns(first_trial)
+        t = [float(x) for x in cols["t_s"]]
+        probe = [float(x) for x, ts in zip(cols["datalogger.ee181_1.air_temp_c"], t) if ts > max(t) - 1800]
+        expected = f"probe 1 air temperature, last 30 min: {sum(probe) / len(probe):.3f} °C"
+        if expected not in run.stdout:
+            fail(f"expected the line '{expected}'")
+        if len(re.findall(r"^case \d+: Q_WB = ", run.stdout, re.M)) != 2:
+            fail("expected a result line per case")
+
+    elif mode == "octave":
+        run = subprocess.run(["octave-cli", "--no-gui", "--quiet",
+                              os.path.join(repo, "docs", "examples", "octave_read_hdf5.m"), h5_path],
+                             capture_output=True, text=True)
+        print(run.stdout, run.stderr)
+        if run.returncode != 0:
+            fail("the Octave example failed")
+        with h5py.File(h5_path, "r") as f:
+            r = f["results"]
+            for i in range(len(r["case"])):
+                line = (f"case {r['case'][i]}: Q_WB = {r['q_wb_w_m2'][i]:.2f} ± {r['u95_w_m2'][i]:.2f} W/m² "
+                        f"(n = {r['n_replicates'][i]})")
+                if line not in run.stdout:
+                    fail(f"expected the line '{line}'")
+            first = sorted(f["trials"].keys())[0]
+            g = f["trials"][first]
+            t = g["t_s"][:]
+            probe = g["datalogger.ee181_1.air_temp_c"][:][t > t.max() - 1800]
+            line = f"probe 1 air temperature, last 30 min: {probe.mean():.3f} °C"
+            if line not in run.stdout or f"{len(t)} rows" not in run.stdout:
+                fail(f"expected the line '{line}' and {len(t)} rows")
+    print("ok")
+finally:
+    shutil.rmtree(work, ignore_errors=True)
