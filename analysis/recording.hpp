@@ -1,6 +1,6 @@
 #pragma once
 // A campaign in memory, as read from or written to the interchange format
-// `manikin-recording/1` (FORMATS.md section 1): campaign.json + trials/<id>.csv.
+// `manikin-recording/1` (docs/formats.md section 1): campaign.json + trials/<id>.csv.
 //
 // Samples are stored column-wise (one vector per channel) because everything downstream
 // (steady state, window means) walks one channel over time. Empty CSV cells are NaN.

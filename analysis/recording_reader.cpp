@@ -1,4 +1,4 @@
-// Reader for `manikin-recording/1` (FORMATS.md section 1).
+// Reader for `manikin-recording/1` (docs/formats.md section 1).
 //
 // Trial CSVs are streamed: read in fixed-size chunks, split into lines in place, each cell
 // parsed with std::from_chars straight out of the chunk (no per-line std::string, no

@@ -1,4 +1,4 @@
-// Writer for `manikin-recording/1` (FORMATS.md section 1), and the instrument-spec helpers.
+// Writer for `manikin-recording/1` (docs/formats.md section 1), and the instrument-spec helpers.
 #include <charconv>
 #include <cmath>
 #include <cstdio>
