@@ -113,7 +113,7 @@ struct CampaignResult {
 
 CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions& options = {});
 
-// The `manikin analyze --json` contract (FORMATS.md section 2), plus extra fields.
+// The `manikin analyze --json` contract (docs/formats.md section 2), plus extra fields.
 nlohmann::json to_json(const CampaignResult& result);
 // A readable table: per case, whole body and regions with u_A, u_B, u_C, nu_eff, k, U, the
 // trials and their steady windows, and the whole-body uncertainty budget.

@@ -10,7 +10,7 @@ namespace manikind::physics {
 double saturation_vapour_pressure_pa(double temp_c) {
     require_in_range("temperature", temp_c, -40.0, 200.0, "degC");
     const double t_k = temp_c + kelvin_offset;
-    // Seed code / TWIN-BASELINE step 1: exp(77.3450 + 0.0057 T - 7235/T) / T^8.2, T in K.
+    // Seed code / docs/twin-baseline.md step 1: exp(77.3450 + 0.0057 T - 7235/T) / T^8.2, T in K.
     return std::exp(77.3450 + 0.0057 * t_k - 7235.0 / t_k) / std::pow(t_k, 8.2);
 }
 

@@ -4,7 +4,7 @@
 namespace manikind::physics {
 
 // Saturation vapour pressure over liquid water, Pa. The seed code's formula (MATLAB model,
-// Supplementary code; also TWIN-BASELINE.md): p_sat = exp(77.3450 + 0.0057 T - 7235/T) / T^8.2,
+// Supplementary code; also docs/twin-baseline.md): p_sat = exp(77.3450 + 0.0057 T - 7235/T) / T^8.2,
 // T in kelvin. Validity: 0..100 °C over liquid water (0.3-0.45 % below IAPWS-95 there, see tests);
 // throws std::domain_error outside -40..200 °C.
 double saturation_vapour_pressure_pa(double temp_c);

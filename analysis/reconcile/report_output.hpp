@@ -1,5 +1,5 @@
 #pragma once
-// Reconcile's outputs: the JSON contract of FORMATS.md (`manikin reconcile --json`), a readable
+// Reconcile's outputs: the JSON contract of docs/formats.md section 3 (`manikin reconcile --json`), a readable
 // text report, and SVG plots (parity with 95 % error bars before/after, residual vs driver).
 #include <filesystem>
 #include <string>

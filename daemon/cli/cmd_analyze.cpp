@@ -1,5 +1,5 @@
 // `manikin analyze <campaign>`: heat fluxes with 95 % expanded uncertainty (Eq. S7) from a
-// recorded campaign (FORMATS.md, manikin-recording/1): steady-state windows, replicate means,
+// recorded campaign (docs/formats.md, manikin-recording/1): steady-state windows, replicate means,
 // Type A + Type B, whole body and regions. Table by default, one JSON document with --json.
 #include <cmath>
 #include <cstdio>
@@ -122,7 +122,7 @@ void add_analyze_command(CLI::App& app) {
                     "(with --db: the campaign's name in the database)");
     cmd->add_option("--db", o->db, "Read the campaign from the daemon's SQLite database instead of a folder");
     cmd->add_option("--campaign", o->campaign, "The campaign's name (same as the positional argument)");
-    cmd->add_flag("--json", o->json, "Print one JSON document (the contract in FORMATS.md) instead of tables");
+    cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 2) instead of tables");
     cmd->add_option("--csv", o->csv_path, "Also write per-case whole-body, region and zone results to this CSV file");
     cmd->add_option("--plot", o->svg_path, "Also draw Q ± U per case (whole body and regions) as SVG to this file");
     cmd->add_option("--png", o->png_path, "Also render the plot as PNG (needs rsvg-convert from librsvg2-bin)");

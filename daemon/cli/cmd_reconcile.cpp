@@ -39,9 +39,9 @@ void add_reconcile_command(CLI::App& app) {
     auto* cmd = app.add_subcommand("reconcile", "Find the physics the twin left out: locate the mismatch, fit candidate "
                                                 "terms, show the fit improve");
     cmd->add_option("campaign", o->campaign, "Campaign folder (manikin-recording/1)")->required();
-    cmd->add_option("--twin", o->twin, "Twin version: 'baseline' (TWIN-BASELINE.md) or a twin-version TOML file")
+    cmd->add_option("--twin", o->twin, "Twin version: 'baseline' (docs/twin-baseline.md) or a twin-version TOML file")
         ->capture_default_str();
-    cmd->add_flag("--json", o->json, "Print one JSON document (FORMATS.md contract) instead of the report");
+    cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 3) instead of the report");
     cmd->add_option("--plots", o->plots, "Write parity.svg and residual_vs_driver.svg into this folder");
     cmd->add_option("--write-twin", o->write_twin, "Write the new twin version (TOML) here when a term is found");
     cmd->add_flag("--no-pairs", o->no_pairs, "Fit single terms only");

@@ -158,7 +158,7 @@ void add_thermoreg_command(CLI::App& app) {
     auto o = std::make_shared<RunOpts>();
     auto* cmd = app.add_subcommand("thermoreg", "Human thermoregulation (the paper's Stolwijk model): Fig. 4, sweeps, air speed");
     add_exposure_options(cmd, *o);
-    cmd->add_flag("--json", o->json, "Print the time series as JSON (FORMATS.md)");
+    cmd->add_flag("--json", o->json, "Print the time series as JSON (docs/formats.md section 4)");
     cmd->add_option("--csv", o->csv, "Write the time series as CSV");
     cmd->add_option("--plot", o->plot, "Write a Fig. 4-like SVG");
     cmd->footer("Defaults are Fig. 4: 41 °C, 20 % RH, MRT 55 °C, still air, 1.5 met, 0.25 clo, 2 h.\n"

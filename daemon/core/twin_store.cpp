@@ -64,7 +64,7 @@ tw::TwinVersion load_twin_version(const std::string& name_or_path) {
 
 std::string twin_version_to_toml(const tw::TwinVersion& v, const std::string& based_on, const std::string& note) {
     std::ostringstream o;
-    o << "# manikind twin version: the baseline (TWIN-BASELINE.md) plus these terms.\n";
+    o << "# manikind twin version: the baseline (docs/twin-baseline.md) plus these terms.\n";
     if (!note.empty()) o << "# " << note << "\n";
     o << fmt::format("name = \"{}\"\nbased_on = \"{}\"\n", v.name, based_on);
     for (const auto& t : v.terms) {

@@ -76,7 +76,7 @@ Knobs resolve(const TwinVersion& v) {
 }  // namespace
 
 const std::vector<SegmentConstants>& baseline_segments() {
-    // TWIN-BASELINE.md steps 2 (A, Wissler / Table 2) and 3 (radiating area fraction f).
+    // docs/twin-baseline.md steps 2 (A, Wissler / Table 2) and 3 (radiating area fraction f).
     static const std::vector<SegmentConstants> segments = {
         {"head", 2.6, 0.95},      {"chest", 1.5, 0.85},   {"back", 1.5, 0.85},  {"pelvis", 1.5, 0.60},
         {"upper_arm", 1.9, 0.70}, {"forearm", 1.9, 0.75}, {"hand", 2.7, 0.70},  {"thigh", 2.15, 0.70},
@@ -142,7 +142,7 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
             f.h_c_w_m2k = h;
             f.q_convection_w_m2 = h * dt_c;
             f.q_radiation_w_m2 = radiative_heat_flux_w_m2(surface_c, wall_c, baseline_skin_emissivity, seg->radiating_fraction);
-            // Eq. 1; no condensation modelled (TWIN-BASELINE step 4).
+            // Eq. 1; no condensation modelled (docs/twin-baseline.md step 4).
             f.q_evaporation_w_m2 = p_surface_pa > p_air_pa
                                        ? evaporative_heat_flux_w_m2(h, p_surface_pa, p_air_pa, wettedness, baseline_lewis_k_kpa)
                                        : 0.0;

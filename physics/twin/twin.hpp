@@ -1,6 +1,6 @@
 #pragma once
 // The digital twin: per-zone steady heat flux from the recorded conditions of a trial, with an
-// explicit, named list of physics terms. The baseline is TWIN-BASELINE.md (temperature-driven
+// explicit, named list of physics terms. The baseline is docs/twin-baseline.md (temperature-driven
 // free convection, grey radiation, Lewis-relation evaporation); every other twin version is the
 // baseline plus terms with parameters. Pure: no I/O. Flux positive = heat lost by the manikin.
 #include <map>
@@ -10,7 +10,7 @@
 
 namespace manikind::physics::twin {
 
-// Baseline constants per manikin segment (TWIN-BASELINE.md steps 2-3), kept in one place.
+// Baseline constants per manikin segment (docs/twin-baseline.md steps 2-3), kept in one place.
 struct SegmentConstants {
     std::string segment;
     double wissler_a = 0.0;          // h_c = A |dT|^(1/4), Table 2 (Wissler)

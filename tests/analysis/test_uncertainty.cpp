@@ -146,7 +146,7 @@ TEST_CASE("conditions carry their own Type A and B") {
     CHECK(*c.wettedness == 1.0);
 }
 
-TEST_CASE("JSON output follows the FORMATS.md contract") {
+TEST_CASE("JSON output follows the docs/formats.md contract") {
     const auto j = an::to_json(good_result());
     REQUIRE(j["cases"].size() == 1);
     const auto& c = j["cases"][0];

@@ -31,7 +31,7 @@ std::vector<ZoneInput> andi35_zones(double skin_temp_c) {
     return zones;
 }
 
-// TWIN-BASELINE.md written out by hand for one zone, independent of the implementation.
+// docs/twin-baseline.md written out by hand for one zone, independent of the implementation.
 double baseline_by_hand(double a, double f, double ts, double ta, double tw, double rh, double w) {
     auto psat = [](double t_c) {
         const double t = t_c + 273.15;
@@ -47,7 +47,7 @@ double baseline_by_hand(double a, double f, double ts, double ta, double tw, dou
 
 }  // namespace
 
-TEST_CASE("twin: baseline is TWIN-BASELINE.md zone by zone (Table S3 case 9: 39.6 C, 38.3 %, wet)", "[physics][twin]") {
+TEST_CASE("twin: baseline is docs/twin-baseline.md zone by zone (Table S3 case 9: 39.6 C, 38.3 %, wet)", "[physics][twin]") {
     TrialConditions trial;
     trial.air_temp_c = 39.6;
     trial.air_rh_pct = 38.3;
