@@ -34,8 +34,9 @@ std::string results_svg(const CampaignResult& r) {
     fig.width_px = std::max(640.0, cols * panel_w_px);
     fig.height_px = rows * panel_h_px + header_px;
     fig.title = r.campaign + ": heat flux Q by case";
-    fig.notes.push_back(fmt::format("positive = heat lost by the manikin; mean of replicates with 95 % bars ± U "
-                                    "({:.0f} % coverage, Eq. S7)", r.options.confidence * 100.0));
+    const double coverage_pct = r.options.confidence * 100.0;
+    fig.notes.push_back(fmt::format("positive = heat lost by the manikin; mean of replicates with bars ± U "
+                                    "({:.0f} % coverage, Eq. S7)", coverage_pct));
 
     // One y scale for every panel, so cases compare at a glance.
     double lo = 0.0, hi = 0.0;
@@ -69,10 +70,10 @@ std::string results_svg(const CampaignResult& r) {
         };
         // The legend once, in the first panel: every panel uses the same two colours.
         pl::Series whole, regions;
-        whole.label = i == 0 ? "whole body, ± U (95 %)" : "";
+        whole.label = i == 0 ? fmt::format("whole body, ± U ({:.0f} %)", coverage_pct) : "";
         whole.colour = "#b2182b";
         whole.marker_radius_px = 4.5;
-        regions.label = i == 0 ? "regions, ± U (95 %)" : "";
+        regions.label = i == 0 ? fmt::format("regions, ± U ({:.0f} %)", coverage_pct) : "";
         regions.colour = "#2166ac";
         p.x.categories.push_back("whole body");
         whole.x.push_back(0.0);

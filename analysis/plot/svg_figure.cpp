@@ -183,8 +183,8 @@ HeatLayout layout_heat(const HeatMapPanel& p) {
         if (v.empty()) v = {0.0, 1.0};
         if (p.diverging) {
             // Symmetric about 0, so white means "no difference".
-            const double a = nice_ticks(0.0, std::max(std::fabs(v.lo), std::fabs(v.hi)), 4).hi;
-            l.scale_ticks = nice_ticks(-a, a, 6, true);
+            const double a = std::max(std::fabs(v.lo), std::fabs(v.hi));
+            l.scale_ticks = nice_ticks(-a, a, 4);
         } else {
             l.scale_ticks = nice_ticks(v.lo, v.hi, 5);
         }
@@ -197,7 +197,7 @@ HeatLayout layout_heat(const HeatMapPanel& p) {
     return l;
 }
 
-std::string render_heat(const HeatMapPanel& p) {
+std::string render_heat(const HeatMapPanel& p, std::size_t index) {
     const HeatLayout l = layout_heat(p);
     const Mapping m{l.plot, l.x_lo, l.x_hi, l.y_lo, l.y_hi};
     const double s_lo = l.scale_ticks.lo, s_hi = l.scale_ticks.hi;
@@ -226,15 +226,16 @@ std::string render_heat(const HeatMapPanel& p) {
 
     // The colour bar: the scale from bottom (low) to top (high), ticked, labelled with its unit.
     o += "<g class=\"colour-bar\">\n";
-    constexpr int steps = 64;
-    const double step_h = l.bar.h / steps;
-    for (int i = 0; i < steps; ++i) {
-        const double t = (i + 0.5) / steps;
-        o += fmt::format("<rect x=\"{}\" y=\"{:.2f}\" width=\"{}\" height=\"{:.2f}\" fill=\"{}\"/>\n", num(l.bar.x),
-                         l.bar.y + l.bar.h - (i + 1) * step_h, num(l.bar.w), step_h + 0.4, scale_colour(t, p.diverging));
+    // A vertical gradient: stop offsets run top (high) to bottom (low).
+    constexpr int stops = 16;
+    o += "<defs><linearGradient id=\"colour-scale-" + std::to_string(index) + "\" x1=\"0\" y1=\"0\" x2=\"0\" y2=\"1\">";
+    for (int i = 0; i <= stops; ++i) {
+        const double t = static_cast<double>(i) / stops;
+        o += fmt::format("<stop offset=\"{:.4f}\" stop-color=\"{}\"/>", t, scale_colour(1.0 - t, p.diverging));
     }
-    o += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#333333\"/>\n", num(l.bar.x),
-                     num(l.bar.y), num(l.bar.w), num(l.bar.h));
+    o += "</linearGradient></defs>\n";
+    o += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"url(#colour-scale-{})\" stroke=\"#333333\"/>\n",
+                     num(l.bar.x), num(l.bar.y), num(l.bar.w), num(l.bar.h), index);
     double label_w = 0.0;
     for (std::size_t i = 0; i < l.scale_ticks.values.size(); ++i) {
         const double y = l.bar.y + l.bar.h * (1.0 - t_of(l.scale_ticks.values[i]));
@@ -380,11 +381,12 @@ std::string format_tick(double value, double step) {
     if (!std::isfinite(value)) return "nan";
     step = std::fabs(step);
     if (!(step > 0.0) || !std::isfinite(step)) return fmt::format("{:g}", value);
-    if (std::fabs(value) < step * 1e-6) return "0";
+    if (std::fabs(value) < step * 1e-6) value = 0.0;  // no "-0" and no 1e-17 from k * step
     const double step_exp = exponent10(step);
     const double step_mantissa = step / std::pow(10.0, step_exp);
     const int extra = std::fabs(step_mantissa - 2.5) < 1e-6 ? 1 : 0;  // 2.5 x 10^n needs one more digit
     if (step >= 1e6 || step < 1e-4) {
+        if (value == 0.0) return "0";
         double e = exponent10(value);
         const int decimals = std::max(0, static_cast<int>(e - step_exp) + extra);
         double mantissa = value / std::pow(10.0, e);
@@ -480,7 +482,7 @@ XYLayout layout_xy(const XYPanel& p) {
 
     const bool categorical = !p.x.categories.empty();
     const double top = p.box.y + (p.title.empty() ? 10.0 : 26.0);
-    const double left = 22.0 + max_label_width(l.y_ticks) + 10.0;
+    const double left = std::max(p.min_left_margin_px, 22.0 + max_label_width(l.y_ticks) + 10.0);
     double bottom = 46.0;
     if (categorical) bottom = 14.0 + max_label_width(l.x_ticks) * 0.87 + 24.0;  // labels at -60°
     const double right = 14.0;
@@ -492,8 +494,8 @@ XYLayout layout_xy(const XYPanel& p) {
     if (entries.empty()) return l;
     double text_w = 0.0;
     for (const auto& e : entries) text_w = std::max(text_w, text_width_px(e.label));
-    const double legend_w = 6 + legend_sample_px + text_w + 8, legend_h = 12 + legend_row_px * static_cast<double>(entries.size());
-    l.legend = free_legend_corner(l.plot, legend_w, legend_h, l.data);
+    const double legend_w = std::max(p.min_legend_width_px, 6 + legend_sample_px + text_w + 8), legend_h = 12 + legend_row_px * static_cast<double>(entries.size());
+    if (!p.legend_outside) l.legend = free_legend_corner(l.plot, legend_w, legend_h, l.data);
     if (!l.legend) {
         // Every corner has data: narrow the plot and put the legend to its right.
         l.legend_outside = true;
@@ -537,7 +539,8 @@ std::string to_svg(const Figure& f) {
     }
     std::size_t index = 0;
     for (const auto& p : f.xy_panels) o += render_xy(p, index++);
-    for (const auto& h : f.heat_maps) o += render_heat(h);
+    index = 0;
+    for (const auto& h : f.heat_maps) o += render_heat(h, index++);
     o += "</svg>\n";
     return o;
 }

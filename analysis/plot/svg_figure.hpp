@@ -96,6 +96,10 @@ struct XYPanel {
     std::vector<ReferenceLine> reference_lines;
     bool identity_line = false;  // the 1:1 line of a parity plot (x and y share a range)
     std::string identity_label = "1:1";
+    bool legend_outside = false;  // always right of the plot, e.g. so stacked panels share a time axis
+    // Stacked panels set the same minimums so their plot areas line up.
+    double min_left_margin_px = 0.0;
+    double min_legend_width_px = 0.0;
 };
 
 // A grid of cells (regular in x and y) coloured by value, with a colour bar for its scale.

@@ -120,6 +120,13 @@ std::string fig4_svg(const tr::SimulationResult& r, const std::string& title) {
                    trace("storage", "#d62728", [](const auto& s) { return s.storage_w; }),
                    trace("50 × (dT + 146 dC)", "#7f7f7f", [](const auto& s) { return 50.0 * s.mean_buoyancy_drive_c; })};
     heat.series.back().dash = "5 4";
+    // Both legends right of the plots: six traces leave no free corner below, and the two time
+    // axes stay aligned.
+    for (auto* panel : {&temps, &heat}) {
+        panel->legend_outside = true;
+        panel->min_left_margin_px = 70.0;
+        panel->min_legend_width_px = 170.0;
+    }
     fig.xy_panels = {std::move(temps), std::move(heat)};
     return pl::to_svg(fig);
 }

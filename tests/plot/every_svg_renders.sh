@@ -16,7 +16,7 @@ fi
 "$manikin" simulate-campaign --out "$dir/campaign" --replicates 2 --seed 7 \
   --effect humidity_buoyancy:gamma=146 >/dev/null
 "$manikin" analyze "$dir/campaign" --plot "$dir/analyze.svg" --png "$dir/analyze-cli.png" >/dev/null
-"$manikin" reconcile "$dir/campaign" --plots "$dir/reconcile" --simulations 40 >/dev/null
+"$manikin" reconcile "$dir/campaign" --plots "$dir/reconcile" --simulations 200 >/dev/null
 "$manikin" thermoreg --plot "$dir/fig4.svg" >/dev/null
 "$manikin" thermoreg sweep --t-step 5 --rh-step 19 --out "$dir/sweep" >/dev/null
 
