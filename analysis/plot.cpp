@@ -53,7 +53,8 @@ std::string results_svg(const CampaignResult& r) {
     for (int i = 0; i < n; ++i) {
         const auto& c = r.cases[static_cast<std::size_t>(i)];
         pl::XYPanel p;
-        p.box = {(i % cols) * panel_w_px, header_px + (i / cols) * panel_h_px, panel_w_px, panel_h_px};
+        const double centring_px = (fig.width_px - cols * panel_w_px) / 2;  // one narrow panel sits in the middle
+        p.box = {centring_px + (i % cols) * panel_w_px, header_px + (i / cols) * panel_h_px, panel_w_px, panel_h_px};
         p.title = fmt::format("Case {} (n = {})", c.case_id, c.n_replicates);
         for (const auto& ce : c.conditions) {
             if (ce.channel == "air_temp_c") p.title += fmt::format(", T_air {:.1f} °C", ce.e.value);
