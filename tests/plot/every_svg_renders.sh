@@ -25,6 +25,7 @@ svgs=("$dir/analyze.svg" "$dir/reconcile/parity.svg" "$dir/reconcile/residual_vs
 fail=0
 for svg in "${svgs[@]}"; do
   name=${svg#"$dir"/}
+  before=$fail
   if [ ! -s "$svg" ]; then echo "FAIL: $name missing or empty"; fail=1; continue; fi
   if ! /usr/bin/python3 -c 'import xml.dom.minidom,sys; xml.dom.minidom.parse(sys.argv[1])' "$svg"; then
     echo "FAIL: $name is not well-formed XML"; fail=1
@@ -37,7 +38,7 @@ for svg in "${svgs[@]}"; do
   if grep -Eo '<text[^>]*>-?[0-9]+\.[0-9]{4,}[^<]*</text>' "$svg"; then
     echo "FAIL: $name has a number with float noise in its text"; fail=1
   fi
-  echo "ok: $name"
+  [ "$fail" = "$before" ] && echo "ok: $name"
 done
 [ -s "$dir/analyze-cli.png" ] || { echo "FAIL: manikin analyze --png wrote no PNG"; fail=1; }
 grep -q 'class="colour-bar"' "$dir/sweep/core_diff.svg" || { echo "FAIL: core_diff.svg has no colour bar"; fail=1; }
