@@ -2,11 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
-#include <limits>
+#include <map>
 #include <sstream>
 
 #include <fmt/core.h>
+
+#include "analysis/plot/svg_figure.hpp"
 
 namespace manikind::analysis::reconcile {
 namespace {
@@ -35,50 +36,14 @@ nlohmann::json candidate_json(const CandidateResult& c) {
     return j;
 }
 
-// A minimal SVG canvas: data coordinates mapped into a plot frame with ticks.
-class Svg {
-public:
-    Svg(double x0, double x1, double y0, double y1, const std::string& title, const std::string& xlabel,
-        const std::string& ylabel)
-        : x0_(x0), x1_(x1), y0_(y0), y1_(y1) {
-        out_ << R"(<svg xmlns="http://www.w3.org/2000/svg" width="640" height="520" font-family="Helvetica,Arial,sans-serif" font-size="12">)"
-             << "\n<rect width=\"640\" height=\"520\" fill=\"white\"/>\n"
-             << fmt::format("<text x=\"320\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">{}</text>\n", title)
-             << fmt::format("<text x=\"{}\" y=\"505\" text-anchor=\"middle\">{}</text>\n", left_ + width_ / 2, xlabel)
-             << fmt::format("<text x=\"18\" y=\"{}\" text-anchor=\"middle\" transform=\"rotate(-90 18 {})\">{}</text>\n",
-                            top_ + height_ / 2, top_ + height_ / 2, ylabel)
-             << fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"black\"/>\n", left_,
-                            top_, width_, height_);
-        for (int i = 0; i <= 5; ++i) {
-            const double xv = x0_ + (x1_ - x0_) * i / 5.0, yv = y0_ + (y1_ - y0_) * i / 5.0;
-            out_ << fmt::format("<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.3g}</text>\n", px(xv), top_ + height_ + 16, xv)
-                 << fmt::format("<text x=\"{}\" y=\"{:.1f}\" text-anchor=\"end\">{:.3g}</text>\n", left_ - 6, py(yv) + 4, yv);
-        }
-    }
-    double px(double x) const { return left_ + (x - x0_) / (x1_ - x0_) * width_; }
-    double py(double y) const { return top_ + height_ - (y - y0_) / (y1_ - y0_) * height_; }
-    void line(double xa, double ya, double xb, double yb, const std::string& style) {
-        out_ << fmt::format("<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" {}/>\n", px(xa), py(ya), px(xb), py(yb), style);
-    }
-    void point(double x, double y, const std::string& color) {
-        out_ << fmt::format("<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"2.6\" fill=\"{}\" fill-opacity=\"0.75\"/>\n", px(x), py(y), color);
-    }
-    void legend(int row, const std::string& color, const std::string& text) {
-        out_ << fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"4\" fill=\"{}\"/><text x=\"{}\" y=\"{}\">{}</text>\n", left_ + 14,
-                            top_ + 16 + 16 * row, color, left_ + 24, top_ + 20 + 16 * row, text);
-    }
-    std::string finish() { return out_.str() + "</svg>\n"; }
-
-private:
-    double x0_, x1_, y0_, y1_;
-    int left_ = 70, top_ = 40, width_ = 540, height_ = 420;
-    std::ostringstream out_;
-};
-
-void write_file(const std::filesystem::path& p, const std::string& text) {
-    std::ofstream f(p, std::ios::binary);
-    f << text;
-    if (!f) throw std::runtime_error("cannot write " + p.string());
+// The unit of each driver reconcile correlates residuals with (forward_models.cpp), for the axis.
+std::string driver_axis_label(const std::string& driver) {
+    static const std::map<std::string, std::string, std::less<>> units{
+        {"skin-air temperature difference", "K"}, {"wall-air temperature difference", "K"},
+        {"vapour concentration difference", "kg/m³"}, {"relative humidity", "%"}, {"air speed", "m/s"},
+        {"wettedness", "0-1"}, {"zone height", "m"}};
+    const auto it = units.find(driver);
+    return it == units.end() ? driver : driver + " (" + it->second + ")";
 }
 
 }  // namespace
@@ -222,63 +187,85 @@ std::string report_to_text(const Report& r) {
 
 std::vector<std::filesystem::path> write_plots(const Report& r, const ForwardModel& model, const std::filesystem::path& dir,
                                                const std::string& unit) {
+    namespace pl = plot;
     std::filesystem::create_directories(dir);
     const auto& pts = model.points();
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-        lo = std::min({lo, pts[i].q_exp - pts[i].expanded_u, r.predicted_before[i], r.predicted_after[i]});
-        hi = std::max({hi, pts[i].q_exp + pts[i].expanded_u, r.predicted_before[i], r.predicted_after[i]});
+    const char* before_colour = "#d62728";
+    const char* after_colour = "#1f77b4";
+
+    // Parity (the paper's Fig. 1D): x = Q_exp with its 95 % interval, y = Q_sim, and the 1:1 line.
+    pl::Figure parity;
+    parity.width_px = 600;
+    parity.height_px = 630;
+    parity.title = "Twin vs recordings";
+    parity.notes.push_back("bars: the recording's 95 % interval (± U); dashed: 1:1");
+    pl::XYPanel pp;
+    pp.box = {0, 46, 600, 584};
+    pp.x.label = "Measured Q_exp (" + unit + ")";
+    pp.y.label = "Twin Q_sim (" + unit + ")";
+    pp.identity_line = true;
+    pl::Series before, after;
+    before.label = fmt::format("before: {} (RMSE {:.2f} {})", r.twin_name, r.before.rmse, unit);
+    before.colour = before_colour;
+    if (r.explanation) after.label = fmt::format("after: + {} (RMSE {:.2f} {})", r.explanation->label, r.after.rmse, unit);
+    after.colour = after_colour;
+    for (auto* s : {&before, &after}) {
+        s->marker_radius_px = 2.6;
+        s->opacity = 0.75;
     }
-    const double pad = 0.05 * (hi - lo + 1e-9);
-    lo -= pad;
-    hi += pad;
-    // Parity (like the paper's Fig. 1D): x = Q_exp with its 95 % CI, y = Q_sim.
-    Svg parity(lo, hi, lo, hi, "Twin vs recordings (95 % CI bars)", "Q_exp (" + unit + ")", "Q_sim (" + unit + ")");
-    parity.line(lo, lo, hi, hi, "stroke=\"#888\" stroke-dasharray=\"4 3\"");
     for (std::size_t i = 0; i < pts.size(); ++i) {
-        parity.line(pts[i].q_exp - pts[i].expanded_u, r.predicted_before[i], pts[i].q_exp + pts[i].expanded_u,
-                    r.predicted_before[i], "stroke=\"#d62728\" stroke-opacity=\"0.35\"");
-        parity.point(pts[i].q_exp, r.predicted_before[i], "#d62728");
+        before.x.push_back(pts[i].q_exp);
+        before.x_err.push_back(pts[i].expanded_u);
+        before.y.push_back(r.predicted_before[i]);
         if (r.explanation) {
-            parity.line(pts[i].q_exp - pts[i].expanded_u, r.predicted_after[i], pts[i].q_exp + pts[i].expanded_u,
-                        r.predicted_after[i], "stroke=\"#1f77b4\" stroke-opacity=\"0.35\"");
-            parity.point(pts[i].q_exp, r.predicted_after[i], "#1f77b4");
+            after.x.push_back(pts[i].q_exp);
+            after.x_err.push_back(pts[i].expanded_u);
+            after.y.push_back(r.predicted_after[i]);
         }
     }
-    parity.legend(0, "#d62728", fmt::format("before: {} (RMSE {:.2f})", r.twin_name, r.before.rmse));
-    if (r.explanation) parity.legend(1, "#1f77b4", fmt::format("after: + {} (RMSE {:.2f})", r.explanation->label, r.after.rmse));
+    pp.series.push_back(before);
+    if (r.explanation) pp.series.push_back(after);
+    parity.xy_panels.push_back(std::move(pp));
     const auto parity_path = dir / "parity.svg";
-    write_file(parity_path, parity.finish());
+    pl::write_svg(parity, parity_path);
+    std::vector<std::filesystem::path> written{parity_path};
 
-    // Residual vs the strongest driver.
-    std::vector<double> x, y_before, y_after;
+    // Residual vs the strongest driver, with the recording's 95 % interval as the bar.
+    pl::Series res_before, res_after;
+    res_before.label = "before";
+    res_before.colour = before_colour;
+    res_after.label = "after";
+    res_after.colour = after_colour;
     for (std::size_t i = 0; i < pts.size(); ++i) {
         const auto it = pts[i].drivers.find(r.best_driver);
         if (it == pts[i].drivers.end()) continue;
-        x.push_back(it->second);
-        y_before.push_back(pts[i].q_exp - r.predicted_before[i]);
-        y_after.push_back(pts[i].q_exp - r.predicted_after[i]);
+        res_before.x.push_back(it->second);
+        res_before.y.push_back(pts[i].q_exp - r.predicted_before[i]);
+        res_before.y_err.push_back(pts[i].expanded_u);
+        res_after.x.push_back(it->second);
+        res_after.y.push_back(pts[i].q_exp - r.predicted_after[i]);
     }
-    std::vector<std::filesystem::path> written{parity_path};
-    if (!x.empty()) {
-        const auto [xmin, xmax] = std::minmax_element(x.begin(), x.end());
-        double ylo = 0.0, yhi = 0.0;
-        for (double v : y_before) ylo = std::min(ylo, v), yhi = std::max(yhi, v);
-        for (double v : y_after) ylo = std::min(ylo, v), yhi = std::max(yhi, v);
-        const double xpad = 0.05 * (*xmax - *xmin + 1e-9), ypad = 0.05 * (yhi - ylo + 1e-9);
-        Svg res(*xmin - xpad, *xmax + xpad, ylo - ypad, yhi + ypad, "Residual vs " + r.best_driver, r.best_driver,
-                "Q_exp - Q_sim (" + unit + ")");
-        res.line(*xmin - xpad, 0.0, *xmax + xpad, 0.0, "stroke=\"#888\"");
-        for (std::size_t i = 0; i < x.size(); ++i) {
-            res.point(x[i], y_before[i], "#d62728");
-            if (r.explanation) res.point(x[i], y_after[i], "#1f77b4");
-        }
-        res.legend(0, "#d62728", "before");
-        if (r.explanation) res.legend(1, "#1f77b4", "after");
-        const auto res_path = dir / "residual_vs_driver.svg";
-        write_file(res_path, res.finish());
-        written.push_back(res_path);
+    if (res_before.x.empty()) return written;
+    for (auto* s : {&res_before, &res_after}) {
+        s->marker_radius_px = 2.6;
+        s->opacity = 0.75;
     }
+    pl::Figure residual;
+    residual.width_px = 640;
+    residual.height_px = 520;
+    residual.title = "Residual vs " + r.best_driver;
+    residual.notes.push_back("bars: the recording's 95 % interval (± U)");
+    pl::XYPanel rp;
+    rp.box = {0, 46, 640, 474};
+    rp.x.label = driver_axis_label(r.best_driver);
+    rp.y.label = "Q_exp − Q_sim (" + unit + ")";
+    rp.reference_lines.push_back({true, 0.0, "#888888", ""});
+    rp.series.push_back(res_before);
+    if (r.explanation) rp.series.push_back(res_after);
+    residual.xy_panels.push_back(std::move(rp));
+    const auto res_path = dir / "residual_vs_driver.svg";
+    pl::write_svg(residual, res_path);
+    written.push_back(res_path);
     return written;
 }
 

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include "analysis/plot/svg_figure.hpp"
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/user_error.hpp"
 #include "physics/thermoreg/stolwijk.hpp"
@@ -73,57 +74,85 @@ nlohmann::json sample_json(const tr::OutputSample& s) {
             {"mean_skin_wettedness", s.mean_skin_wettedness}};
 }
 
-// Fig. 4 as SVG: temperatures (top) and heat rates with 50 x (dT + 146 dC) (bottom).
+// Fig. 4: temperatures (top) and heat rates with 50 x (dT + 146 dC) (bottom) against time.
 std::string fig4_svg(const tr::SimulationResult& r, const std::string& title) {
-    std::ostringstream o;
-    const double w = 720, h = 640, left = 70, right = 20, panel_h = 240;
-    const double t_max_min = r.series.back().t_s / 60.0;
-    o << fmt::format(R"(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" font-family="Helvetica,Arial,sans-serif" font-size="12">)", w, h)
-      << fmt::format("\n<rect width=\"{}\" height=\"{}\" fill=\"white\"/>\n<text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">{}</text>\n", w, h, w / 2, title);
-    struct Line {
-        std::string label, color;
-        std::vector<double> y;
+    namespace pl = analysis::plot;
+    pl::Figure fig;
+    fig.width_px = 760;
+    fig.height_px = 720;
+    fig.title = title;
+    std::vector<double> t_min;
+    for (const auto& s : r.series) t_min.push_back(s.t_s / 60.0);
+    auto trace = [&](const std::string& label, const std::string& colour, auto value_of) {
+        pl::Series s;
+        s.label = label;
+        s.colour = colour;
+        s.line = true;
+        s.markers = false;
+        s.x = t_min;
+        for (const auto& sample : r.series) s.y.push_back(value_of(sample));
+        return s;
     };
-    auto panel = [&](double top, double ylo, double yhi, const std::string& ylabel, const std::vector<Line>& lines) {
-        const double pw = w - left - right;
-        auto px = [&](double t_min) { return left + t_min / t_max_min * pw; };
-        auto py = [&](double y) { return top + panel_h - (y - ylo) / (yhi - ylo) * panel_h; };
-        o << fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"black\"/>\n", left, top, pw, panel_h);
-        for (int i = 0; i <= 6; ++i) {
-            const double tv = t_max_min * i / 6.0, yv = ylo + (yhi - ylo) * i / 6.0;
-            o << fmt::format("<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.0f}</text>\n", px(tv), top + panel_h + 15, tv)
-              << fmt::format("<text x=\"{}\" y=\"{:.1f}\" text-anchor=\"end\">{:.4g}</text>\n", left - 5, py(yv) + 4, yv);
-        }
-        o << fmt::format("<text x=\"16\" y=\"{}\" transform=\"rotate(-90 16 {})\" text-anchor=\"middle\">{}</text>\n",
-                         top + panel_h / 2, top + panel_h / 2, ylabel);
-        int row = 0;
-        for (const auto& line : lines) {
-            std::string pts;
-            for (std::size_t i = 0; i < r.series.size(); ++i)
-                pts += fmt::format("{:.1f},{:.1f} ", px(r.series[i].t_s / 60.0), py(std::clamp(line.y[i], ylo, yhi)));
-            o << fmt::format("<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"2\" points=\"{}\"/>\n", line.color, pts)
-              << fmt::format("<line x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"{}\" stroke-width=\"3\"/><text x=\"{}\" y=\"{}\">{}</text>\n",
-                             left + 10, top + 14 + 15 * row, left + 30, top + 14 + 15 * row, line.color, left + 35, top + 18 + 15 * row, line.label);
-            ++row;
-        }
+    auto time_axis = [&] {
+        pl::Axis a;
+        a.label = "Time (min)";
+        a.lo = 0.0;
+        a.hi = t_min.empty() ? 1.0 : t_min.back();
+        a.target_intervals = 6;
+        return a;
     };
-    auto series = [&](auto f) {
-        std::vector<double> v;
-        for (const auto& s : r.series) v.push_back(f(s));
-        return v;
-    };
-    panel(40, 34.0, 40.0, "Temperature (°C)",
-          {{"core", "#d62728", series([](const auto& s) { return s.core_temp_c; })},
-           {"mean skin", "#1f77b4", series([](const auto& s) { return s.mean_skin_temp_c; })}});
-    panel(40 + panel_h + 50, -400.0, 400.0, "Heat rate (W), + = gained",
-          {{"evaporation", "#1f77b4", series([](const auto& s) { return s.evaporation_w; })},
-           {"radiation", "#ff7f0e", series([](const auto& s) { return s.radiation_w; })},
-           {"convection", "#2ca02c", series([](const auto& s) { return s.convection_w; })},
-           {"metabolic", "#9467bd", series([](const auto& s) { return s.metabolic_w; })},
-           {"storage", "#d62728", series([](const auto& s) { return s.storage_w; })},
-           {"50 x (dT + 146 dC)", "#7f7f7f", series([](const auto& s) { return 50.0 * s.mean_buoyancy_drive_c; })}});
-    o << fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">Time (min)</text>\n</svg>\n", left + (w - left - right) / 2, h - 8);
-    return o.str();
+    pl::XYPanel temps;
+    temps.box = {0, 34, 760, 320};
+    temps.x = time_axis();
+    temps.y.label = "Temperature (°C)";
+    temps.series = {trace("core", "#d62728", [](const auto& s) { return s.core_temp_c; }),
+                    trace("mean skin", "#1f77b4", [](const auto& s) { return s.mean_skin_temp_c; })};
+    pl::XYPanel heat;
+    heat.box = {0, 364, 760, 350};
+    heat.x = time_axis();
+    heat.y.label = "Heat rate (W), + = gained by the body";
+    heat.y.target_intervals = 8;
+    heat.reference_lines.push_back({true, 0.0, "#999999", ""});
+    heat.series = {trace("evaporation", "#1f77b4", [](const auto& s) { return s.evaporation_w; }),
+                   trace("radiation", "#ff7f0e", [](const auto& s) { return s.radiation_w; }),
+                   trace("convection", "#2ca02c", [](const auto& s) { return s.convection_w; }),
+                   trace("metabolic", "#9467bd", [](const auto& s) { return s.metabolic_w; }),
+                   trace("storage", "#d62728", [](const auto& s) { return s.storage_w; }),
+                   trace("50 × (dT + 146 dC)", "#7f7f7f", [](const auto& s) { return 50.0 * s.mean_buoyancy_drive_c; })};
+    heat.series.back().dash = "5 4";
+    // Both legends right of the plots: six traces leave no free corner below, and the two time
+    // axes stay aligned.
+    for (auto* panel : {&temps, &heat}) {
+        panel->legend_outside = true;
+        panel->min_left_margin_px = 70.0;
+        panel->min_legend_width_px = 170.0;
+    }
+    fig.xy_panels = {std::move(temps), std::move(heat)};
+    return pl::to_svg(fig);
+}
+
+// Fig. S22's third column: coupled minus dt-only after 2 h over the T x RH grid.
+std::string sweep_map_svg(const std::vector<double>& air_temps_c, const std::vector<double>& rhs_pct,
+                          const std::vector<double>& diff_c, const std::string& what, const std::string& mrt) {
+    namespace pl = analysis::plot;
+    pl::Figure fig;
+    fig.width_px = 720;
+    fig.height_px = 540;
+    fig.title = fmt::format("{} temperature difference, coupled − dt-only, after 2 h (MRT {})", what, mrt);
+    fig.notes.push_back("red: the coupled model ends warmer; blue: cooler");
+    pl::HeatMapPanel map;
+    map.box = {0, 46, 720, 494};
+    map.x.label = "Air temperature (°C)";
+    map.y.label = "Relative humidity (%)";
+    map.x_centres = air_temps_c;
+    map.y_centres = rhs_pct;
+    map.values = diff_c;
+    for (std::size_t i = 0; i < diff_c.size(); ++i)
+        map.tooltips.push_back(fmt::format("{} °C, {} %: {:+.2f} °C", air_temps_c[i / rhs_pct.size()],
+                                           rhs_pct[i % rhs_pct.size()], diff_c[i]));
+    map.scale_label = what + " difference (°C)";
+    fig.heat_maps.push_back(std::move(map));
+    return pl::to_svg(fig);
 }
 
 void write_text(const std::string& path, const std::string& text) {
@@ -268,36 +297,20 @@ void add_thermoreg_command(CLI::App& app) {
             min_core = std::min(min_core, c.core_c - c.core_dt);
         }
         write_text((std::filesystem::path(so->out) / "sweep.csv").string(), csv.str());
-        // Heat maps of the differences (coupled - dt-only), like Fig. S22's third column.
-        for (const bool core : {true, false}) {
-            std::ostringstream svg;
-            const int nt = static_cast<int>(std::floor(20.0 / so->t_step + 1e-9)) + 1;
-            const int nr = static_cast<int>(std::floor(95.0 / so->rh_step + 1e-9)) + 1;
-            const double cw = 560.0 / nt, ch = 400.0 / nr;
-            svg << R"(<svg xmlns="http://www.w3.org/2000/svg" width="720" height="500" font-family="Helvetica,Arial,sans-serif" font-size="12">)"
-                << "<rect width=\"720\" height=\"500\" fill=\"white\"/>\n"
-                << fmt::format("<text x=\"360\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">{} difference, coupled - dt-only, after 2 h (MRT {})</text>\n",
-                               core ? "Core" : "Mean skin", so->mrt);
-            for (std::size_t i = 0; i < grid.size(); ++i) {
-                const double d = core ? cells[i].core_c - cells[i].core_dt : cells[i].skin_c - cells[i].skin_dt;
-                const double x = std::clamp(d / 1.5, -1.0, 1.0);  // ±1.5 °C full scale
-                const int red = x > 0 ? 255 : static_cast<int>(255 * (1 + x)), blue = x < 0 ? 255 : static_cast<int>(255 * (1 - x));
-                const int green = static_cast<int>(255 * (1 - std::abs(x)));
-                const double px = 70 + std::round((grid[i].first - 30.0) / so->t_step) * cw;
-                const double py = 440 - (std::round((grid[i].second - 5.0) / so->rh_step) + 1) * ch;
-                svg << fmt::format("<rect x=\"{:.1f}\" y=\"{:.1f}\" width=\"{:.1f}\" height=\"{:.1f}\" fill=\"rgb({},{},{})\"><title>{} °C, {} %: {:+.2f} °C</title></rect>\n",
-                                   px, py, cw + 0.5, ch + 0.5, red, green, blue, grid[i].first, grid[i].second, d);
-            }
-            for (int t = 30; t <= 50; t += 5)
-                svg << fmt::format("<text x=\"{:.1f}\" y=\"458\" text-anchor=\"middle\">{}</text>\n", 70 + (t - 30) / so->t_step * cw + cw / 2, t);
-            for (int rh = 5; rh <= 100; rh += 15)
-                svg << fmt::format("<text x=\"64\" y=\"{:.1f}\" text-anchor=\"end\">{}</text>\n", 440 - ((rh - 5) / so->rh_step + 0.5) * ch + 4, rh);
-            svg << "<text x=\"350\" y=\"480\" text-anchor=\"middle\">Air temperature (°C)</text>"
-                << "<text x=\"20\" y=\"240\" transform=\"rotate(-90 20 240)\" text-anchor=\"middle\">RH (%)</text>"
-                << "<text x=\"650\" y=\"60\">red: coupled hotter</text><text x=\"650\" y=\"76\">blue: cooler</text>"
-                << "<text x=\"650\" y=\"92\">full scale ±1.5 °C</text>\n</svg>\n";
-            write_text((std::filesystem::path(so->out) / (core ? "core_diff.svg" : "skin_diff.svg")).string(), svg.str());
+        // Heat maps of the differences (coupled - dt-only), like Fig. S22's third column; `grid`
+        // runs RH fastest, the layout the heat map takes.
+        std::vector<double> air_temps_c, rhs_pct, core_diff_c, skin_diff_c;
+        for (const auto& [t, rh] : grid) {
+            if (air_temps_c.empty() || air_temps_c.back() != t) air_temps_c.push_back(t);
+            if (air_temps_c.size() == 1) rhs_pct.push_back(rh);
         }
+        for (const auto& c : cells) {
+            core_diff_c.push_back(c.core_c - c.core_dt);
+            skin_diff_c.push_back(c.skin_c - c.skin_dt);
+        }
+        const std::filesystem::path out(so->out);
+        write_text((out / "core_diff.svg").string(), sweep_map_svg(air_temps_c, rhs_pct, core_diff_c, "Core", so->mrt));
+        write_text((out / "skin_diff.svg").string(), sweep_map_svg(air_temps_c, rhs_pct, skin_diff_c, "Mean skin", so->mrt));
         if (so->json) {
             std::printf("%s\n", nlohmann::json{{"points", grid.size()}, {"seconds", seconds}, {"out", so->out},
                                                {"max_core_diff_c", max_core}, {"min_core_diff_c", min_core}}
