@@ -10,6 +10,7 @@
 #include <fmt/core.h>
 
 #include "analysis/input_error.hpp"
+#include "physics/sign_convention.hpp"
 
 namespace manikind::analysis {
 
@@ -73,9 +74,9 @@ std::string results_svg(const CampaignResult& r) {
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{0}\" height=\"{1}\" viewBox=\"0 0 {0} {1}\" "
         "font-family=\"Helvetica, Arial, sans-serif\" font-size=\"11\">\n"
         "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
-        "<text x=\"{2}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">{3}: heat flux Q (W/m², positive = heat lost "
-        "by the manikin), mean of replicates ± U ({4:.0f} %, Eq. S7)</text>\n",
-        width, height, width / 2, xml_escape(r.campaign), r.options.confidence * 100.0);
+        "<text x=\"{2}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">{3}: heat flux Q (W/m², {5}), "
+        "mean of replicates ± U ({4:.0f} %, Eq. S7)</text>\n",
+        width, height, width / 2, xml_escape(r.campaign), r.options.confidence * 100.0, physics::heat_flux_sign);
 
     for (int i = 0; i < n; ++i) {
         const auto& c = r.cases[static_cast<std::size_t>(i)];
