@@ -1,3 +1,5 @@
+#include <memory>
+
 #include <spdlog/spdlog.h>
 
 #include "daemon/cli/commands.hpp"
