@@ -1,3 +1,4 @@
+// The whole `manikin` command tree, built in one place for main.cpp and for the tests that walk it.
 #include <memory>
 
 #include <spdlog/spdlog.h>
