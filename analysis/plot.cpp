@@ -10,6 +10,7 @@
 
 #include "analysis/input_error.hpp"
 #include "analysis/plot/svg_figure.hpp"
+#include "physics/sign_convention.hpp"
 
 namespace manikind::analysis {
 
@@ -33,7 +34,7 @@ std::string results_svg(const CampaignResult& r) {
     pl::Figure fig;
     fig.width_px = std::max(640.0, cols * panel_w_px);
     fig.height_px = rows * panel_h_px + header_px;
-    fig.title = r.campaign + ": heat flux Q by case";
+    fig.title = r.campaign + ": heat flux Q by case (" + physics::heat_flux_sign + ")";
     const double coverage_pct = r.options.confidence * 100.0;
     fig.notes.push_back(fmt::format("positive = heat lost by the manikin; mean of replicates with bars ± U "
                                     "({:.0f} % coverage, Eq. S7)", coverage_pct));

@@ -14,14 +14,15 @@
 #include <vector>
 
 #include "analysis/zone_map.hpp"
+#include "physics/sign_convention.hpp"
 
 namespace manikind::analysis {
 
 inline constexpr const char* kRecordingFormat = "manikin-recording/2";
 inline constexpr const char* kRecordingFormatV1 = "manikin-recording/1";
 
-// One sign for heat flux in every file and command: what the manikin's heaters make up for.
-inline constexpr const char* kHeatFluxSign = "positive = heat lost by the body (skin to environment)";
+// One sign for heat flux in every file and command (physics/sign_convention.hpp).
+inline constexpr const char* kHeatFluxSign = physics::heat_flux_sign;
 
 // A Type B specification: the manufacturer's limit ±(accuracy + accuracy_of_reading x |reading|).
 enum class Distribution {

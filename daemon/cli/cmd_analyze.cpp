@@ -15,11 +15,11 @@
 #include "analysis/input_error.hpp"
 #include "analysis/plot.hpp"
 #include "analysis/recording.hpp"
+#include "daemon/cli/campaign_source.hpp"
 #include "daemon/cli/commands.hpp"
-#include "daemon/core/database_export.hpp"
-#include "daemon/core/recorder/database.hpp"
 #include "daemon/core/config.hpp"
 #include "daemon/core/user_error.hpp"
+#include "physics/sign_convention.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -27,8 +27,7 @@ namespace {
 namespace an = manikind::analysis;
 
 struct AnalyzeOptions {
-    std::string campaign;
-    std::string db;
+    CampaignSource source;
     bool json = false;
     std::string csv_path;
     std::string svg_path;
@@ -58,7 +57,6 @@ an::InstrumentSpec to_analysis(const config::InstrumentSpec& s, const std::strin
 }
 
 void run(const AnalyzeOptions& o) {
-    if (o.campaign.empty()) throw UserError("give the campaign folder, or --db <file> --campaign <name>");
     const config::Config cfg = o.config_path.empty() ? config::default_config() : config::load_config(o.config_path);
     an::ReadOptions read;
     for (const auto& [channel, spec] : cfg.instruments) read.default_instruments[channel] = to_analysis(spec, channel);
@@ -83,11 +81,7 @@ void run(const AnalyzeOptions& o) {
 
     an::CampaignResult result;
     try {
-        const an::Campaign campaign = o.db.empty() ? an::read_campaign(o.campaign, read) : [&] {
-            if (!std::filesystem::exists(o.db)) throw UserError(fmt::format("{}: no such database", o.db));
-            auto db = recorder::Database::open(o.db);
-            return campaign_from_database(db, o.campaign);
-        }();
+        const an::Campaign campaign = read_campaign_source(o.source, read);
         result = an::analyze_campaign(campaign, a);
         if (!o.csv_path.empty()) {
             std::ofstream out(o.csv_path, std::ios::binary);
@@ -104,10 +98,13 @@ void run(const AnalyzeOptions& o) {
         throw UserError(e.what());
     }
     if (o.json) {
-        std::printf("%s\n", an::to_json(result).dump(2).c_str());
+        auto j = an::to_json(result);
+        j["heat_flux_sign"] = physics::heat_flux_sign;
+        std::printf("%s\n", j.dump(2).c_str());
         return;
     }
     for (const auto& w : result.warnings) spdlog::warn("{}", w);
+    std::printf("Heat flux Q: %s\n", physics::heat_flux_sign);
     std::fputs(an::format_table(result).c_str(), stdout);
 }
 
@@ -117,11 +114,7 @@ void add_analyze_command(CLI::App& app) {
     auto o = std::make_shared<AnalyzeOptions>();
     auto* cmd = app.add_subcommand(
         "analyze", "Heat fluxes with 95 % CIs from a recorded campaign: steady state, replicates, Type A + B (Eq. S7)");
-    cmd->add_option("campaign", o->campaign,
-                    "Campaign folder in the manikin-recording/1 format: campaign.json + trials/<id>.csv\n"
-                    "(with --db: the campaign's name in the database)");
-    cmd->add_option("--db", o->db, "Read the campaign from the daemon's SQLite database instead of a folder");
-    cmd->add_option("--campaign", o->campaign, "The campaign's name (same as the positional argument)");
+    add_campaign_source_options(cmd, o->source);
     cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 2) instead of tables");
     cmd->add_option("--csv", o->csv_path, "Also write per-case whole-body, region and zone results to this CSV file");
     cmd->add_option("--plot", o->svg_path, "Also draw Q ± U per case (whole body and regions) as SVG to this file");
@@ -160,6 +153,7 @@ void add_analyze_command(CLI::App& app) {
                     "0.25 -> 8. 0 = infinite dof")
         ->capture_default_str();
     cmd->footer(
+        std::string("Heat flux Q: ") + physics::heat_flux_sign + ".\n"
         "Method (docs/analysis.md):\n"
         "  steady    a trial is steady when every zone's skin temperature stays within 0.05 °C over its final\n"
         "            30 min; unsteady, partial (shorter than the window) and empty trials are excluded and named.\n"
@@ -177,7 +171,7 @@ void add_analyze_command(CLI::App& app) {
         "  manikin analyze recordings/validation-2026 --csv results.csv --plot results.svg\n"
         "  manikin analyze recordings/validation-2026 --window-min 20 --require-flux-stability\n"
         "  manikin analyze recordings/validation-2026 --coverage paper --type-b-relative-uncertainty 0.25\n"
-        "Exit status 2 on bad input; the message names file:line:column and the field.");
+        "Exit status 2 on bad input; the message names file:line:column and the field (docs/cli.md).");
     cmd->callback([o] { run(*o); });
 }
 

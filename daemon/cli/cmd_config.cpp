@@ -4,13 +4,17 @@
 #include <fstream>
 #include <memory>
 #include <random>
+#include <sstream>
 #include <string>
+#include <vector>
 
+#include <fmt/core.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/config.hpp"
+#include "daemon/core/user_error.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -34,6 +38,13 @@ nlohmann::json to_json(const config::Config& c) {
             {"api", {{"socket", c.api.socket}, {"tcp_port", c.api.tcp_port}, {"max_clients", c.api.max_clients},
                      {"idle_timeout_s", c.api.idle_timeout_s}, {"token_set", !c.api.token.empty()}}},
             {"warnings", c.warnings}};
+}
+
+std::vector<std::string> split_lines(const std::string& text) {
+    std::vector<std::string> lines;
+    std::istringstream in(text);
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+    return lines;
 }
 
 // 32 random bytes as 64 hex characters: 256 bits, far above what token_problem asks for.
@@ -63,10 +74,21 @@ void add_config_command(CLI::App& app) {
                                                   "faults, socket path, real-mode keys, token); errors name file:line:column and the key");
     check->add_option("file", *file, "Configuration file")->required();
     check->add_flag("--json", *json, "Print the effective configuration as JSON");
+    check->footer("Exit status 0 when the daemon would start with it, 5 when it has problems (each on its own line,\n"
+                  "file:line:column: key), 2 when the file cannot be read (docs/cli.md).");
     check->callback([file, json] {
-        const auto c = config::load_config(*file);
-        for (const auto& w : c.warnings) spdlog::warn("{}", w);
-        config::require_valid(c);  // the daemon's own start-up check: the two never disagree
+        if (!std::ifstream(*file)) throw UserError(fmt::format("{}: cannot open the configuration file", *file));
+        // The file was read: what is wrong in it is the check's negative verdict, not a usage error.
+        const auto c = [&] {
+            try {
+                auto loaded = config::load_config(*file);
+                for (const auto& w : loaded.warnings) spdlog::warn("{}", w);
+                config::require_valid(loaded);  // the daemon's own start-up check: the two never disagree
+                return loaded;
+            } catch (const UserError& e) {
+                throw UserError::check_failed(e.what(), nlohmann::json{{"file", *file}, {"problems", split_lines(e.what())}});
+            }
+        }();
         if (*json) {
             std::printf("%s\n", to_json(c).dump(2).c_str());
             return;
@@ -74,10 +96,25 @@ void add_config_command(CLI::App& app) {
         std::printf("%s: ok (%s lab '%s', %zu instrument specs, %zu warnings)\n", file->c_str(), c.mode.c_str(),
                     c.lab_name.c_str(), c.instruments.size(), c.warnings.size());
     });
+    auto show_json = std::make_shared<bool>(false);
     auto* show = cmd->add_subcommand("show", "Print the built-in default configuration (the simulated lab)");
-    show->callback([] { std::printf("%s", config::default_config_toml()); });
+    show->add_flag("--json", *show_json, "Print it as JSON: the effective configuration, as check --json does, and the TOML text");
+    show->callback([show_json] {
+        if (*show_json)
+            std::printf("%s\n", nlohmann::json{{"config", to_json(config::default_config())}, {"toml", config::default_config_toml()}}
+                                    .dump(2)
+                                    .c_str());
+        else
+            std::printf("%s", config::default_config_toml());
+    });
+    auto token_json = std::make_shared<bool>(false);
     auto* token = cmd->add_subcommand("token", "Print a new random API token (64 hex characters) for [api] token");
-    token->callback([] { std::printf("%s\n", random_token().c_str()); });
+    token->add_flag("--json", *token_json, "Print {\"token\": \"...\"}");
+    token->callback([token_json] {
+        const std::string t = random_token();
+        if (*token_json) std::printf("%s\n", nlohmann::json{{"token", t}}.dump().c_str());
+        else std::printf("%s\n", t.c_str());
+    });
 }
 
 }  // namespace manikind::cli

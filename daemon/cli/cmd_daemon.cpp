@@ -28,6 +28,7 @@
 #include "daemon/core/hdf5_export.hpp"
 #include "daemon/core/recorder/database.hpp"
 #include "daemon/core/user_error.hpp"
+#include "physics/sign_convention.hpp"
 
 namespace manikind::cli {
 
@@ -58,9 +59,12 @@ nlohmann::json call(const Conn& c, nlohmann::json req, bool mutating) {
         req["token"] = token;
     }
     auto reply = call_daemon(c.socket, req, c.timeout_s);
-    if (!reply.value("ok", false)) throw UserError("the daemon refused: " + reply.value("error", std::string("?")));
+    if (!reply.value("ok", false))
+        throw UserError::refused("the daemon refused: " + reply.value("error", std::string("?")));
     return reply;
 }
+
+std::string heat_flux_footer() { return std::string("Heat flux: ") + physics::heat_flux_sign + "."; }
 
 std::string bar(double fraction, int width = 30) {
     const int filled = static_cast<int>(std::floor(std::clamp(fraction, 0.0, 1.0) * width));  // full only at 1
@@ -136,7 +140,7 @@ void print_status(const nlohmann::json& s) {
         }
     }
     if (s.contains("measured")) {
-        std::printf("measured:\n");
+        std::printf("measured:  (heat flux %s)\n", physics::heat_flux_sign);
         print_measured(s["measured"]);
     }
     std::printf("%-11s %-5s %-5s %9s %6s %6s %6s %6s %6s  %s\n", "device", "conn", "stale", "samples", "cksum", "tmout", "exc",
@@ -161,6 +165,7 @@ void add_daemon_commands(CLI::App& app) {
         auto c = std::make_shared<Conn>();
         auto* cmd = app.add_subcommand("status", "The running daemon: campaign, trial stage, devices and their counters");
         add_conn_options(cmd, *c, false);
+        cmd->footer(heat_flux_footer());
         cmd->callback([c] {
             const auto r = call(*c, {{"cmd", "status"}}, false);
             if (c->json) std::printf("%s\n", r["status"].dump(2).c_str());
@@ -201,13 +206,21 @@ void add_daemon_commands(CLI::App& app) {
             check->add_option("file", *check_file, "Campaign file")->required();
             check->add_option("--config", *config_file, "Daemon config whose [safety] limits apply (default: built-in limits)");
             check->add_flag("--json", *json, "Print the parsed plan as JSON");
+            check->footer("Exit status 0 when the plan is valid, 5 when it has errors, 2 when a file cannot be read (docs/cli.md).");
             check->callback([check_file, config_file, json] {
                 const auto text = toml_input::read_file(*check_file);
                 if (!text) throw UserError(fmt::format("{}: cannot open the campaign file", *check_file));
-                const CampaignPlan plan = parse_campaign_plan(*text, *check_file);
                 const auto cfg = config_file->empty() ? config::default_config() : config::load_config(*config_file);
+                // The files were read: what is wrong in the plan is the check's negative verdict.
+                const CampaignPlan plan = [&] {
+                    try {
+                        return parse_campaign_plan(*text, *check_file);
+                    } catch (const UserError& e) {
+                        throw UserError::check_failed(e.what());
+                    }
+                }();
                 if (const auto why = check_plan_against_limits(plan, cfg.safety); !why.empty())
-                    throw UserError(fmt::format("{}: {}", *check_file, why));
+                    throw UserError::check_failed(fmt::format("{}: {}", *check_file, why));
                 if (*json) {
                     nlohmann::json cases = nlohmann::json::array();
                     for (const auto& pc : plan.cases)
@@ -241,9 +254,13 @@ void add_daemon_commands(CLI::App& app) {
         cmd->add_option("--chamber-temp", *temp, "°C")->required();
         cmd->add_option("--chamber-rh", *rh, "%")->required();
         add_conn_options(cmd, *c, true);
+        cmd->footer("A setpoint outside the daemon's [safety] limits is refused: exit status 4 (docs/cli.md).");
         cmd->callback([c, temp, rh] {
             call(*c, {{"cmd", "set_chamber"}, {"chamber_temp_c", *temp}, {"chamber_rh_pct", *rh}}, true);
-            std::printf("chamber setpoints sent\n");
+            if (c->json)
+                std::printf("%s\n", nlohmann::json{{"ok", true}, {"chamber_temp_c", *temp}, {"chamber_rh_pct", *rh}}.dump().c_str());
+            else
+                std::printf("chamber setpoints sent\n");
         });
     }
     {
@@ -253,20 +270,21 @@ void add_daemon_commands(CLI::App& app) {
         trial->require_subcommand(1);
         auto* watch = trial->add_subcommand("watch", "Live status with a progress bar toward steady state (Ctrl-C to stop)");
         add_conn_options(watch, *c, false);
-        watch->add_flag("--once", *once, "Print one update and exit");
+        watch->add_flag("--once", *once, "Print one update and exit (implied by --json: one JSON document)");
+        watch->footer(heat_flux_footer());
         watch->callback([c, once] {
             // Clear the screen only on a terminal; a pipe or a log file gets plain blocks.
             const bool terminal = ::isatty(STDOUT_FILENO) == 1;
             for (bool first = true;; first = false) {
                 const auto r = call(*c, {{"cmd", "status"}}, false);
-                if (c->json) std::printf("%s\n", r["status"].dump().c_str());
+                if (c->json) std::printf("%s\n", r["status"].dump(2).c_str());
                 else {
                     if (terminal) std::printf("\033[H\033[2J");
                     else if (!first) std::printf("\n");
                     print_status(r["status"]);
                 }
                 std::fflush(stdout);
-                if (*once || r["status"]["campaign"].is_null()) break;
+                if (*once || c->json || r["status"]["campaign"].is_null()) break;
                 std::this_thread::sleep_for(std::chrono::seconds(1));
             }
         });
@@ -277,16 +295,33 @@ void add_daemon_commands(CLI::App& app) {
         auto* cmd = app.add_subcommand("results", "Whole-body heat flux per case with 95 % CIs, from the running daemon");
         cmd->add_option("--campaign", *campaign, "Campaign name (default: the last one run)");
         add_conn_options(cmd, *c, false);
+        cmd->footer(heat_flux_footer() +
+                    "\nNo results yet is not an error: exit status 0, and under --json {\"campaign\": ..., \"cases\": [],\n"
+                    "\"note\": ...} (docs/cli.md).");
         cmd->callback([c, campaign] {
             nlohmann::json req{{"cmd", "results"}};
             if (!campaign->empty()) req["campaign"] = *campaign;
             const auto r = call(*c, req, false);
-            if (c->json) {
-                std::printf("%s\n", r["results"].dump(2).c_str());
+            if (r["results"].is_null()) {
+                const std::string note = r.value("note", std::string("no results yet"));
+                if (c->json)
+                    std::printf("%s\n", nlohmann::json{{"campaign", r.value("campaign", nlohmann::json())},
+                                                       {"cases", nlohmann::json::array()}, {"note", note}}
+                                            .dump(2)
+                                            .c_str());
+                else
+                    std::printf("%s\n", note.c_str());
                 return;
             }
-            std::printf("campaign %s%s\n  case  n   Q_WB W/m²   U (95 %%)   95 %% CI\n", r["campaign"].get<std::string>().c_str(),
-                        r["results"].value("interim", false) ? " (interim: the trials done so far)" : "");
+            if (c->json) {
+                auto j = r["results"];
+                j["heat_flux_sign"] = physics::heat_flux_sign;
+                std::printf("%s\n", j.dump(2).c_str());
+                return;
+            }
+            std::printf("campaign %s%s; heat flux %s\n  case  n   Q_WB W/m²   U (95 %%)   95 %% CI\n",
+                        r["campaign"].get<std::string>().c_str(),
+                        r["results"].value("interim", false) ? " (interim: the trials done so far)" : "", physics::heat_flux_sign);
             for (const auto& cs : r["results"]["cases"]) {
                 const auto& wb = cs["whole_body"];
                 std::printf("  %4d  %d  %9.2f  %9.2f   [%.2f, %.2f]\n", cs.value("case", 0), cs.value("n_replicates", 0),
@@ -298,6 +333,7 @@ void add_daemon_commands(CLI::App& app) {
         auto c = std::make_shared<Conn>();
         auto* cmd = app.add_subcommand("live", "Every live channel of the running daemon: value, unit, quality and age");
         add_conn_options(cmd, *c, false);
+        cmd->footer(heat_flux_footer());
         cmd->callback([c] {
             const auto r = call(*c, {{"cmd", "live"}}, false);
             if (c->json) {

@@ -24,6 +24,7 @@
 #include "daemon/core/lab_daemon.hpp"
 #include "daemon/core/user_error.hpp"
 #include "daemon/core/twin_store.hpp"
+#include "physics/sign_convention.hpp"
 
 namespace manikind::cli {
 
@@ -45,7 +46,8 @@ void add_demo_command(CLI::App& app) {
     cmd->add_option("--cases", o->cases, "Run only the first N cases of Table S3")->check(CLI::Range(1, 15))->capture_default_str();
     cmd->add_option("--replicates", o->replicates, "Replicates per case")->check(CLI::Range(1, 5))->capture_default_str();
     cmd->footer("The simulated world includes humidity-driven buoyancy (gamma = 146, the paper's finding);\n"
-                "the baseline twin does not. Nothing in the analysis is told so.");
+                "the baseline twin does not. Nothing in the analysis is told so.\n"
+                "Heat flux: " + std::string(physics::heat_flux_sign) + ".");
     cmd->callback([o] {
         namespace rc = analysis::reconcile;
         const auto t0 = std::chrono::steady_clock::now();
@@ -93,7 +95,8 @@ void add_demo_command(CLI::App& app) {
         auto secs = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
 
         if (o->json) {
-            std::printf("%s\n", nlohmann::json{{"analysis", analysis::to_json(result)},
+            std::printf("%s\n", nlohmann::json{{"heat_flux_sign", physics::heat_flux_sign},
+                                               {"analysis", analysis::to_json(result)},
                                                {"reconcile", rc::report_to_json(report, *model)}}
                                     .dump(2)
                                     .c_str());
@@ -105,7 +108,7 @@ void add_demo_command(CLI::App& app) {
         std::printf("  database:   %s (campaign '%s')\n", daemon.database_path().string().c_str(), plan.name.c_str());
         std::printf("  recordings: %s\n\n", (out / "campaign").string().c_str());
         // Compact results table: whole body per case with its 95 % CI (manikin analyze has the rest).
-        std::printf("Whole-body heat flux per case (positive = heat lost), mean of the replicates with 95 %% CI:\n");
+        std::printf("Whole-body heat flux per case (%s), mean of the replicates with 95 %% CI:\n", physics::heat_flux_sign);
         std::printf("  case  T_air °C  RH_air %%  T_skin °C  wet  n   Q_WB W/m²   U (95 %%)     k\n");
         std::vector<std::string> excluded;
         for (const auto& c : result.cases) {

@@ -19,6 +19,7 @@
 #include "physics/paper_cfd_table.hpp"
 #include "physics/psychrometrics.hpp"
 #include "physics/range_check.hpp"
+#include "physics/sign_convention.hpp"
 #include "physics/threshold_map.hpp"
 
 namespace manikind::cli {
@@ -199,7 +200,8 @@ void add_h_c(CLI::App& physics) {
                     "table2:<stolwijk|jos|wissler|present|seed>:<region> | posture:<standing|seated|supine>")
         ->capture_default_str();
     cmd->add_option("--air-speed", *speed, "Air speed, m/s: adds forced (de Dear) and mixed (Eq. 9, n = 3) coefficients");
-    cmd->footer("Examples:\n  manikin physics h-c --air-temp 41 --rh 10 --skin-temp 35\n"
+    cmd->footer(std::string("Heat fluxes: ") + ph::heat_flux_sign + ".\n"
+                "Examples:\n  manikin physics h-c --air-temp 41 --rh 10 --skin-temp 35\n"
                 "  manikin physics h-c --air-temp 41 --rh 10 --model table1:thigh --json\n"
                 "  manikin physics h-c --air-temp 41 --rh 20 --model table2:wissler:legs --air-speed 0.1");
     cmd->callback([o, model, speed, cmd] {
@@ -226,6 +228,7 @@ void add_h_c(CLI::App& physics) {
         }
         const double p_skin = physics_call([&] { return ph::saturation_vapour_pressure_pa(o->skin_temp_c); });
         const double p_air = physics_call([&] { return ph::vapour_pressure_pa(o->air_temp_c, o->rh_pct); });
+        r.add_text("heat_flux_sign", "heat flux", ph::heat_flux_sign);
         r.add("q_convection_w_m2", "q_conv = h (T_skin - T_air)", h_w_m2k * b.dt_c, "W/m²", 2);
         r.add("q_evaporation_w_m2", "q_evap = w 16.5 h dp (Eq. 1)",
               ph::evaporative_heat_flux_w_m2(h_w_m2k, p_skin, p_air, o->wettedness), "W/m²", 2);
@@ -406,7 +409,7 @@ void add_cfd_gamma(CLI::App& physics) {
 void add_physics_commands(CLI::App& app) {
     auto* physics = app.add_subcommand("physics", "Correlations from the paper: psychrometrics, buoyancy, convection");
     physics->require_subcommand(1);
-    physics->footer("Units: °C, %, m/s; fluxes positive = heat lost by the skin. Every command takes --json.");
+    physics->footer(std::string("Units: °C, %, m/s; heat fluxes ") + ph::heat_flux_sign + ". Every command takes --json.");
     add_psychro(*physics);
     add_buoyancy(*physics);
     add_h_c(*physics);

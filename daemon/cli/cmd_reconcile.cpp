@@ -12,13 +12,14 @@
 #include <spdlog/spdlog.h>
 
 #include "analysis/analyze.hpp"
-#include "analysis/input_error.hpp"
 #include "analysis/reconcile/from_analysis.hpp"
 #include "analysis/reconcile/reconcile.hpp"
 #include "analysis/reconcile/report_output.hpp"
+#include "daemon/cli/campaign_source.hpp"
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/twin_store.hpp"
 #include "daemon/core/user_error.hpp"
+#include "physics/sign_convention.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -29,7 +30,8 @@ namespace rc = analysis::reconcile;
 
 void add_reconcile_command(CLI::App& app) {
     struct Opts {
-        std::string campaign, twin = "baseline", plots, write_twin;
+        CampaignSource source;
+        std::string twin = "baseline", plots, write_twin;
         bool json = false, no_pairs = false, power = false;
         double alpha = 0.01;
         int simulations = 2000;
@@ -38,7 +40,7 @@ void add_reconcile_command(CLI::App& app) {
     auto o = std::make_shared<Opts>();
     auto* cmd = app.add_subcommand("reconcile", "Find the physics the twin left out: locate the mismatch, fit candidate "
                                                 "terms, show the fit improve");
-    cmd->add_option("campaign", o->campaign, "Campaign folder (manikin-recording/1)")->required();
+    add_campaign_source_options(cmd, o->source);
     cmd->add_option("--twin", o->twin, "Twin version: 'baseline' (docs/twin-baseline.md) or a twin-version TOML file")
         ->capture_default_str();
     cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 3) instead of the report");
@@ -61,24 +63,23 @@ void add_reconcile_command(CLI::App& app) {
                 "the evidence noise alone reaches (--alpha), chosen out of sample by case, and told apart from its\n"
                 "rivals; otherwise the report says where the mismatch is and that it is unexplained. A steady offset\n"
                 "on a few zones is reported as a local anomaly, not physics. docs/reconcile.md has the equations.\n"
-                "Exit status 0 whether or not a term is found.\n"
+                "Heat flux: " + std::string(physics::heat_flux_sign) + ".\n"
+                "Exit status 0 whether or not a term is found (docs/cli.md).\n"
                 "Example: manikin simulate-campaign --effect humidity_buoyancy:gamma=146 --out /tmp/c\n"
-                "         manikin reconcile /tmp/c --plots /tmp/c/plots --write-twin /tmp/c/twin.toml");
+                "         manikin reconcile /tmp/c --plots /tmp/c/plots --write-twin /tmp/c/twin.toml\n"
+                "         manikin reconcile --db manikind-demo/manikind.db --campaign validation-20261124T010203Z");
     cmd->callback([o] {
         const auto t0 = std::chrono::steady_clock::now();
         const auto base = twin_store::load_twin_version(o->twin);
-        analysis::Campaign campaign;
-        try {
-            campaign = analysis::read_campaign(o->campaign);
-        } catch (const analysis::InputError& e) {
-            throw UserError(e.what());
-        }
+        const analysis::Campaign campaign = read_campaign_source(o->source);
+        // With --db the positional names a campaign in it, otherwise a folder: report what was read.
+        const std::string campaign_label = o->source.db.empty() ? o->source.campaign : o->source.db + ": " + campaign.name;
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
         const auto result = analysis::analyze_campaign(campaign);
         std::vector<int> skipped;
         auto cases = rc::case_inputs_from_results(result, campaign.zone_map, &skipped);
         for (int id : skipped) spdlog::warn("case {}: no air temperature or humidity in the steady window; left out", id);
-        if (cases.empty()) throw UserError(fmt::format("{}: no case has a steady window to compare", o->campaign));
+        if (cases.empty()) throw UserError(fmt::format("{}: no case has a steady window to compare", campaign_label));
         const auto model = rc::make_twin_model(std::move(cases), base);
         rc::Options opt;
         opt.try_pairs = !o->no_pairs;
@@ -92,11 +93,11 @@ void add_reconcile_command(CLI::App& app) {
             const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             if (o->json) {
                 nlohmann::json j = rc::power_to_json(plan);
-                j["campaign"] = o->campaign;
+                j["campaign"] = campaign_label;
                 j["seconds"] = seconds;
                 std::printf("%s\n", j.dump(2).c_str());
             } else {
-                std::printf("Campaign: %s (%zu cases, %d replicates)\n%s(%.2f s)\n", o->campaign.c_str(), result.cases.size(),
+                std::printf("Campaign: %s (%zu cases, %d replicates)\n%s(%.2f s)\n", campaign_label.c_str(), result.cases.size(),
                             plan.campaign_replicates, rc::power_to_text(plan).c_str(), seconds);
             }
             return;
@@ -109,16 +110,18 @@ void add_reconcile_command(CLI::App& app) {
         }
         if (!o->write_twin.empty() && report.explanation) {
             twin_store::save_twin_version(report.new_version, o->write_twin, base.name,
-                                          fmt::format("found by manikin reconcile {}", o->campaign));
+                                          fmt::format("found by manikin reconcile {}", campaign_label));
             spdlog::info("wrote twin version {}", o->write_twin);
         }
         if (o->json) {
             auto j = rc::report_to_json(report, *model);
-            j["campaign"] = o->campaign;
+            j["campaign"] = campaign_label;
+            j["heat_flux_sign"] = physics::heat_flux_sign;
             j["seconds"] = seconds;
             std::printf("%s\n", j.dump(2).c_str());
         } else {
-            std::printf("Campaign: %s (%zu cases)\n%s", o->campaign.c_str(), result.cases.size(),
+            std::printf("Campaign: %s (%zu cases); heat flux %s\n%s", campaign_label.c_str(), result.cases.size(),
+                        physics::heat_flux_sign,
                         rc::report_to_text(report).c_str());
             std::printf("(%.2f s)\n", seconds);
         }

@@ -11,6 +11,7 @@
 
 #include <chrono>
 #include <csignal>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -31,6 +32,7 @@
 #include "drivers/anemometers.hpp"
 #include "drivers/modbus_driver.hpp"
 #include "drivers/manikin_can_driver.hpp"
+#include "physics/sign_convention.hpp"
 #include "protocol/manikin_can.hpp"
 
 namespace manikind::cli {
@@ -175,6 +177,7 @@ void add_sim_commands(CLI::App& app) {
     rep->add_flag("--json", r->json, "Print the last value of every channel as JSON");
     rep->add_option("--db", r->db, "Also record the replayed samples into this database (a trial of --campaign)");
     rep->add_option("--campaign", r->campaign, "Campaign name for the replayed trial (default: replay-<file name>)");
+    rep->footer(std::string("Heat flux: ") + physics::heat_flux_sign + " (docs/manikin-can-bus.md).");
     rep->callback([r] {
         std::ifstream in(r->file);
         if (!in) throw UserError(fmt::format("{}: cannot open the capture", r->file));
@@ -276,6 +279,8 @@ void add_probe_command(CLI::App& app) {
     cmd->add_option("--write", o->writes, "Modbus: write name=value (checked against the map's limits)");
     cmd->add_option("--read", o->reads, "Modbus: read this register (default: every polled one)");
     cmd->add_flag("--json", o->json, "One JSON document");
+    cmd->footer("A --write beyond the register map's limits is refused: exit status 4; under --json the readings are\n"
+                "then the error's \"details\" (docs/cli.md).");
     cmd->callback([o] {
         drivers::SystemClock clock;
         nlohmann::json out = {{"device", o->device}, {"samples", nlohmann::json::array()}};
@@ -323,8 +328,12 @@ void add_probe_command(CLI::App& app) {
             out["writes"] = nlohmann::json::array();
             for (const auto& w : o->writes) {
                 const auto eq = w.find('=');
-                if (eq == std::string::npos) throw UserError("--write: expected name=value, got " + w);
-                const std::string why = d.write(w.substr(0, eq), std::stod(w.substr(eq + 1)));
+                const std::string value_text = eq == std::string::npos ? "" : w.substr(eq + 1);
+                char* end = nullptr;
+                const double value = std::strtod(value_text.c_str(), &end);
+                if (eq == std::string::npos || value_text.empty() || *end != '\0')
+                    throw UserError("--write: expected name=value with a number, got " + w);
+                const std::string why = d.write(w.substr(0, eq), value);
                 out["writes"].push_back({{"register", w.substr(0, eq)}, {"ok", why.empty()}, {"error", why}});
             }
             if (o->reads.empty()) {
@@ -338,7 +347,15 @@ void add_probe_command(CLI::App& app) {
             }
             out["status"] = status_json(d.status());
         }
+        // A write the map's limits refused is a refusal (status 4), after the readings are shown.
+        std::string refused;
+        if (out.contains("writes"))
+            for (const auto& w : out["writes"])
+                if (!w["ok"].get<bool>())
+                    refused += fmt::format("{}write {} refused: {}", refused.empty() ? "" : "; ", w["register"].get<std::string>(),
+                                           w["error"].get<std::string>());
         if (o->json) {
+            if (!refused.empty()) throw UserError::refused(refused, out);
             std::printf("%s\n", out.dump(2).c_str());
             return;
         }
@@ -346,10 +363,7 @@ void add_probe_command(CLI::App& app) {
             std::printf("%-28s %12s  %s\n", s["channel"].get<std::string>().c_str(), s["value"].dump().c_str(),
                         s["quality"].get<std::string>().c_str());
         std::printf("%s\n", out["status"].dump().c_str());
-        if (out.contains("writes"))
-            for (const auto& w : out["writes"])
-                if (!w["ok"].get<bool>()) std::printf("write %s refused: %s\n", w["register"].get<std::string>().c_str(),
-                                                      w["error"].get<std::string>().c_str());
+        if (!refused.empty()) throw UserError::refused(refused);
     });
 }
 

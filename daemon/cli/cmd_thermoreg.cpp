@@ -19,6 +19,7 @@
 #include "analysis/plot/svg_figure.hpp"
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/user_error.hpp"
+#include "physics/sign_convention.hpp"
 #include "physics/thermoreg/stolwijk.hpp"
 
 namespace manikind::cli {
@@ -60,16 +61,35 @@ tr::SimulationResult run_checked(const tr::Exposure& e, const tr::ModelOptions& 
     }
 }
 
+// The model keeps Fig. 4's sign (positive = gained by the body); everything this command prints
+// follows the CLI's one convention instead (physics::heat_flux_sign), converted here only.
+struct PrintedRates {
+    double evaporation_loss_w, convection_loss_w, radiation_loss_w, respiration_loss_w;  // positive = heat lost
+    double metabolic_production_w;  // heat generated in the body
+    double storage_w;               // positive = heat stored in the body
+};
+
+PrintedRates printed_rates(const tr::OutputSample& s) {
+    return {-s.evaporation_w, -s.convection_w, -s.radiation_w, -s.respiration_w, s.metabolic_w, s.storage_w};
+}
+
+const std::string& rates_sign_text() {
+    static const std::string text = fmt::format("heat losses {}; metabolic = heat produced; {}", physics::heat_flux_sign,
+                                                physics::heat_storage_sign);
+    return text;
+}
+
 nlohmann::json sample_json(const tr::OutputSample& s) {
+    const auto p = printed_rates(s);
     return {{"t_s", s.t_s},
             {"core_temp_c", s.core_temp_c},
             {"mean_skin_temp_c", s.mean_skin_temp_c},
-            {"evaporation_w", s.evaporation_w},
-            {"convection_w", s.convection_w},
-            {"radiation_w", s.radiation_w},
-            {"respiration_w", s.respiration_w},
-            {"metabolic_w", s.metabolic_w},
-            {"storage_w", s.storage_w},
+            {"evaporation_loss_w", p.evaporation_loss_w},
+            {"convection_loss_w", p.convection_loss_w},
+            {"radiation_loss_w", p.radiation_loss_w},
+            {"respiration_loss_w", p.respiration_loss_w},
+            {"metabolic_production_w", p.metabolic_production_w},
+            {"storage_w", p.storage_w},
             {"buoyancy_drive_c", s.mean_buoyancy_drive_c},
             {"mean_skin_wettedness", s.mean_skin_wettedness}};
 }
@@ -110,14 +130,14 @@ std::string fig4_svg(const tr::SimulationResult& r, const std::string& title) {
     pl::XYPanel heat;
     heat.box = {0, 364, 760, 350};
     heat.x = time_axis();
-    heat.y.label = "Heat rate (W), + = gained by the body";
+    heat.y.label = "Heat rate (W): losses + = lost, storage + = stored";
     heat.y.target_intervals = 8;
     heat.reference_lines.push_back({true, 0.0, "#999999", ""});
-    heat.series = {trace("evaporation", "#1f77b4", [](const auto& s) { return s.evaporation_w; }),
-                   trace("radiation", "#ff7f0e", [](const auto& s) { return s.radiation_w; }),
-                   trace("convection", "#2ca02c", [](const auto& s) { return s.convection_w; }),
-                   trace("metabolic", "#9467bd", [](const auto& s) { return s.metabolic_w; }),
-                   trace("storage", "#d62728", [](const auto& s) { return s.storage_w; }),
+    heat.series = {trace("evaporation loss", "#1f77b4", [](const auto& s) { return printed_rates(s).evaporation_loss_w; }),
+                   trace("radiation loss", "#ff7f0e", [](const auto& s) { return printed_rates(s).radiation_loss_w; }),
+                   trace("convection loss", "#2ca02c", [](const auto& s) { return printed_rates(s).convection_loss_w; }),
+                   trace("metabolic production", "#9467bd", [](const auto& s) { return printed_rates(s).metabolic_production_w; }),
+                   trace("storage (+ = stored)", "#d62728", [](const auto& s) { return printed_rates(s).storage_w; }),
                    trace("50 × (dT + 146 dC)", "#7f7f7f", [](const auto& s) { return 50.0 * s.mean_buoyancy_drive_c; })};
     heat.series.back().dash = "5 4";
     // Both legends right of the plots: six traces leave no free corner below, and the two time
@@ -191,7 +211,7 @@ void add_thermoreg_command(CLI::App& app) {
     cmd->add_option("--csv", o->csv, "Write the time series as CSV");
     cmd->add_option("--plot", o->plot, "Write a Fig. 4-like SVG");
     cmd->footer("Defaults are Fig. 4: 41 °C, 20 % RH, MRT 55 °C, still air, 1.5 met, 0.25 clo, 2 h.\n"
-                "Heat rates: positive = heat gained by the body (Fig. 4). Core = trunk core.\n"
+                "Heat rates: " + rates_sign_text() + "\n(Fig. 4 plots the opposite sign). Core = trunk core.\n"
                 "Examples:\n  manikin thermoreg --seed-compatible --plot fig4.svg\n"
                 "  manikin thermoreg --convection dt-only --mrt 41 --json\n"
                 "  manikin thermoreg sweep --mrt 55 --out s22/\n  manikin thermoreg speeds");
@@ -204,11 +224,15 @@ void add_thermoreg_command(CLI::App& app) {
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
         if (!o->csv.empty()) {
             std::ostringstream csv;
-            csv << "t_s,core_temp_c,mean_skin_temp_c,evaporation_w,convection_w,radiation_w,respiration_w,metabolic_w,storage_w,buoyancy_drive_c,mean_skin_wettedness\n";
-            for (const auto& s : r.series)
+            csv << "t_s,core_temp_c,mean_skin_temp_c,evaporation_loss_w,convection_loss_w,radiation_loss_w,respiration_loss_w,"
+                   "metabolic_production_w,storage_w,buoyancy_drive_c,mean_skin_wettedness\n";
+            for (const auto& s : r.series) {
+                const auto p = printed_rates(s);
                 csv << fmt::format("{},{:.4f},{:.4f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.4f},{:.4f}\n", s.t_s, s.core_temp_c,
-                                   s.mean_skin_temp_c, s.evaporation_w, s.convection_w, s.radiation_w, s.respiration_w,
-                                   s.metabolic_w, s.storage_w, s.mean_buoyancy_drive_c, s.mean_skin_wettedness);
+                                   s.mean_skin_temp_c, p.evaporation_loss_w, p.convection_loss_w, p.radiation_loss_w,
+                                   p.respiration_loss_w, p.metabolic_production_w, p.storage_w, s.mean_buoyancy_drive_c,
+                                   s.mean_skin_wettedness);
+            }
             write_text(o->csv, csv.str());
         }
         const std::string title = fmt::format("{} °C, {} % RH, MRT {} °C, {} m/s: {}{}", o->exposure.air_temp_c, o->exposure.rh_pct,
@@ -219,19 +243,22 @@ void add_thermoreg_command(CLI::App& app) {
             nlohmann::json series = nlohmann::json::array();
             for (const auto& s : r.series) series.push_back(sample_json(s));
             std::printf("%s\n", nlohmann::json{{"convection", tr::to_string(m.convection)}, {"seed_compatible", m.seed_compatible},
-                                               {"sign", "heat rates positive = gained by the body (Fig. 4)"},
+                                               {"heat_flux_sign", rates_sign_text()},
                                                {"series", series}, {"final", sample_json(r.final)},
                                                {"max_energy_residual_w", r.max_abs_energy_residual_w}, {"compute_ms", ms}}
                                     .dump(2)
                                     .c_str());
             return;
         }
-        std::printf("%s\n  min   core °C   skin °C   evap W   conv W   rad W   metab W   storage W   dT+146dC\n", title.c_str());
+        std::printf("%s\nHeat rates: %s\n", title.c_str(), rates_sign_text().c_str());
+        std::printf("  min   core °C   skin °C   evap W   conv W   rad W   metab W   storage W   dT+146dC\n");
         for (const auto& s : r.series)
-            if (std::fmod(s.t_s, 600.0) < 1e-9)
-                std::printf("  %3.0f   %7.2f   %7.2f   %6.0f   %6.0f   %5.0f   %7.0f   %9.0f   %8.2f\n", s.t_s / 60.0, s.core_temp_c,
-                            s.mean_skin_temp_c, s.evaporation_w, s.convection_w, s.radiation_w, s.metabolic_w, s.storage_w,
-                            s.mean_buoyancy_drive_c);
+            if (std::fmod(s.t_s, 600.0) < 1e-9) {
+                const auto p = printed_rates(s);
+                std::printf("  %3.0f   %7.2f   %7.2f   %6.0f   %6.0f   %5.0f   %7.0f   %9.0f   %8.2f\n", s.t_s / 60.0,
+                            s.core_temp_c, s.mean_skin_temp_c, p.evaporation_loss_w, p.convection_loss_w, p.radiation_loss_w,
+                            p.metabolic_production_w, p.storage_w, s.mean_buoyancy_drive_c);
+            }
         std::printf("final (%.0f min): core %.2f °C, mean skin %.2f °C; energy balance closes to %.1e W; %.1f ms\n",
                     r.final.t_s / 60.0, r.final.core_temp_c, r.final.mean_skin_temp_c, r.max_abs_energy_residual_w, ms);
     });

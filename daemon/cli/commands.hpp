@@ -1,20 +1,24 @@
 #pragma once
-// Every `manikin` subcommand registers itself through one of these functions, called from
-// main.cpp. Each lives in its own cmd_<name>.cpp.
+// Every `manikin` subcommand registers itself through one of these functions, each in its own
+// cmd_<name>.cpp; add_all_commands (app.cpp) calls them all, for main.cpp and for the tests
+// that walk the command tree.
 #include <CLI/CLI.hpp>
 
 namespace manikind::cli {
 
 void add_physics_commands(CLI::App& app);    // cmd_physics.cpp: `manikin physics ...`
 void add_selfcheck_command(CLI::App& app);   // cmd_selfcheck.cpp: `manikin selfcheck`
-void add_config_command(CLI::App& app);      // cmd_config.cpp: `manikin config check|show`
+void add_config_command(CLI::App& app);      // cmd_config.cpp: `manikin config check|show|token`
 void add_analyze_command(CLI::App& app);     // cmd_analyze.cpp: `manikin analyze <campaign>`
 void add_simulate_command(CLI::App& app);    // cmd_simulate.cpp: `manikin simulate-campaign`
 void add_reconcile_command(CLI::App& app);   // cmd_reconcile.cpp: `manikin reconcile`
 void add_demo_command(CLI::App& app);        // cmd_demo.cpp: `manikin demo` (the README main job)
-void add_thermoreg_command(CLI::App& app);
-void add_daemon_commands(CLI::App& app);
+void add_thermoreg_command(CLI::App& app);   // cmd_thermoreg.cpp: `manikin thermoreg [sweep|speeds]`
+void add_daemon_commands(CLI::App& app);     // cmd_daemon.cpp: status, campaign, setpoint, trial watch, results, export
 void add_sim_commands(CLI::App& app);        // cmd_sim.cpp: `manikin sim serve`, `manikin replay`
-void add_probe_command(CLI::App& app);       // cmd_sim.cpp: `manikin probe <device>`     // cmd_daemon.cpp: status, campaign, setpoint, trial watch, results, export   // cmd_thermoreg.cpp: `manikin thermoreg [sweep|speeds]`
+void add_probe_command(CLI::App& app);       // cmd_sim.cpp: `manikin probe <device>`
+
+// The whole `manikin` app: global options and every subcommand above.
+void add_all_commands(CLI::App& app);
 
 }  // namespace manikind::cli

@@ -79,8 +79,13 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
         if (cmd == "results") {
             auto name = text("campaign");
             if (!name) name = daemon.last_campaign();
-            if (!name) return fail("\"campaign\": expected a campaign name (none has run yet)");
-            return {{"ok", true}, {"campaign", *name}, {"results", daemon.results_json(*name)}};
+            // Nothing to show yet is an answer, not a refusal: "results" is null and "note" says why.
+            if (!name) return {{"ok", true}, {"campaign", nullptr}, {"results", nullptr}, {"note", "no campaign has run yet"}};
+            auto results = daemon.latest_results_json(*name);
+            if (!results)
+                return {{"ok", true}, {"campaign", *name}, {"results", nullptr},
+                        {"note", fmt::format("campaign '{}' has no results yet", *name)}};
+            return {{"ok", true}, {"campaign", *name}, {"results", std::move(*results)}};
         }
         if (cmd == "start_campaign") {
             CampaignPlan plan;
@@ -154,9 +159,11 @@ nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohm
     const auto deadline = client_clock::now() + std::chrono::duration_cast<client_clock::duration>(
                                                     std::chrono::duration<double>(timeout_s));
     auto timed_out = [&](const char* waiting_for) {
-        return UserError(fmt::format("no answer from the daemon at {} within {} s: waited for {} ('{}'). It may be hung "
-                                     "or overloaded: see its log (journalctl -u manikind), or try a longer --timeout",
-                                     path, timeout_s, waiting_for, cmd));
+        return UserError::unreachable(fmt::format("no answer from the daemon at {} within {} s: waited for {} ('{}'). It may "
+                                                  "be hung or overloaded: see its log (journalctl -u manikind), or try a "
+                                                  "longer --timeout",
+                                                  path, timeout_s, waiting_for, cmd),
+                                      "daemon_timeout");
     };
     sockaddr_un addr = unix_address(path, "socket");
     const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
@@ -182,8 +189,8 @@ nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohm
             if (err == 0) break;
             errno = err;
         }
-        throw UserError(fmt::format("cannot reach the daemon at {}: {} (is manikind running? --socket)", path,
-                                    std::strerror(errno)));
+        throw UserError::unreachable(fmt::format("cannot reach the daemon at {}: {} (is manikind running? --socket)",
+                                                 path, std::strerror(errno)));
     }
     const std::string msg = request.dump() + "\n";
     for (std::size_t sent = 0; sent < msg.size();) {
@@ -196,7 +203,7 @@ nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohm
             if (!wait_for(fd, POLLOUT, deadline)) throw timed_out("it to take the request");
             continue;
         }
-        throw UserError(fmt::format("the daemon at {} closed the connection: {}", path, std::strerror(errno)));
+        throw UserError::unreachable(fmt::format("the daemon at {} closed the connection: {}", path, std::strerror(errno)));
     }
     std::string reply;
     char buf[65536];
@@ -210,11 +217,13 @@ nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohm
             if (!wait_for(fd, POLLIN, deadline)) throw timed_out("its reply");
             continue;
         }
-        if (reply.empty()) throw UserError(fmt::format("the daemon at {} closed the connection without replying", path));
+        if (reply.empty())
+            throw UserError::unreachable(fmt::format("the daemon at {} closed the connection without replying", path));
         break;
     }
     const auto j = nlohmann::json::parse(reply, nullptr, false);
-    if (j.is_discarded()) throw UserError("the daemon's reply is not JSON: " + reply.substr(0, 200));
+    if (j.is_discarded())
+        throw UserError::unreachable("the daemon's reply is not JSON: " + reply.substr(0, 200), "daemon_bad_reply");
     return j;
 }
 

@@ -701,13 +701,19 @@ nlohmann::json LabDaemon::live_json() {
     return j;
 }
 
-nlohmann::json LabDaemon::results_json(const std::string& campaign) {
+std::optional<nlohmann::json> LabDaemon::latest_results_json(const std::string& campaign) {
     std::lock_guard lk(lock_);
     const auto id = db_.find_campaign(campaign);
     if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), campaign));
     const auto r = db_.latest_result(*id);
-    if (!r) throw UserError(fmt::format("campaign '{}' has no results yet", campaign));
+    if (!r) return std::nullopt;
     return nlohmann::json::parse(r->json);
+}
+
+nlohmann::json LabDaemon::results_json(const std::string& campaign) {
+    auto r = latest_results_json(campaign);
+    if (!r) throw UserError(fmt::format("campaign '{}' has no results yet", campaign));
+    return std::move(*r);
 }
 
 }  // namespace manikind

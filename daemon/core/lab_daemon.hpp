@@ -72,6 +72,8 @@ public:
     nlohmann::json status_json();
     nlohmann::json live_json();
     nlohmann::json results_json(const std::string& campaign);   // latest stored results
+    // The latest stored results, or nothing while none are stored; throws for an unknown campaign.
+    std::optional<nlohmann::json> latest_results_json(const std::string& campaign);
 
     // Alarms: every warn or error event since the daemon started (the newest 200), each with an
     // id, for the console; acknowledging one records who saw it, it does not clear the cause.

@@ -13,14 +13,14 @@
 
 using manikind::test::run_manikin;
 
-TEST_CASE("manikin config check exits non-zero on a bad register map, with file:line: key on stderr", "[cli][config]") {
+TEST_CASE("manikin config check exits 5 (negative verdict) on a bad register map, with file:line: key on stderr", "[cli][config]") {
     const auto dir = std::filesystem::temp_directory_path() / ("manikind-cli-config-" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
     const auto file = (dir / "lab.toml").string();
     std::ofstream(file) << "[lab]\nname = \"x\"\n[devices.chamber]\nregister_map = \"/dev/zero\"\n";
     // stderr only: the problems must be where a shell user sees them, not on stdout.
     const auto r = run_manikin("config check " + file + " 2>&1 >/dev/null");
-    CHECK(r.exit_code == 2);
+    CHECK(r.exit_code == 5);
     CHECK_THAT(r.out, Catch::Contains(file + ":4:") && Catch::Contains("devices.chamber.register_map: /dev/zero: "));
     CHECK(run_manikin("config check " + file).out.find(": ok") == std::string::npos);
     std::filesystem::remove_all(dir);

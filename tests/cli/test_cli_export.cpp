@@ -163,7 +163,9 @@ TEST_CASE("export: bad input is refused with the reason and nothing half-written
               .exit_code == 2);
     CHECK_FALSE(fs::exists(out / "x.h5"));
     CHECK(run_manikin("export --db " + (out / "missing.db").string() + " c " + (out / "y").string()).exit_code == 2);
-    CHECK(run_manikin("export --db " + db_path.string() + " c " + (out / "y").string() + " --format parquet").exit_code != 0);
+    const auto parquet = run_manikin("export --db " + db_path.string() + " c " + (out / "y").string() + " --format parquet --json");
+    CHECK(parquet.exit_code == 2);  // docs/cli.md: a usage error
+    CHECK(nlohmann::json::parse(parquet.out).at("error").at("code").is_string());
 }
 
 TEST_CASE("SQLite views: trial_table has a row per 5-s step and a column per channel, equal to the CSV export",

@@ -50,14 +50,17 @@ def check(cond, what):
         failures.append(what)
 
 
-def probe(*args, map_file=None):
+def probe(*args, map_file=None, exit_code=0):
     cmd = [manikin, "probe", "chamber", "--port", str(port), "--timeout", "1", "--json"] + list(args)
     if map_file:
         cmd += ["--map", map_file]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    check(out.returncode == exit_code, f"probe {' '.join(args)} exits {exit_code} (got {out.returncode})")
     if out.returncode != 0:
         print(out.stderr)
-    return json.loads(out.stdout)
+    doc = json.loads(out.stdout)
+    # A refused write (exit 4, docs/cli.md) carries the probe's readings in the error's details.
+    return doc["error"]["details"] if "error" in doc else doc
 
 
 r = probe("--write", "air_temp_remote_setpoint_c=35.5", "--write", "air_rh_remote_setpoint_pct=40")
@@ -68,7 +71,7 @@ pv = {s["channel"]: s for s in r["samples"]}
 check(abs(pv["air_temp_pv_c"]["value"] - 23.1) < 1e-9, "temperature PV read back as 23.1 °C")
 check(abs(pv["air_rh_pv_pct"]["value"] - 45.6) < 1e-9, "humidity PV read back as 45.6 %")
 
-r = probe("--write", "air_temp_remote_setpoint_c=80")
+r = probe("--write", "air_temp_remote_setpoint_c=80", exit_code=4)
 check(not r["writes"][0]["ok"] and "55" in r["writes"][0]["error"], "80 °C refused by the map's limit before sending")
 check(temp.getValues(3, 26, 1) == [355], "the refused setpoint never reached the controller")
 
