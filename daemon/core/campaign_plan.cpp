@@ -14,6 +14,33 @@
 
 namespace manikind {
 
+nlohmann::json campaign_definition_json(const CampaignPlan& plan) {
+    return {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
+}
+
+nlohmann::json case_conditions_json(const PlannedCase& c) {
+    return {{"id", c.id},           {"chamber_temp_c", c.chamber_temp_c}, {"chamber_rh_pct", c.chamber_rh_pct},
+            {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
+}
+
+std::vector<std::string> plan_differences(const CampaignPlan& plan, const nlohmann::json& definition,
+                                          const std::vector<nlohmann::json>& case_conditions) {
+    std::vector<std::string> out;
+    const auto compare = [&](const std::string& where, const nlohmann::json& stored, const nlohmann::json& planned) {
+        for (const auto& [key, value] : planned.items())
+            if (!stored.contains(key)) out.push_back(fmt::format("{}{}: not stored, now {}", where, key, value.dump()));
+            else if (stored.at(key) != value)
+                out.push_back(fmt::format("{}{}: was {}, now {}", where, key, stored.at(key).dump(), value.dump()));
+    };
+    compare("", definition, campaign_definition_json(plan));
+    if (case_conditions.size() != plan.cases.size())
+        out.push_back(fmt::format("cases: {} stored, {} in the plan", case_conditions.size(), plan.cases.size()));
+    for (std::size_t i = 0; i < std::min(case_conditions.size(), plan.cases.size()); ++i)
+        compare(fmt::format("case {} (position {}): ", plan.cases[i].id, i + 1), case_conditions[i],
+                case_conditions_json(plan.cases[i]));
+    return out;
+}
+
 CampaignPlan table_s3_plan(const std::string& name) {
     CampaignPlan p;
     p.name = name;

@@ -6,6 +6,8 @@
 #include <string_view>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "daemon/core/config.hpp"
 
 namespace manikind {
@@ -29,6 +31,16 @@ struct CampaignPlan {
     double acquire_timeout_s = 4.0 * 3600.0;
     std::vector<PlannedCase> cases;
 };
+
+// What the database stores of a plan (campaigns.definition_json, cases.conditions_json): what a
+// continued campaign is compared with.
+nlohmann::json campaign_definition_json(const CampaignPlan& plan);
+nlohmann::json case_conditions_json(const PlannedCase& c);
+
+// How `plan` differs from a campaign stored as `definition` and `case_conditions` (in position
+// order), one readable line per difference; empty when it is the same plan.
+std::vector<std::string> plan_differences(const CampaignPlan& plan, const nlohmann::json& definition,
+                                          const std::vector<nlohmann::json>& case_conditions);
 
 // The paper's 15 validation cases (Table S3) x 3 replicates.
 CampaignPlan table_s3_plan(const std::string& name);

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <set>
 #include <chrono>
 #include <cmath>
 
@@ -63,9 +64,12 @@ LabDaemon::LabDaemon(DaemonOptions options)
       db_(recorder::Database::open(db_path_)) {
     last_tick_steady_ns_ = steady_now_ns();
     const int interrupted = db_.mark_interrupted_trials(system_clock_.utc_ns());
-    if (interrupted > 0)
+    const int campaigns_interrupted = db_.mark_interrupted_campaigns();
+    if (interrupted > 0 || campaigns_interrupted > 0)
         db_.add_event(std::nullopt, 0, system_clock_.utc_ns(), "warn", "restart",
-                      fmt::format("{} trial(s) were running when the daemon stopped; marked interrupted", interrupted));
+                      fmt::format("{} trial(s) and {} campaign(s) were running when the daemon stopped; marked "
+                                  "interrupted (start the same campaign again to continue it)",
+                                  interrupted, campaigns_interrupted));
     recorder_ = std::make_unique<recorder::Recorder>(db_path_);
     skin_range_.resize(analysis::andi35_zone_map().size());
     auto sink = [this](const drivers::Sample& s) { on_sample(s); };
@@ -240,9 +244,29 @@ void LabDaemon::enter(Stage s, const std::string& why) {
 std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
     std::lock_guard lk(lock_);
     if (const auto why = check_plan_against_limits(plan, o_.config.safety); !why.empty()) return why;
-    if (db_.find_campaign(plan.name) || (plan_ && plan_->name == plan.name) ||
+    if ((plan_ && plan_->name == plan.name) ||
         std::any_of(waiting_.begin(), waiting_.end(), [&](const CampaignPlan& p) { return p.name == plan.name; }))
-        return fmt::format("a campaign named '{}' is already in {} or queued", plan.name, db_path_.string());
+        return fmt::format("a campaign named '{}' is already running or queued", plan.name);
+    // One already in the database is continued, if it is the same plan and not complete.
+    if (const auto existing = db_.find_campaign(plan.name)) {
+        const auto campaigns = db_.campaigns();
+        const auto row = std::find_if(campaigns.begin(), campaigns.end(), [&](const auto& c) { return c.id == *existing; });
+        if (row->state == "done")
+            return fmt::format("campaign '{}' is complete in {}; give the plan a new name to run it again", plan.name,
+                               db_path_.string());
+        std::vector<nlohmann::json> stored_cases;
+        for (const auto& c : db_.cases(*existing))
+            stored_cases.push_back(nlohmann::json::parse(c.conditions_json, nullptr, false));
+        const auto differences =
+            plan_differences(plan, nlohmann::json::parse(row->definition_json, nullptr, false), stored_cases);
+        if (!differences.empty()) {
+            std::string list;
+            for (const auto& d : differences) list += "\n  " + d;
+            return fmt::format("campaign '{}' in {} was planned differently; continue it with the same plan, or give "
+                               "this one a new name. Differences:{}",
+                               plan.name, db_path_.string(), list);
+        }
+    }
     if (plan_) {
         waiting_.push_back(plan);
         event("info", "campaign", fmt::format("'{}' queued behind '{}' ({} waiting)", plan.name, plan_->name, waiting_.size()));
@@ -253,25 +277,41 @@ std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
 }
 
 void LabDaemon::begin_campaign(const CampaignPlan& plan) {
-    nlohmann::json def = {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
-    campaign_id_ = db_.create_campaign(plan.name, def.dump());
     queue_.clear();
-    int position = 0;
     std::vector<std::pair<PlannedCase, std::int64_t>> cases;
-    for (const auto& c : plan.cases) {
-        nlohmann::json cj = {{"id", c.id}, {"chamber_temp_c", c.chamber_temp_c}, {"chamber_rh_pct", c.chamber_rh_pct},
-                             {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
-        cases.emplace_back(c, db_.add_case(campaign_id_, fmt::format("case {}", c.id), cj.dump(), position++));
+    std::set<std::pair<std::int64_t, std::int64_t>> done;  // (case row, replicate) finished before
+    const auto existing = db_.find_campaign(plan.name);
+    if (existing) {
+        // Continuing (start_campaign checked it is the same plan): finished trials are kept; an
+        // interrupted, aborted or failed one stays in the database with its reason (the analysis
+        // reads done trials only) and is run again.
+        campaign_id_ = *existing;
+        const auto stored = db_.cases(campaign_id_);
+        for (std::size_t i = 0; i < plan.cases.size() && i < stored.size(); ++i) cases.emplace_back(plan.cases[i], stored[i].id);
+        for (const auto& t : db_.trials(campaign_id_))
+            if (t.state == "done") done.insert({t.case_id, t.replicate});
+    } else {
+        campaign_id_ = db_.create_campaign(plan.name, campaign_definition_json(plan).dump());
+        int position = 0;
+        for (const auto& c : plan.cases)
+            cases.emplace_back(c, db_.add_case(campaign_id_, fmt::format("case {}", c.id), case_conditions_json(c).dump(),
+                                               position++));
     }
     for (int r = 1; r <= plan.replicates; ++r)
-        for (const auto& [c, id] : cases) queue_.push_back({c, id, r});
-    trials_total_ = static_cast<int>(queue_.size());
-    trials_done_ = 0;
+        for (const auto& [c, id] : cases)
+            if (!done.count({id, r})) queue_.push_back({c, id, r});
+    trials_total_ = plan.replicates * static_cast<int>(cases.size());
+    trials_done_ = static_cast<int>(done.size());
     plan_ = plan;
     safety_tripped_ = false;
     last_campaign_ = plan.name;
     db_.set_campaign_state(campaign_id_, "running");
-    event("info", "campaign", fmt::format("'{}' started: {} cases x {} replicates", plan.name, plan.cases.size(), plan.replicates));
+    if (existing)
+        event("info", "campaign", fmt::format("'{}' continued: {} of {} trials done before, {} to run", plan.name,
+                                              trials_done_, trials_total_, queue_.size()));
+    else
+        event("info", "campaign",
+              fmt::format("'{}' started: {} cases x {} replicates", plan.name, plan.cases.size(), plan.replicates));
 }
 
 std::string LabDaemon::abort(const std::string& reason) {
@@ -566,6 +606,17 @@ void LabDaemon::stop() {
         stop_ = true;
     }
     if (tick_thread_.joinable()) tick_thread_.join();
+    {
+        // SIGTERM (or any stop) mid-campaign: the running trial and the campaign end
+        // "interrupted" now, not at the next start; starting the same plan continues it.
+        std::lock_guard lk(lock_);
+        if (trial_id_) finish_trial("interrupted", "daemon stopped");
+        if (plan_ && campaign_id_) {
+            db_.set_campaign_state(campaign_id_, "interrupted");
+            event("warn", "campaign", fmt::format("'{}' interrupted: the daemon stopped (start it again to continue)", plan_->name));
+            plan_.reset();
+        }
+    }
     if (acq_) {
         acq_->manikin().set_run(false);
         acq_->stop();

@@ -6,9 +6,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
 
 #include "daemon/core/recorder/database.hpp"
@@ -58,4 +60,97 @@ TEST_CASE("kill -9 mid-trial: restart marks the trial interrupted, committed sam
     // Every row committed before the kill is in the trial's samples or (before the trial began) the idle log.
     CHECK(db.sample_count(trials[0].id) + db.idle_sample_count() >= committed_before_kill);
     fs::remove_all(dir);
+}
+
+namespace {
+
+struct CrashDir {
+    fs::path path;
+    explicit CrashDir(const std::string& name)
+        : path(fs::temp_directory_path() / ("manikind-" + name + "-" + std::to_string(::getpid()))) {
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~CrashDir() { fs::remove_all(path); }
+    void write_plan(const std::string& file, int replicates, double second_case_temp_c) const {
+        std::ofstream plan(path / file);
+        plan << "name = \"survivor\"\nreplicates = " << replicates
+             << "\ntrial_duration_min = 40\n"
+                "[[cases]]\nchamber_temp_c = 35\nchamber_rh_pct = 27\nskin_setpoint_c = 35\nwet = false\n"
+                "[[cases]]\nchamber_temp_c = "
+             << second_case_temp_c << "\nchamber_rh_pct = 25\nskin_setpoint_c = 35\nwet = false\n";
+    }
+    std::vector<std::string> daemon(const std::string& plan) const {
+        return {std::string(MANIKIND_BIN_DIR) + "/manikind", "--virtual", "--database", (path / "c.db").string(),
+                "--socket", (path / "d.sock").string(), "--campaign", (path / plan).string(), "--exit-when-done"};
+    }
+};
+
+}  // namespace
+
+TEST_CASE("kill -9 mid-campaign, the same plan started again: it continues and completes, every trial done once",
+          "[daemon][crash][continue]") {
+    CrashDir dir("continue");
+    dir.write_plan("plan.toml", 1, 38);
+    {
+        auto child = DaemonProcess::spawn(dir.daemon("plan.toml"));
+        // The first trial finishes, the second is acquiring (trial ids count from 1): kill it there.
+        REQUIRE(child.read_until("acquiring trial 2 "));
+        ::kill(child.pid(), SIGKILL);
+        child.wait();
+    }
+    {
+        auto db = manikind::recorder::Database::open(dir.path / "c.db");
+        const auto trials = db.trials(db.find_campaign("survivor").value());
+        REQUIRE(trials.size() == 2);
+        CHECK(trials[0].state == "done");
+        CHECK(trials[1].state == "acquiring");  // as the kill left it
+    }
+    // A changed plan under the same name is refused with the difference named.
+    dir.write_plan("changed.toml", 1, 39);
+    auto refused = DaemonProcess::spawn(dir.daemon("changed.toml"));
+    const int refused_status = refused.wait();
+    CHECK(WEXITSTATUS(refused_status) != 0);
+    CHECK_THAT(refused.output(), Catch::Contains("chamber_temp_c: was 38") && Catch::Contains("now 39"));
+
+    auto again = DaemonProcess::spawn(dir.daemon("plan.toml"));
+    CHECK(WEXITSTATUS(again.wait()) == 0);
+
+    auto db = manikind::recorder::Database::open(dir.path / "c.db");
+    const auto events = db.events(std::nullopt);
+    CHECK(std::any_of(events.begin(), events.end(), [](const auto& e) {
+        return e.kind == "campaign" && e.message == "'survivor' continued: 1 of 2 trials done before, 1 to run";
+    }));
+    CHECK(db.integrity_check() == "ok");
+    const auto campaign_id = db.find_campaign("survivor").value();
+    const auto campaigns = db.campaigns();
+    CHECK(campaigns.front().state == "done");
+    std::map<std::pair<std::int64_t, std::int64_t>, int> done_per_trial;
+    int interrupted = 0;
+    for (const auto& t : db.trials(campaign_id)) {
+        if (t.state == "done") ++done_per_trial[{t.case_id, t.replicate}];
+        if (t.state == "interrupted") {
+            ++interrupted;
+            CHECK(t.reason == "daemon restarted");
+        }
+    }
+    CHECK(interrupted == 1);                 // kept, with its reason
+    CHECK(done_per_trial.size() == 2);       // both planned trials
+    for (const auto& [key, n] : done_per_trial) CHECK(n == 1);  // each done once
+    CHECK(db.latest_result(campaign_id).has_value());
+}
+
+TEST_CASE("SIGTERM mid-trial ends the trial and the campaign interrupted at once", "[daemon][crash][continue]") {
+    CrashDir dir("sigterm");
+    dir.write_plan("plan.toml", 1, 38);
+    auto child = DaemonProcess::spawn(dir.daemon("plan.toml"));
+    REQUIRE(child.read_until("acquiring trial"));
+    ::kill(child.pid(), SIGTERM);
+    child.wait();
+    auto db = manikind::recorder::Database::open(dir.path / "c.db");
+    const auto trials = db.trials(db.find_campaign("survivor").value());
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "interrupted");
+    CHECK(trials[0].reason == "daemon stopped");
+    CHECK(db.campaigns().front().state == "interrupted");
 }

@@ -521,6 +521,12 @@ int Database::mark_interrupted_trials(std::int64_t utc_ns) {
     return sqlite3_changes(impl_->db);
 }
 
+int Database::mark_interrupted_campaigns() {
+    // 'created': killed between creating the campaign and its first trial.
+    Query(*impl_, "UPDATE campaigns SET state = 'interrupted' WHERE state IN ('created', 'running')").run();
+    return sqlite3_changes(impl_->db);
+}
+
 std::int64_t Database::device_id(const std::string& name, const std::string& kind, const std::string& address) {
     Query q(*impl_,
             "INSERT INTO devices (name, kind, address) VALUES (?, ?, ?)"

@@ -123,6 +123,9 @@ public:
     // After a crash: every trial not in a terminal state becomes "interrupted" with reason
     // "daemon restarted" and ended_utc_ns = utc_ns. Returns how many.
     int mark_interrupted_trials(std::int64_t utc_ns);
+    // After a crash: campaigns left "created" or "running" become "interrupted" (continuable by
+    // starting the same plan again). Returns how many.
+    int mark_interrupted_campaigns();
 
     // Devices and channels: get-or-create. A device's kind and address are updated to the
     // values given; a channel whose unit differs from the stored one is a UserError (its
