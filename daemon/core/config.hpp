@@ -89,6 +89,9 @@ struct Config {
     std::string log_level = "info";
     std::filesystem::path database = "manikind.db";
     double idle_log_period_s = 10.0;       // outside trials, one reading per channel this often (0: off)
+    // [recorder] durability: "process" survives a killed daemon (SQLite synchronous = NORMAL);
+    // "power" also a power cut (FULL: every commit synced to the disk). docs/recorder.md.
+    std::string recorder_durability = "process";
     SafetyLimits safety;
     SteadyStateRule steady_state;
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)

@@ -56,12 +56,18 @@ double SlidingRange::range() const {
     return maxq_.front().second - minq_.front().second;
 }
 
+namespace {
+recorder::Durability durability_of(const config::Config& c) {
+    return c.recorder_durability == "power" ? recorder::Durability::power : recorder::Durability::process;
+}
+}  // namespace
+
 LabDaemon::LabDaemon(DaemonOptions options)
     : o_(std::move(options)),
       db_path_(o_.config.database.is_relative() && !o_.config.source_dir.empty() ? o_.config.source_dir / o_.config.database
                                                                                  : o_.config.database),
       db_lock_(InstanceLock::acquire(db_path_, "database")),
-      db_(recorder::Database::open(db_path_)) {
+      db_(recorder::Database::open(db_path_, durability_of(o_.config))) {
     last_tick_steady_ns_ = steady_now_ns();
     const int interrupted = db_.mark_interrupted_trials(system_clock_.utc_ns());
     const int campaigns_interrupted = db_.mark_interrupted_campaigns();
@@ -70,7 +76,9 @@ LabDaemon::LabDaemon(DaemonOptions options)
                       fmt::format("{} trial(s) and {} campaign(s) were running when the daemon stopped; marked "
                                   "interrupted (start the same campaign again to continue it)",
                                   interrupted, campaigns_interrupted));
-    recorder_ = std::make_unique<recorder::Recorder>(db_path_);
+    recorder::RecorderOptions recorder_options;
+    recorder_options.durability = durability_of(o_.config);
+    recorder_ = std::make_unique<recorder::Recorder>(db_path_, recorder_options);
     skin_range_.resize(analysis::andi35_zone_map().size());
     auto sink = [this](const drivers::Sample& s) { on_sample(s); };
     if (o_.config.mode == "simulated") {

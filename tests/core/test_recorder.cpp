@@ -18,6 +18,7 @@
 
 #include <fmt/core.h>
 
+#include "daemon/core/config.hpp"
 #include "daemon/core/recorder/database.hpp"
 #include "daemon/core/recorder/recorder.hpp"
 #include "daemon/core/user_error.hpp"
@@ -83,6 +84,18 @@ TEST_CASE("database: a fresh file is at the latest schema, in WAL mode and sound
     // Reopening an up-to-date file changes nothing.
     auto again = Database::open(dir.path / "trials.db");
     CHECK(again.schema_version() == Database::latest_schema_version());
+}
+
+TEST_CASE("database: [recorder] durability picks SQLite's sync level, from the configuration to the daemon's connections",
+          "[recorder][durability]") {
+    TempDir dir("durability");
+    CHECK(Database::open(dir.path / "a.db").synchronous() == 1);                                 // NORMAL
+    CHECK(Database::open(dir.path / "b.db", manikind::recorder::Durability::power).synchronous() == 2);  // FULL
+    const auto power = manikind::config::parse_config("[recorder]\ndurability = \"power\"\n", "test.toml");
+    CHECK(power.recorder_durability == "power");
+    CHECK(manikind::config::default_config().recorder_durability == "process");
+    CHECK_THROWS_WITH(manikind::config::parse_config("[recorder]\ndurability = \"fsync\"\n", "test.toml"),
+                      Catch::Contains("test.toml:2") && Catch::Contains("durability"));
 }
 
 TEST_CASE("database: a version 1 file is upgraded and a newer one is refused", "[recorder]") {

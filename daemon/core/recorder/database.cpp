@@ -391,7 +391,7 @@ Database::~Database() = default;
 std::span<const char* const> Database::migrations() { return all_migrations; }
 int Database::latest_schema_version() { return static_cast<int>(all_migrations.size()); }
 
-Database Database::open(const std::filesystem::path& path) {
+Database Database::open(const std::filesystem::path& path, Durability durability) {
     auto impl = std::make_unique<Impl>();
     impl->path = path;
     // Created 0640 (or tighter, by the umask): recordings are the lab's, not every local user's. SQLite
@@ -413,7 +413,8 @@ Database Database::open(const std::filesystem::path& path) {
                                         "local filesystem",
                                         path.string(), mode));
     }
-    impl->exec("PRAGMA synchronous = NORMAL", "setting synchronous");
+    impl->exec(durability == Durability::power ? "PRAGMA synchronous = FULL" : "PRAGMA synchronous = NORMAL",
+               "setting synchronous");
     impl->exec("PRAGMA foreign_keys = ON", "enabling foreign keys");
     migrate(*impl);
     impl->insert_sample = impl->statement(
@@ -434,6 +435,12 @@ std::string Database::journal_mode() {
     Query q(*impl_, "PRAGMA journal_mode");
     q.step();
     return q.text(0);
+}
+
+int Database::synchronous() {
+    Query q(*impl_, "PRAGMA synchronous");
+    q.step();
+    return static_cast<int>(q.integer(0));
 }
 
 std::string Database::integrity_check() {

@@ -88,11 +88,16 @@ struct ResultRow {
 // True for the states a trial never leaves: done, aborted, interrupted, failed.
 bool is_terminal_trial_state(std::string_view state);
 
+// What a committed transaction survives (docs/recorder.md, "Durability"): `process`, a killed
+// process (WAL with synchronous = NORMAL: the WAL is synced at checkpoints only); `power`, a
+// power cut or kernel crash too (synchronous = FULL: the WAL is synced at every commit).
+enum class Durability { process, power };
+
 class Database {
 public:
     // Opens (creating if absent) and migrates to the latest schema. Throws UserError if the
     // file is not a database, cannot be put in WAL mode, or has a schema newer than this program.
-    static Database open(const std::filesystem::path& path);
+    static Database open(const std::filesystem::path& path, Durability durability = Durability::process);
 
     Database(Database&&) noexcept;
     Database& operator=(Database&&) noexcept;
@@ -108,6 +113,7 @@ public:
     const std::filesystem::path& path() const;
     int schema_version();
     std::string journal_mode();
+    int synchronous();  // SQLite's PRAGMA synchronous: 1 NORMAL (Durability::process), 2 FULL (power)
     std::string integrity_check();  // "ok" when fine, else SQLite's findings one per line
 
     // Campaigns, cases, trials.

@@ -24,7 +24,7 @@ Recorder::Recorder(std::filesystem::path db_path, RecorderOptions options)
     writer_ = std::thread([this, opened = std::move(opened)]() mutable {
         std::optional<Database> db;
         try {
-            db.emplace(Database::open(path_));
+            db.emplace(Database::open(path_, options_.durability));
         } catch (...) {
             opened.set_exception(std::current_exception());
             return;

@@ -23,6 +23,7 @@ struct RecorderOptions {
     // bounds what a crash of this process can lose.
     std::chrono::milliseconds max_batch_delay{200};
     int max_commit_attempts = 5;  // then the batch is discarded (counted in lost) and logged
+    Durability durability = Durability::process;  // [recorder] durability
 };
 
 struct RecorderStats {
