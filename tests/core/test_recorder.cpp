@@ -5,7 +5,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <random>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -399,4 +401,95 @@ TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound
     CHECK(t->reason == "daemon restarted");
     CHECK(t->ended_utc_ns == 123);
     CHECK(db.mark_interrupted_trials(124) == 0);
+}
+
+TEST_CASE("recorder: the files copied at random instants while writing, as a power cut leaves them, open sound and "
+          "consistent (durability = power)",
+          "[recorder][durability]") {
+    TempDir dir("powercut");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path, manikind::recorder::Durability::power);
+        f = make_fixture(db);
+    }  // closed before fork()
+
+    int fds[2];
+    REQUIRE(::pipe(fds) == 0);
+    const pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+        ::close(fds[0]);
+        int status = 0;
+        try {
+            // The daemon's two connections: the Recorder's for samples, one for trial states and events.
+            auto db = Database::open(path, manikind::recorder::Durability::power);
+            manikind::recorder::RecorderOptions options;
+            options.durability = manikind::recorder::Durability::power;
+            Recorder recorder(path, options);
+            for (std::int64_t i = 1;; ++i) {
+                recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
+                if (i % 500 == 0) {
+                    recorder.flush();
+                    db.set_trial_state(f.trial, (i / 500) % 2 ? "acquiring" : "chamber_settling", "", i);
+                    db.add_event(f.trial, i * 1000, i * 1000, "info", "stage", std::to_string(i));
+                    const std::uint64_t committed = recorder.stats().committed;
+                    if (::write(fds[1], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
+                }
+            }
+        } catch (...) {
+            status = 1;
+        }
+        ::_exit(status);
+    }
+    ::close(fds[1]);
+    // At 12 of the first 60 reports (which ones: a fixed pseudo-random draw), freeze the writer
+    // wherever it is (mid-commit or not), copy the database and its WAL but not the -shm index
+    // (rebuilt after a reboot), and let it go on.
+    std::mt19937 draw(20261124);
+    std::vector<int> stop_at;
+    for (int k = 0; k < 12; ++k) stop_at.push_back(5 * k + static_cast<int>(draw() % 5));
+    std::vector<std::pair<fs::path, std::uint64_t>> copies;  // copy folder, rows committed before it
+    std::uint64_t committed = 0;
+    for (int report = 0; report < 60; ++report) {
+        if (::read(fds[0], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
+        if (std::find(stop_at.begin(), stop_at.end(), report) == stop_at.end()) continue;
+        // Let the writer run into its next batch, then freeze it at that instant.
+        for (int spin = 0; spin < 1000 + report * 997 % 20000; ++spin) std::atomic_signal_fence(std::memory_order_seq_cst);
+        ::kill(child, SIGSTOP);
+        int stopped = 0;
+        ::waitpid(child, &stopped, WUNTRACED);
+        const fs::path copy = dir.path / ("copy-" + std::to_string(report));
+        fs::create_directories(copy);
+        fs::copy_file(path, copy / "trials.db");
+        if (fs::exists(path.string() + "-wal")) fs::copy_file(path.string() + "-wal", copy / "trials.db-wal");
+        copies.emplace_back(copy, committed);
+        ::kill(child, SIGCONT);
+    }
+    ::kill(child, SIGKILL);
+    ::waitpid(child, nullptr, 0);
+    ::close(fds[0]);
+    REQUIRE(copies.size() == stop_at.size());
+
+    for (const auto& [copy, committed_before] : copies) {
+        INFO(copy.string());
+        auto db = Database::open(copy / "trials.db");
+        CHECK(db.integrity_check() == "ok");
+        // Every row committed before the freeze is there, as a prefix without holes.
+        const auto samples = db.samples(f.trial, f.channel_a);
+        REQUIRE(samples.size() >= committed_before);
+        CHECK(samples.back().mono_ns == static_cast<std::int64_t>(samples.size()) * 1000);
+        // The trial row and the events, written through the other connection, agree with each other.
+        const auto trial = db.trial(f.trial);
+        REQUIRE(trial);
+        CHECK((trial->state == "acquiring" || trial->state == "chamber_settling" || trial->state == "pending"));
+        const auto events = db.events(f.trial);
+        if (!events.empty()) {
+            // The state of the last event's step, or of the next one when the freeze fell between
+            // that step's state update and its event (two transactions).
+            const long last_event_row = std::stol(events.back().message);
+            const auto state_at = [](long row) { return (row / 500) % 2 ? "acquiring" : "chamber_settling"; };
+            CHECK((trial->state == state_at(last_event_row) || trial->state == state_at(last_event_row + 500)));
+        }
+    }
 }
