@@ -67,7 +67,9 @@ bool ModbusDriver::ensure_connected(std::int64_t now_ns) {
         return false;
     }
     ctx_ = ctx;
-    backoff_.reset();
+    // The backoff is reset by an answer, not by the connect: a silent device (a gateway that
+    // accepts TCP, a dead RTU slave) would otherwise cost a full response timeout per register
+    // every poll, and on the virtual clock stall the whole lab (issue 17).
     std::lock_guard lk(status_lock_);
     if (ever_connected_) ++status_.reconnects;
     ever_connected_ = true;
@@ -136,7 +138,10 @@ void ModbusDriver::poll() {
             if (!p.poll) continue;
             Quality q = Quality::comm_error;
             std::optional<double> v;
-            if (ensure_connected(now)) v = read_point(p, q);
+            if (ensure_connected(now)) {
+                v = read_point(p, q);
+                if (!ctx_) backoff_.failed(now);  // dropped after a timeout: the next try waits
+            }
             if (v && q != Quality::comm_error) any_good = true;
             if (v) {
                 std::lock_guard sl(status_lock_);
@@ -145,6 +150,7 @@ void ModbusDriver::poll() {
             }
             out.push_back(Sample{options_.device_name, p.channel, v.value_or(std::nan("")), v ? q : Quality::comm_error, now, utc});
         }
+        if (any_good) backoff_.reset();
         std::lock_guard sl(status_lock_);
         if (any_good) {
             status_.last_good_mono_ns = now;

@@ -119,6 +119,27 @@ TEST_CASE("Modbus faults: timeouts, exceptions, dropped connections, then recove
     }
 }
 
+TEST_CASE("a silent Modbus device costs one timeout per backoff step, not one per register per poll",
+          "[devices][faults]") {
+    // A silent datalogger used to time out on each of its registers every poll: 4 s of wall
+    // time per virtual second, the virtual clock all but stopped.
+    LabFixture lab;
+    lab.run_s(5);
+    lab.lab().inject(parse_fault("datalogger:silent"));
+    lab.reset_counts();
+    const auto timeouts_before = lab.status("datalogger").timeouts;
+    lab.run_s(60);
+    const auto timeouts = lab.status("datalogger").timeouts - timeouts_before;
+    CHECK(timeouts >= 4);   // it kept trying: 0.5, 1, 2, 4, 8, 10, 10 ... s apart
+    CHECK(timeouts <= 12);  // 8 registers x 60 polls before
+    CHECK(lab.channel("datalogger", "ee181_1.air_temp_c").good == 0);
+    lab.lab().clear_faults("datalogger");
+    lab.run_s(15);
+    lab.reset_counts();
+    lab.run_s(3);
+    CHECK(lab.channel("datalogger", "ee181_1.air_temp_c").good >= 2);
+}
+
 TEST_CASE("a stuck datalogger keeps serving frozen values", "[devices][faults]") {
     LabFixture lab;
     lab.run_s(3);
