@@ -583,21 +583,29 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
     TrialInfo info;
     info.id = cj.string(t, "id", path, {});
     const Located at = locate(cj.text(), "\"" + info.id + "\"");
+    // A key of this trial: searched from the '{' that opens the trial's object (first one
+    // with this id; a duplicate id is refused later anyway).
+    const std::size_t id_pos = cj.text().find("\"" + info.id + "\"");
+    const std::size_t object_pos = id_pos == std::string::npos ? 0 : cj.text().rfind('{', id_pos);
+    auto at_key = [&](const std::string& key) {
+        const std::size_t p = cj.text().find("\"" + key + "\"", object_pos == std::string::npos ? 0 : object_pos);
+        return p == std::string::npos ? at : locate_offset(cj.text(), p);
+    };
     if (info.id.empty() || info.id.find_first_of("/\\") != std::string::npos)
         cj.fail(path + "id", "a trial id must be non-empty and contain no slash", at);
     if (!t.contains("case")) cj.fail(path + "case", "required key is missing", at);
-    info.case_id = cj.integer(t, "case", path, at, 0);
-    info.replicate = t.contains("replicate") ? cj.integer(t, "replicate", path, at, 1) : 0;  // 0: numbered below
-    info.file = t.contains("file") ? cj.string(t, "file", path, at) : "trials/" + info.id + ".csv";
-    check_trial_file(folder, info.file, path + "file", cj, at);
-    if (t.contains("skin_setpoint_c")) info.skin_setpoint_c = cj.number(t, "skin_setpoint_c", path, at);
+    info.case_id = cj.integer(t, "case", path, at_key("case"), 0);
+    info.replicate = t.contains("replicate") ? cj.integer(t, "replicate", path, at_key("replicate"), 1) : 0;  // 0: numbered below
+    info.file = t.contains("file") ? cj.string(t, "file", path, at_key("file")) : "trials/" + info.id + ".csv";
+    check_trial_file(folder, info.file, path + "file", cj, at_key("file"));
+    if (t.contains("skin_setpoint_c")) info.skin_setpoint_c = cj.number(t, "skin_setpoint_c", path, at_key("skin_setpoint_c"));
     if (t.contains("wet")) {
         if (!t.at("wet").is_boolean()) cj.fail(path + "wet", "expected true or false", at);
         info.wettedness = t.at("wet").get<bool>() ? 1.0 : 0.0;
     }
     if (t.contains("wettedness")) {
-        const double w = cj.number(t, "wettedness", path, at);
-        if (w < 0.0 || w > 1.0) cj.fail(path + "wettedness", fmt::format("must be within 0..1, found {}", w), at);
+        const double w = cj.number(t, "wettedness", path, at_key("wettedness"));
+        if (w < 0.0 || w > 1.0) cj.fail(path + "wettedness", fmt::format("must be within 0..1, found {}", w), at_key("wettedness"));
         info.wettedness = w;
     }
     if (t.contains("chamber_setpoint")) {
@@ -606,9 +614,9 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
         if (cs.contains("temp_c")) info.chamber_setpoint_temp_c = cj.number(cs, "temp_c", path + "chamber_setpoint.", at);
         if (cs.contains("rh_pct")) info.chamber_setpoint_rh_pct = cj.number(cs, "rh_pct", path + "chamber_setpoint.", at);
     }
-    if (t.contains("started_utc")) info.started_utc = cj.string(t, "started_utc", path, at);
+    if (t.contains("started_utc")) info.started_utc = cj.string(t, "started_utc", path, at_key("started_utc"));
     if (t.contains("t0_utc")) {
-        info.t0_utc_ns = parse_iso_utc(cj.string(t, "t0_utc", path, at));
+        info.t0_utc_ns = parse_iso_utc(cj.string(t, "t0_utc", path, at_key("t0_utc")));
         if (!info.t0_utc_ns) cj.fail(path + "t0_utc", "expected an ISO 8601 UTC time like 2026-11-24T01:35:07.250Z", at);
     }
     static const std::set<std::string> known{"id", "case", "replicate", "file", "skin_setpoint_c", "wet",
