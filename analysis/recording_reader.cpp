@@ -227,19 +227,22 @@ bool parse_cell(std::string_view cell, double& value) {
 
 // Far above a week at 1 Hz with 99 zones (~0.5 GB); a larger "trial" is the wrong file.
 constexpr std::uintmax_t kMaxTrialFileBytes = std::uintmax_t{1} << 30;
+// campaign.json is metadata, a few kB; read whole, so bounded well below the trials.
+constexpr std::uintmax_t kMaxCampaignJsonBytes = std::uintmax_t{16} << 20;
 
-// Why `path` cannot be a trial file, or "" (also when it does not exist: opening says so).
-// A FIFO would block and a device like /dev/zero never ends, so only regular files pass.
-std::string trial_file_problem(const std::filesystem::path& path) {
+// Why `path` cannot be read as `what` ("the trial file"), or "" (also when it does not
+// exist: opening says so). A FIFO would block and a device like /dev/zero never ends, so
+// only regular files of at most `max_bytes` pass.
+std::string file_problem(const std::filesystem::path& path, const char* what, std::uintmax_t max_bytes) {
     std::error_code ec;
     const auto status = std::filesystem::status(path, ec);
     if (!std::filesystem::exists(status)) return "";
-    if (std::filesystem::is_directory(status)) return "the trial file is a directory, not a regular file";
-    if (!std::filesystem::is_regular_file(status)) return "the trial file is not a regular file (a device, FIFO or socket)";
+    if (std::filesystem::is_directory(status)) return fmt::format("{} is a directory, not a regular file", what);
+    if (!std::filesystem::is_regular_file(status))
+        return fmt::format("{} is not a regular file (a device, FIFO or socket)", what);
     const auto bytes = std::filesystem::file_size(path, ec);
-    if (!ec && bytes > kMaxTrialFileBytes)
-        return fmt::format("the trial file holds {} bytes, more than the 1 GiB ({} bytes) a trial may hold", bytes,
-                           kMaxTrialFileBytes);
+    if (!ec && bytes > max_bytes)
+        return fmt::format("{} holds {} bytes, more than the {} MiB it may hold", what, bytes, max_bytes >> 20);
     return "";
 }
 
@@ -276,7 +279,7 @@ bool parse_quality(std::string_view cell, std::uint8_t& code) {
 TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const std::string& file,
                          const std::vector<RecordedChannel>& channels) {
     // Checked before opening: a FIFO or a device would block or never end (/dev/zero).
-    if (const std::string problem = trial_file_problem(path); !problem.empty()) throw InputError(file, 0, 0, "", problem);
+    if (const std::string problem = file_problem(path, "the trial file", kMaxTrialFileBytes); !problem.empty()) throw InputError(file, 0, 0, "", problem);
     FilePtr f(std::fopen(path.c_str(), "rb"));
     if (!f) throw InputError(file, 0, 0, "", fmt::format("cannot open the trial file: {}", std::strerror(errno)));
     ChunkedLineReader reader(f.get(), file);
@@ -571,7 +574,7 @@ void check_trial_file(const std::filesystem::path& folder, const std::string& fi
     const auto inside = resolved.lexically_relative(root);
     if (inside.empty() || *inside.begin() == "..")
         cj.fail(field, fmt::format("'{}' is a link that leads out of the campaign folder", file), at);
-    if (const std::string problem = trial_file_problem(resolved); !problem.empty())
+    if (const std::string problem = file_problem(resolved, "the trial file", kMaxTrialFileBytes); !problem.empty())
         cj.fail(field, fmt::format("'{}': {}", file, problem), at);
 }
 
@@ -632,6 +635,8 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
 Campaign read_campaign_checked(const std::filesystem::path& folder, const ReadOptions& options) {
     const std::filesystem::path json_path = folder / "campaign.json";
     const std::string json_file = json_path.string();
+    if (const std::string problem = file_problem(json_path, "campaign.json", kMaxCampaignJsonBytes); !problem.empty())
+        throw InputError(json_file, 0, 0, "", problem);
     std::ifstream in(json_path, std::ios::binary);
     if (!in) {
         std::error_code ec;

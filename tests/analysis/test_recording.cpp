@@ -525,6 +525,12 @@ TEST_CASE("bad input: a trial file that is not a regular file is refused before 
         CHECK_THAT(copy.error(),
                    Catch::Contains("campaign.json:52:7 (field 'trials[2].file'): 'trials/c09-r3.csv': the trial file is not a regular file"));
     }
+    SECTION("campaign.json a FIFO") {
+        BrokenCopy copy;
+        fs::remove(copy.path / "campaign.json");
+        REQUIRE(::mkfifo((copy.path / "campaign.json").c_str(), 0600) == 0);
+        CHECK_THAT(copy.error(), Catch::Contains("campaign.json: campaign.json is not a regular file"));
+    }
     SECTION("a directory") {
         BrokenCopy copy;
         fs::remove(copy.path / kR3);
