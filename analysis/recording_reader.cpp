@@ -468,8 +468,11 @@ public:
                 int min = std::numeric_limits<int>::min(), int max = std::numeric_limits<int>::max()) const {
         const auto& v = obj.at(key);
         if (!v.is_number_integer()) fail(path + key, fmt::format("expected an integer, found {}", v.dump()), at);
-        const bool in_range = v.is_number_unsigned() ? v.get<std::uint64_t>() <= static_cast<std::uint64_t>(max)
-                                                     : v.get<std::int64_t>() >= min && v.get<std::int64_t>() <= max;
+        // Non-negative integers are unsigned in nlohmann; those beyond int64 are not int64s.
+        const bool in_range = v.is_number_unsigned()
+                                  ? v.get<std::uint64_t>() <= static_cast<std::uint64_t>(max) &&
+                                        static_cast<std::int64_t>(v.get<std::uint64_t>()) >= min
+                                  : v.get<std::int64_t>() >= min && v.get<std::int64_t>() <= max;
         if (!in_range) fail(path + key, fmt::format("must be within {}..{}, found {}", min, max, v.dump()), at);
         return static_cast<int>(v.get<std::int64_t>());
     }
