@@ -95,7 +95,7 @@ enum class Role { time, air_temp, air_rh, air_speed, wall_temp, skin, flux, utc,
 // Physical limits of every numeric column: a value outside is a typing or unit error (°F for
 // °C, W for W/m², ms for s), not a measurement, and would poison every mean downstream.
 // Chosen wide enough for any climate chamber and manikin test a lab runs; docs/formats.md
-// section 1.1 lists the same table.
+// section 1.3 ("Checks on read") lists the same table.
 struct ValueRange {
     double min;
     double max;
@@ -225,7 +225,7 @@ bool parse_cell(std::string_view cell, double& value) {
     return true;
 }
 
-// Far above a week at 1 Hz with 99 zones (~0.5 GB); a larger "trial" is the wrong file.
+// Far above a week at 1 Hz with 99 zones (~0.7 GB); a larger "trial" is the wrong file.
 constexpr std::uintmax_t kMaxTrialFileBytes = std::uintmax_t{1} << 30;
 // campaign.json is metadata, a few kB; read whole, so bounded well below the trials.
 constexpr std::uintmax_t kMaxCampaignJsonBytes = std::uintmax_t{16} << 20;
@@ -279,7 +279,8 @@ bool parse_quality(std::string_view cell, std::uint8_t& code) {
 TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const std::string& file,
                          const std::vector<RecordedChannel>& channels) {
     // Checked before opening: a FIFO or a device would block or never end (/dev/zero).
-    if (const std::string problem = file_problem(path, "the trial file", kMaxTrialFileBytes); !problem.empty()) throw InputError(file, 0, 0, "", problem);
+    if (const std::string problem = file_problem(path, "the trial file", kMaxTrialFileBytes); !problem.empty())
+        throw InputError(file, 0, 0, "", problem);
     FilePtr f(std::fopen(path.c_str(), "rb"));
     if (!f) throw InputError(file, 0, 0, "", fmt::format("cannot open the trial file: {}", std::strerror(errno)));
     ChunkedLineReader reader(f.get(), file);
