@@ -5,6 +5,7 @@
 // iostreams). A whole campaign is built in local structures and returned only when every
 // file parsed, so an error never leaves a half-imported campaign behind.
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -39,7 +40,8 @@ using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 // buffer grows it (a 99-zone header is still only a few kB).
 class ChunkedLineReader {
 public:
-    explicit ChunkedLineReader(std::FILE* f, std::size_t chunk_bytes = 1 << 18) : file_(f), buffer_(chunk_bytes) {}
+    ChunkedLineReader(std::FILE* f, const std::string& name, std::size_t chunk_bytes = 1 << 18)
+        : file_(f), name_(name), buffer_(chunk_bytes) {}
 
     // Returns false at end of file. The view stays valid until the next call.
     bool next(std::string_view& line) {
@@ -68,7 +70,8 @@ public:
             if (filled_ == buffer_.size()) buffer_.resize(buffer_.size() * 2);
             const std::size_t n = std::fread(buffer_.data() + filled_, 1, buffer_.size() - filled_, file_);
             if (n == 0) {
-                if (std::ferror(file_)) throw std::runtime_error(std::strerror(errno));
+                if (std::ferror(file_))
+                    throw InputError(name_, 0, 0, "", fmt::format("cannot read the trial file: {}", std::strerror(errno)));
                 eof_ = true;
             }
             filled_ += n;
@@ -80,6 +83,7 @@ private:
         if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
     }
     std::FILE* file_;
+    const std::string& name_;
     std::vector<char> buffer_;
     std::size_t pos_ = 0;
     std::size_t filled_ = 0;
@@ -88,11 +92,47 @@ private:
 
 enum class Role { time, air_temp, air_rh, air_speed, wall_temp, skin, flux, utc, channel, quality };
 
+// Physical limits of every numeric column: a value outside is a typing or unit error (°F for
+// °C, W for W/m², ms for s), not a measurement, and would poison every mean downstream.
+// Chosen wide enough for any climate chamber and manikin test a lab runs; docs/formats.md
+// section 1.3 ("Checks on read") lists the same table.
+struct ValueRange {
+    double min;
+    double max;
+    const char* unit;
+};
+constexpr ValueRange kTimeRange_s{0.0, 1e7, "s"};                 // a trial of up to ~115 days
+constexpr ValueRange kAirTempRange_c{-60.0, 100.0, "°C"};         // climate chambers span -40..+60 °C
+constexpr ValueRange kAirRhRange_pct{-1.0, 101.0, "%"};           // 0..100 plus a sensor's calibration margin
+constexpr ValueRange kAirSpeedRange_m_s{0.0, 60.0, "m/s"};        // a wind tunnel's top speed
+constexpr ValueRange kWallTempRange_c{-60.0, 150.0, "°C"};        // radiant panels run hotter than air
+constexpr ValueRange kSkinTempRange_c{-10.0, 60.0, "°C"};         // held near 33..36 °C; cold starts and faults read lower
+constexpr ValueRange kHeatFluxRange_w_m2{-2000.0, 2000.0, "W/m²"};  // beyond solar + full sweating either way
+constexpr ValueRange kChannelRange{-1e9, 1e9, ""};  // any unit (campaign.json names it): finite and sane only
+
 struct Column {
     Role role;
     std::size_t zone_index = 0;  // for skin and flux; the recorded channel's index for channel and quality
     std::string name;
+    const ValueRange* range = nullptr;  // for numeric columns
+    std::string unit;                   // for messages
 };
+
+const ValueRange* range_of(Role role) {
+    switch (role) {
+        case Role::time: return &kTimeRange_s;
+        case Role::air_temp: return &kAirTempRange_c;
+        case Role::air_rh: return &kAirRhRange_pct;
+        case Role::air_speed: return &kAirSpeedRange_m_s;
+        case Role::wall_temp: return &kWallTempRange_c;
+        case Role::skin: return &kSkinTempRange_c;
+        case Role::flux: return &kHeatFluxRange_w_m2;
+        case Role::channel: return &kChannelRange;
+        case Role::utc:
+        case Role::quality: return nullptr;
+    }
+    return nullptr;
+}
 
 std::string_view trim(std::string_view s) {
     while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
@@ -114,6 +154,11 @@ std::vector<Column> parse_header(std::string_view line, const ZoneMap& map, cons
     std::map<std::string, std::size_t> channel_index;
     for (std::size_t k = 0; k < channels.size(); ++k) channel_index[channels[k].column()] = k;
     std::vector<Column> columns;
+    auto add = [&](Role role, std::size_t index, const std::string& name) {
+        const ValueRange* range = range_of(role);
+        const std::string unit = role == Role::channel ? channels[index].unit : range ? range->unit : "";
+        columns.push_back({role, index, name, range, unit});
+    };
     std::set<std::string> seen;
     std::size_t start = 0;
     for (;;) {
@@ -125,21 +170,21 @@ std::vector<Column> parse_header(std::string_view line, const ZoneMap& map, cons
         if (!seen.insert(name).second) throw InputError(file, 1, column, name, "column appears twice in the header");
         std::string_view kind;
         const int zone = zone_column_number(name, kind);
-        if (name == "t_s") columns.push_back({Role::time, 0, name});
-        else if (name == "air_temp_c") columns.push_back({Role::air_temp, 0, name});
-        else if (name == "air_rh_pct") columns.push_back({Role::air_rh, 0, name});
-        else if (name == "air_speed_m_s") columns.push_back({Role::air_speed, 0, name});
-        else if (name == "wall_temp_c") columns.push_back({Role::wall_temp, 0, name});
-        else if (name == "utc") columns.push_back({Role::utc, 0, name});
+        if (name == "t_s") add(Role::time, 0, name);
+        else if (name == "air_temp_c") add(Role::air_temp, 0, name);
+        else if (name == "air_rh_pct") add(Role::air_rh, 0, name);
+        else if (name == "air_speed_m_s") add(Role::air_speed, 0, name);
+        else if (name == "wall_temp_c") add(Role::wall_temp, 0, name);
+        else if (name == "utc") add(Role::utc, 0, name);
         else if (const auto it = channel_index.find(name); it != channel_index.end())
-            columns.push_back({Role::channel, it->second, name});
+            add(Role::channel, it->second, name);
         else if (name.size() > 2 && name.ends_with(".q") && channel_index.count(name.substr(0, name.size() - 2)))
-            columns.push_back({Role::quality, channel_index.at(name.substr(0, name.size() - 2)), name});
+            add(Role::quality, channel_index.at(name.substr(0, name.size() - 2)), name);
         else if (zone > 0 && (kind == "skin_c" || kind == "flux_w_m2")) {
             if (static_cast<std::size_t>(zone) > map.size())
                 throw InputError(file, 1, column, name,
                                  fmt::format("unknown zone column: the zone map '{}' has zones 01..{:02}", map.name, map.size()));
-            columns.push_back({kind == "skin_c" ? Role::skin : Role::flux, static_cast<std::size_t>(zone - 1), name});
+            add(kind == "skin_c" ? Role::skin : Role::flux, static_cast<std::size_t>(zone - 1), name);
         } else {
             throw InputError(file, 1, column, name,
                              "unknown column; expected t_s, utc, air_temp_c, air_rh_pct, air_speed_m_s, wall_temp_c, "
@@ -180,6 +225,27 @@ bool parse_cell(std::string_view cell, double& value) {
     return true;
 }
 
+// Far above a week at 1 Hz with 99 zones (~0.7 GB); a larger "trial" is the wrong file.
+constexpr std::uintmax_t kMaxTrialFileBytes = std::uintmax_t{1} << 30;
+// campaign.json is metadata, a few kB; read whole, so bounded well below the trials.
+constexpr std::uintmax_t kMaxCampaignJsonBytes = std::uintmax_t{16} << 20;
+
+// Why `path` cannot be read as `what` ("the trial file"), or "" (also when it does not
+// exist: opening says so). A FIFO would block and a device like /dev/zero never ends, so
+// only regular files of at most `max_bytes` pass.
+std::string file_problem(const std::filesystem::path& path, const char* what, std::uintmax_t max_bytes) {
+    std::error_code ec;
+    const auto status = std::filesystem::status(path, ec);
+    if (!std::filesystem::exists(status)) return "";
+    if (std::filesystem::is_directory(status)) return fmt::format("{} is a directory, not a regular file", what);
+    if (!std::filesystem::is_regular_file(status))
+        return fmt::format("{} is not a regular file (a device, FIFO or socket)", what);
+    const auto bytes = std::filesystem::file_size(path, ec);
+    if (!ec && bytes > max_bytes)
+        return fmt::format("{} holds {} bytes, more than the {} MiB it may hold", what, bytes, max_bytes >> 20);
+    return "";
+}
+
 std::string shorten(std::string_view s) {
     if (s.size() <= 40) return std::string(s);
     return std::string(s.substr(0, 37)) + "...";
@@ -212,9 +278,12 @@ bool parse_quality(std::string_view cell, std::uint8_t& code) {
 
 TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, const std::string& file,
                          const std::vector<RecordedChannel>& channels) {
+    // Checked before opening: a FIFO or a device would block or never end (/dev/zero).
+    if (const std::string problem = file_problem(path, "the trial file", kMaxTrialFileBytes); !problem.empty())
+        throw InputError(file, 0, 0, "", problem);
     FilePtr f(std::fopen(path.c_str(), "rb"));
     if (!f) throw InputError(file, 0, 0, "", fmt::format("cannot open the trial file: {}", std::strerror(errno)));
-    ChunkedLineReader reader(f.get());
+    ChunkedLineReader reader(f.get(), file);
     std::string_view line;
     std::size_t line_no = 0;
     bool have_header = false;
@@ -296,6 +365,10 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
             if (!parse_cell(cell, value))
                 throw InputError(file, line_no, start + 1, columns[c].name,
                                  fmt::format("expected a number, found '{}'", shorten(cell)));
+            if (const ValueRange& r = *columns[c].range; !std::isnan(value) && (value < r.min || value > r.max))
+                throw InputError(file, line_no, start + 1, columns[c].name,
+                                 fmt::format("{} {} is outside the physical range {:g}..{:g} {}", shorten(trim(cell)),
+                                             columns[c].unit, r.min, r.max, columns[c].unit));
             if (c == time_column) {
                 if (std::isnan(value)) throw InputError(file, line_no, start + 1, "t_s", "the time cell is empty");
                 if (value <= previous_t_s)
@@ -357,6 +430,20 @@ Located locate(const std::string& text, const std::string& needle, std::size_t n
     }
 }
 
+// The key whose value starts at `pos` ("flux" in `"flux": 1e400`), or "" inside an array.
+std::string key_before(const std::string& text, std::size_t pos) {
+    auto skip_space = [&](std::size_t p) {
+        while (p > 0 && std::isspace(static_cast<unsigned char>(text[p - 1]))) --p;
+        return p;
+    };
+    std::size_t p = skip_space(pos);
+    if (p == 0 || text[p - 1] != ':') return "";
+    p = skip_space(p - 1);
+    if (p < 2 || text[p - 1] != '"') return "";
+    const std::size_t open = text.rfind('"', p - 2);
+    return open == std::string::npos ? "" : text.substr(open + 1, p - 2 - open);
+}
+
 class CampaignJson {
 public:
     CampaignJson(std::string file, std::string text) : file_(std::move(file)), text_(std::move(text)) {}
@@ -377,10 +464,18 @@ public:
         if (!v.is_string()) fail(path + key, fmt::format("expected a string, found {}", v.dump()), at);
         return v.get<std::string>();
     }
-    int integer(const json& obj, const std::string& key, const std::string& path, Located at) const {
+    // An integer within min..max (an int either way: get<int> would wrap silently).
+    int integer(const json& obj, const std::string& key, const std::string& path, Located at,
+                int min = std::numeric_limits<int>::min(), int max = std::numeric_limits<int>::max()) const {
         const auto& v = obj.at(key);
         if (!v.is_number_integer()) fail(path + key, fmt::format("expected an integer, found {}", v.dump()), at);
-        return v.get<int>();
+        // Non-negative integers are unsigned in nlohmann; those beyond int64 are not int64s.
+        const bool in_range = v.is_number_unsigned()
+                                  ? v.get<std::uint64_t>() <= static_cast<std::uint64_t>(max) &&
+                                        static_cast<std::int64_t>(v.get<std::uint64_t>()) >= min
+                                  : v.get<std::int64_t>() >= min && v.get<std::int64_t>() <= max;
+        if (!in_range) fail(path + key, fmt::format("must be within {}..{}, found {}", min, max, v.dump()), at);
+        return static_cast<int>(v.get<std::int64_t>());
     }
 
     const std::string& file() const { return file_; }
@@ -465,27 +560,59 @@ std::vector<RecordedChannel> parse_channels(const json& arr, const CampaignJson&
     return out;
 }
 
-TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson& cj, std::vector<std::string>& warnings) {
+// The trial file must lie inside the campaign folder (after resolving symlinks) and be a
+// regular file: a campaign from elsewhere must not make us read /etc/passwd or /dev/zero.
+void check_trial_file(const std::filesystem::path& folder, const std::string& file, const std::string& field,
+                      const CampaignJson& cj, Located at) {
+    const std::filesystem::path relative(file);
+    if (relative.empty() || relative.has_root_name() || relative.has_root_directory())
+        cj.fail(field, fmt::format("'{}' must be a path relative to the campaign folder", file), at);
+    const auto normal = relative.lexically_normal();
+    if (!normal.empty() && *normal.begin() == "..")
+        cj.fail(field, fmt::format("'{}' leads out of the campaign folder", file), at);
+    std::error_code ec;
+    const auto root = std::filesystem::canonical(folder, ec);
+    if (ec) cj.fail(field, fmt::format("cannot resolve the campaign folder: {}", ec.message()), at);
+    const auto resolved = std::filesystem::weakly_canonical(root / normal, ec);
+    if (ec) cj.fail(field, fmt::format("cannot resolve '{}': {}", file, ec.message()), at);
+    const auto inside = resolved.lexically_relative(root);
+    if (inside.empty() || *inside.begin() == "..")
+        cj.fail(field, fmt::format("'{}' is a link that leads out of the campaign folder", file), at);
+    if (const std::string problem = file_problem(resolved, "the trial file", kMaxTrialFileBytes); !problem.empty())
+        cj.fail(field, fmt::format("'{}': {}", file, problem), at);
+}
+
+TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson& cj, const std::filesystem::path& folder,
+                           std::vector<std::string>& warnings) {
     const std::string path = fmt::format("trials[{}].", index);
     if (!t.is_object()) cj.fail(fmt::format("trials[{}]", index), "expected an object");
     if (!t.contains("id")) cj.fail(path + "id", "required key is missing");
     TrialInfo info;
     info.id = cj.string(t, "id", path, {});
     const Located at = locate(cj.text(), "\"" + info.id + "\"");
+    // A key of this trial: searched from the '{' that opens the trial's object (first one
+    // with this id; a duplicate id is refused later anyway).
+    const std::size_t id_pos = cj.text().find("\"" + info.id + "\"");
+    const std::size_t object_pos = id_pos == std::string::npos ? 0 : cj.text().rfind('{', id_pos);
+    auto at_key = [&](const std::string& key) {
+        const std::size_t p = cj.text().find("\"" + key + "\"", object_pos == std::string::npos ? 0 : object_pos);
+        return p == std::string::npos ? at : locate_offset(cj.text(), p);
+    };
     if (info.id.empty() || info.id.find_first_of("/\\") != std::string::npos)
         cj.fail(path + "id", "a trial id must be non-empty and contain no slash", at);
     if (!t.contains("case")) cj.fail(path + "case", "required key is missing", at);
-    info.case_id = cj.integer(t, "case", path, at);
-    info.replicate = t.contains("replicate") ? cj.integer(t, "replicate", path, at) : 0;
-    info.file = t.contains("file") ? cj.string(t, "file", path, at) : "trials/" + info.id + ".csv";
-    if (t.contains("skin_setpoint_c")) info.skin_setpoint_c = cj.number(t, "skin_setpoint_c", path, at);
+    info.case_id = cj.integer(t, "case", path, at_key("case"), 0);
+    info.replicate = t.contains("replicate") ? cj.integer(t, "replicate", path, at_key("replicate"), 1) : 0;  // 0: numbered below
+    info.file = t.contains("file") ? cj.string(t, "file", path, at_key("file")) : "trials/" + info.id + ".csv";
+    check_trial_file(folder, info.file, path + "file", cj, at_key("file"));
+    if (t.contains("skin_setpoint_c")) info.skin_setpoint_c = cj.number(t, "skin_setpoint_c", path, at_key("skin_setpoint_c"));
     if (t.contains("wet")) {
         if (!t.at("wet").is_boolean()) cj.fail(path + "wet", "expected true or false", at);
         info.wettedness = t.at("wet").get<bool>() ? 1.0 : 0.0;
     }
     if (t.contains("wettedness")) {
-        const double w = cj.number(t, "wettedness", path, at);
-        if (w < 0.0 || w > 1.0) cj.fail(path + "wettedness", fmt::format("must be within 0..1, found {}", w), at);
+        const double w = cj.number(t, "wettedness", path, at_key("wettedness"));
+        if (w < 0.0 || w > 1.0) cj.fail(path + "wettedness", fmt::format("must be within 0..1, found {}", w), at_key("wettedness"));
         info.wettedness = w;
     }
     if (t.contains("chamber_setpoint")) {
@@ -494,9 +621,9 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
         if (cs.contains("temp_c")) info.chamber_setpoint_temp_c = cj.number(cs, "temp_c", path + "chamber_setpoint.", at);
         if (cs.contains("rh_pct")) info.chamber_setpoint_rh_pct = cj.number(cs, "rh_pct", path + "chamber_setpoint.", at);
     }
-    if (t.contains("started_utc")) info.started_utc = cj.string(t, "started_utc", path, at);
+    if (t.contains("started_utc")) info.started_utc = cj.string(t, "started_utc", path, at_key("started_utc"));
     if (t.contains("t0_utc")) {
-        info.t0_utc_ns = parse_iso_utc(cj.string(t, "t0_utc", path, at));
+        info.t0_utc_ns = parse_iso_utc(cj.string(t, "t0_utc", path, at_key("t0_utc")));
         if (!info.t0_utc_ns) cj.fail(path + "t0_utc", "expected an ISO 8601 UTC time like 2026-11-24T01:35:07.250Z", at);
     }
     static const std::set<std::string> known{"id", "case", "replicate", "file", "skin_setpoint_c", "wet",
@@ -509,14 +636,15 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
     return info;
 }
 
-}  // namespace
-
-Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options) {
+Campaign read_campaign_checked(const std::filesystem::path& folder, const ReadOptions& options) {
     const std::filesystem::path json_path = folder / "campaign.json";
     const std::string json_file = json_path.string();
+    if (const std::string problem = file_problem(json_path, "campaign.json", kMaxCampaignJsonBytes); !problem.empty())
+        throw InputError(json_file, 0, 0, "", problem);
     std::ifstream in(json_path, std::ios::binary);
     if (!in) {
-        if (!std::filesystem::exists(folder))
+        std::error_code ec;
+        if (!std::filesystem::exists(folder, ec))
             throw InputError(folder.string(), 0, 0, "", "no such campaign folder");
         throw InputError(json_file, 0, 0, "", "cannot open campaign.json (a campaign is a folder with campaign.json and trials/)");
     }
@@ -532,6 +660,16 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
         std::string what = e.what();
         if (const auto colon = what.rfind(": "); colon != std::string::npos) what = what.substr(colon + 2);
         cj.fail("", "invalid JSON: " + what, at);
+    } catch (const json::out_of_range& e) {
+        // A number beyond double ("1e400"): nlohmann names the token, not where it is.
+        const std::string what = e.what();
+        const auto open = what.find('\'');
+        const std::string token =
+            open == std::string::npos ? "" : what.substr(open + 1, what.rfind('\'') - open - 1);
+        const std::size_t pos = token.empty() ? std::string::npos : cj.text().find(token);
+        cj.fail(pos == std::string::npos ? "" : key_before(cj.text(), pos),
+                fmt::format("number {} is out of range (beyond ±1.8e308)", token),
+                pos == std::string::npos ? Located{} : locate_offset(cj.text(), pos));
     }
     if (!doc.is_object()) cj.fail("", "expected a JSON object at the top level", {1, 1});
 
@@ -608,7 +746,7 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
     std::set<std::string> ids;
     std::vector<TrialInfo> infos;
     for (std::size_t i = 0; i < trials.size(); ++i) {
-        TrialInfo info = parse_trial_info(trials[i], i, cj, campaign.warnings);
+        TrialInfo info = parse_trial_info(trials[i], i, cj, folder, campaign.warnings);
         if (!ids.insert(info.id).second)
             cj.fail(fmt::format("trials[{}].id", i), fmt::format("duplicated trial id '{}'", info.id),
                     locate(cj.text(), "\"" + info.id + "\"", 1));
@@ -633,6 +771,22 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
         campaign.trials.push_back(std::move(trial));
     }
     return campaign;
+}
+
+}  // namespace
+
+Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options) {
+    // Every bad input above is an InputError with its field; this net keeps anything missed
+    // (a filesystem or JSON library error) a bad-input error naming the file, never "internal".
+    try {
+        return read_campaign_checked(folder, options);
+    } catch (const InputError&) {
+        throw;
+    } catch (const std::filesystem::filesystem_error& e) {
+        throw InputError(e.path1().empty() ? folder.string() : e.path1().string(), 0, 0, "", e.code().message());
+    } catch (const json::exception& e) {
+        throw InputError((folder / "campaign.json").string(), 0, 0, "", e.what());
+    }
 }
 
 }  // namespace manikind::analysis

@@ -10,6 +10,7 @@
 #include <linux/can.h>
 
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdlib>
 #include <cstdio>
@@ -148,6 +149,94 @@ void serve(const ServeOptions& o) {
     }
 }
 
+struct ReplayOptions {
+    std::string file;
+    bool json = false;
+    std::string db, campaign;
+};
+
+struct CapturedFrame {
+    std::int64_t t_ns = 0;  // the candump stamp, UTC
+    can_frame frame{};
+    int line = 0;
+};
+
+struct Capture {
+    std::vector<CapturedFrame> frames;  // in time order, identical duplicates left out
+    std::size_t duplicates = 0;
+};
+
+bool same_frame(const can_frame& a, const can_frame& b) {
+    return a.can_id == b.can_id && a.can_dlc == b.can_dlc && std::memcmp(a.data, b.data, a.can_dlc) == 0;
+}
+
+// The latest stamp whose nanoseconds fit an int64 (year 2262), with room for rounding.
+constexpr double kMaxStamp_s = 9.2e9;
+
+// Reads a `candump -l` capture and checks every line: a candump line, a finite stamp in
+// 0..kMaxStamp_s, never before the previous one. A frame identical to one already seen at
+// the same stamp (a logger writing a frame twice) is skipped and counted.
+Capture read_capture(const std::string& file) {
+    std::error_code ec;
+    if (std::filesystem::exists(file, ec) && !std::filesystem::is_regular_file(file, ec))
+        throw UserError(fmt::format("{}: not a regular file", file));
+    std::ifstream in(file);
+    if (!in) throw UserError(fmt::format("{}: cannot open the capture", file));
+    Capture capture;
+    std::string text;
+    int line_no = 0, previous_line = 0;
+    while (std::getline(in, text)) {
+        ++line_no;
+        if (text.empty() || text[0] == '#') continue;
+        const auto parsed = protocol::manikin_can::parse_candump_line(text);
+        if (!parsed)
+            throw UserError(fmt::format("{}:{}: not a candump -l line (expected \"(seconds.micro) can0 ID#HEX\")", file, line_no));
+        const double t_s = parsed->first;
+        if (!std::isfinite(t_s) || t_s < 0.0 || t_s >= kMaxStamp_s)
+            throw UserError(fmt::format("{}:{}: time stamp {} s is not a time: it must be finite, 0 or more and below {:g} s",
+                                        file, line_no, t_s, kMaxStamp_s));
+        const auto t_ns = static_cast<std::int64_t>(std::llround(t_s * 1e9));
+        if (!capture.frames.empty() && t_ns < capture.frames.back().t_ns)
+            throw UserError(fmt::format("{}:{}: time stamp {:.6f} s is before {:.6f} s on line {}; a capture must be in time order",
+                                        file, line_no, t_s, static_cast<double>(capture.frames.back().t_ns) * 1e-9,
+                                        previous_line));
+        // Earlier frames with this stamp sit at the back, the capture being in time order.
+        bool duplicate = false;
+        for (auto it = capture.frames.rbegin(); it != capture.frames.rend() && it->t_ns == t_ns && !duplicate; ++it)
+            duplicate = same_frame(it->frame, parsed->second);
+        previous_line = line_no;
+        if (duplicate) {
+            ++capture.duplicates;
+            continue;
+        }
+        capture.frames.push_back({t_ns, parsed->second, line_no});
+    }
+    if (capture.frames.empty()) throw UserError(fmt::format("{}: no frames", file));
+    return capture;
+}
+
+// Records a checked replay as one campaign, one case, one trial holding the whole capture.
+void store_replay(const ReplayOptions& r, const std::vector<drivers::Sample>& samples, std::int64_t end_utc_ns) {
+    auto db = recorder::Database::open(r.db);
+    const std::string name = r.campaign.empty() ? "replay-" + std::filesystem::path(r.file).filename().string() : r.campaign;
+    const auto campaign = db.create_campaign(name, nlohmann::json{{"replayed_from", r.file}}.dump());
+    const std::int64_t trial_id = db.create_trial(campaign, db.add_case(campaign, "replay", "{}", 0), 1);
+    db.set_trial_state(trial_id, "acquiring", "replay of " + r.file, 0);
+    const std::int64_t device_id = db.device_id("manikin", "can", "replay " + r.file);
+    std::map<std::string, std::int64_t> channel_ids;
+    std::vector<recorder::SampleRow> rows;
+    for (const auto& sample : samples) {
+        auto it = channel_ids.find(sample.channel);
+        if (it == channel_ids.end())
+            it = channel_ids.emplace(sample.channel, db.channel_id(device_id, sample.channel, drivers::unit_of_channel(sample.channel)))
+                     .first;
+        rows.push_back({trial_id, it->second, sample.mono_ns, sample.utc_ns, sample.value, static_cast<std::uint8_t>(sample.quality)});
+    }
+    // Every (channel, time) is unique by now, so every row is stored.
+    db.insert_samples(rows);
+    db.set_trial_state(trial_id, "done", "replayed", end_utc_ns);
+}
+
 }  // namespace
 
 void add_sim_commands(CLI::App& app) {
@@ -166,11 +255,6 @@ void add_sim_commands(CLI::App& app) {
     srv->footer(std::string("Faults:\n") + sim::fault_help());
     srv->callback([o] { serve(*o); });
 
-    struct ReplayOptions {
-        std::string file;
-        bool json = false;
-        std::string db, campaign;
-    };
     auto r = std::make_shared<ReplayOptions>();
     auto* rep = app.add_subcommand("replay", "Feed a manikin bus capture (can-utils `candump -l` format) through the driver");
     rep->add_option("file", r->file, "candump -l log: (1718000000.123456) can0 123#11223344")->required();
@@ -179,73 +263,46 @@ void add_sim_commands(CLI::App& app) {
     rep->add_option("--campaign", r->campaign, "Campaign name for the replayed trial (default: replay-<file name>)");
     rep->footer(std::string("Heat flux: ") + physics::heat_flux_sign + " (docs/manikin-can-bus.md).");
     rep->callback([r] {
-        std::ifstream in(r->file);
-        if (!in) throw UserError(fmt::format("{}: cannot open the capture", r->file));
-        // Parse everything first: a bad line stops the replay before anything is recorded.
-        std::vector<std::pair<std::int64_t, can_frame>> captured;
-        {
-            std::string text;
-            int line_no = 0;
-            while (std::getline(in, text)) {
-                ++line_no;
-                if (text.empty() || text[0] == '#') continue;
-                const auto parsed = protocol::manikin_can::parse_candump_line(text);
-                if (!parsed)
-                    throw UserError(fmt::format("{}:{}: not a candump -l line (expected \"(seconds.micro) can0 ID#HEX\")",
-                                                r->file, line_no));
-                captured.emplace_back(static_cast<std::int64_t>(parsed->first * 1e9), parsed->second);
-            }
-        }
-        if (captured.empty()) throw UserError(fmt::format("{}: no frames", r->file));
-        const std::int64_t t0 = captured.front().first;
+        // Everything is read and checked first, then replayed; only then is anything stored,
+        // so a bad capture leaves the database as it was.
+        const Capture capture = read_capture(r->file);
+        const std::int64_t t0 = capture.frames.front().t_ns;
         drivers::ManualClock clock(t0);  // replay time is the capture's own: UTC of the first frame
         std::map<std::string, drivers::Sample> last;
-        std::size_t samples = 0;
-        // Into the recorder: one campaign, one case, one trial holding the whole capture.
-        std::optional<recorder::Database> db;
-        std::int64_t trial_id = 0, device_id = 0;
-        std::map<std::string, std::int64_t> channel_ids;
-        std::vector<recorder::SampleRow> rows;
-        if (!r->db.empty()) {
-            db.emplace(recorder::Database::open(r->db));
-            const std::string name =
-                r->campaign.empty() ? "replay-" + std::filesystem::path(r->file).filename().string() : r->campaign;
-            const auto campaign = db->create_campaign(name, nlohmann::json{{"replayed_from", r->file}}.dump());
-            trial_id = db->create_trial(campaign, db->add_case(campaign, "replay", "{}", 0), 1);
-            db->set_trial_state(trial_id, "acquiring", "replay of " + r->file, 0);
-            device_id = db->device_id("manikin", "can", "replay " + r->file);
-        }
+        std::map<std::string, int> last_line;  // the line of each channel's last sample, for messages
+        std::vector<drivers::Sample> samples;
+        int line = 0;
         boost::asio::io_context io;
         drivers::ManikinCanDriver driver(io, -1, {}, clock, [&](const drivers::Sample& sample) {
+            // Two different frames at one time stamp giving the same channel: the database keeps
+            // one sample per channel and time, so which one is right cannot be decided here.
+            if (const auto it = last.find(sample.channel); it != last.end() && it->second.mono_ns == sample.mono_ns)
+                throw UserError(fmt::format("{}:{}: a second reading of {} at the time stamp of line {}", r->file, line,
+                                            sample.channel, last_line[sample.channel]));
             last[sample.channel] = sample;
-            ++samples;
-            if (!db) return;
-            auto it = channel_ids.find(sample.channel);
-            if (it == channel_ids.end()) {
-                it = channel_ids.emplace(sample.channel, db->channel_id(device_id, sample.channel,
-                                                                         drivers::unit_of_channel(sample.channel))).first;
-            }
-            rows.push_back({trial_id, it->second, sample.mono_ns, sample.utc_ns, sample.value,
-                            static_cast<std::uint8_t>(sample.quality)});
+            last_line[sample.channel] = line;
+            samples.push_back(sample);
         });
-        std::size_t frames = 0;
-        for (const auto& [t_ns, frame] : captured) {
-            clock.advance_ns(t_ns - t0 - clock.mono_ns());
-            driver.ingest(frame);
-            ++frames;
+        for (const auto& f : capture.frames) {
+            line = f.line;
+            clock.advance_ns(f.t_ns - t0 - clock.mono_ns());
+            driver.ingest(f.frame);
         }
+        const std::size_t frames = capture.frames.size();
         const auto st = driver.status();
-        if (db) {
-            db->insert_samples(rows);
-            db->set_trial_state(trial_id, "done", "replayed", clock.utc_ns());
-        }
+        if (!r->db.empty()) store_replay(*r, samples, clock.utc_ns());
         if (r->json) {
-            nlohmann::json j = {{"frames", frames}, {"samples", samples}, {"malformed", st.malformed}, {"channels", nlohmann::json::object()}};
+            nlohmann::json j = {{"frames", frames},
+                                {"duplicate_frames", capture.duplicates},
+                                {"samples", samples.size()},
+                                {"malformed", st.malformed},
+                                {"channels", nlohmann::json::object()}};
             for (const auto& [ch, v] : last) j["channels"][ch] = {{"value", v.value}, {"quality", drivers::to_string(v.quality)}};
             std::printf("%s\n", j.dump(2).c_str());
             return;
         }
-        std::printf("%s: %zu frames, %zu samples, %llu malformed, %.1f s of bus time\n", r->file.c_str(), frames, samples,
+        std::printf("%s: %zu frames, %zu identical duplicates skipped, %zu samples%s, %llu malformed, %.1f s of bus time\n",
+                    r->file.c_str(), frames, capture.duplicates, samples.size(), r->db.empty() ? "" : " stored",
                     static_cast<unsigned long long>(st.malformed), clock.elapsed_s());
         for (const auto& [ch, v] : last) std::printf("  %-24s %10.2f  %s\n", ch.c_str(), v.value, drivers::to_string(v.quality));
     });

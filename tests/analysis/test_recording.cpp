@@ -6,6 +6,7 @@
 #include <fstream>
 #include <limits>
 #include <string>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
@@ -365,4 +366,188 @@ TEST_CASE("a long trial streams through chunk boundaries intact") {
     const auto back = an::read_campaign(dir.path);
     CHECK(back.trials[0].data.rows() == 901);
     CHECK(same(back.trials[0].data.heat_flux_w_m2[34], t.data.heat_flux_w_m2[34]));
+}
+
+// --- issue 17: bad input everywhere --------------------------------------------------------
+
+namespace {
+
+// A copy of good-2zone with one thing broken in it.
+struct BrokenCopy : TempDir {
+    explicit BrokenCopy(const fs::path& from = recordings("good-2zone")) { fs::copy(from, path, fs::copy_options::recursive); }
+    // Replaces the first `from` in `file` (relative to the campaign) by `to`.
+    void edit(const std::string& file, const std::string& from, const std::string& to) const {
+        std::ifstream in(path / file, std::ios::binary);
+        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        const auto at = text.find(from);
+        REQUIRE(at != std::string::npos);
+        text.replace(at, from.size(), to);
+        std::ofstream(path / file, std::ios::binary | std::ios::trunc) << text;
+    }
+    // The InputError's message; any other exception escapes and fails the test.
+    std::string error() const {
+        try {
+            (void)an::read_campaign(path);
+        } catch (const an::InputError& e) {
+            return e.what();
+        }
+        return "no error";
+    }
+};
+
+// "trials/c09-r3.csv" row 2 (line 3) is "5,39.6,38.3,35.01,35.00,14,25".
+constexpr const char* kR3 = "trials/c09-r3.csv";
+constexpr const char* kR3Row2 = "5,39.6,38.3,35.01,35.00,14,25";
+
+}  // namespace
+
+TEST_CASE("bad input: values outside their physical range name file, line, column and field") {
+    struct Case {
+        std::string row;   // replaces line 3 of c09-r3.csv
+        std::string where;  // "c09-r3.csv:3:<column> (field '<name>')"
+    };
+    const Case cases[] = {
+        {"5,39.6,38.3,35.01,35.00,14,1e308", "c09-r3.csv:3:28 (field 'z02_flux_w_m2'): 1e308 W/m² is outside the physical range -2000..2000 W/m²"},
+        {"5,39.6,38.3,35.01,35.00,-2001,25", "c09-r3.csv:3:25 (field 'z01_flux_w_m2'): -2001 W/m²"},
+        {"1e300,39.6,38.3,35.01,35.00,14,25", "c09-r3.csv:3:1 (field 't_s'): 1e300 s is outside the physical range 0..1e+07 s"},
+        {"5,101,38.3,35.01,35.00,14,25", "c09-r3.csv:3:3 (field 'air_temp_c'): 101 °C"},
+        {"5,39.6,101.5,35.01,35.00,14,25", "c09-r3.csv:3:8 (field 'air_rh_pct'): 101.5 %"},
+        {"5,39.6,38.3,95,35.00,14,25", "c09-r3.csv:3:13 (field 'z01_skin_c'): 95 °C"},
+        {"5,39.6,38.3,35.01,-11,14,25", "c09-r3.csv:3:19 (field 'z02_skin_c'): -11 °C"},
+    };
+    for (const auto& c : cases) {
+        INFO(c.row);
+        BrokenCopy copy;
+        copy.edit(kR3, kR3Row2, c.row);
+        CHECK_THAT(copy.error(), Catch::Contains(c.where));
+    }
+    // A negative first time: t_s starts at 0.
+    BrokenCopy negative;
+    negative.edit(kR3, "\n0,39.6", "\n-1,39.6");
+    CHECK_THAT(negative.error(), Catch::Contains("c09-r3.csv:2:1 (field 't_s'): -1 s is outside"));
+    // The edges of a range are inside it: RH 101 % and flux -2000 W/m² still read.
+    BrokenCopy edges;
+    edges.edit(kR3, kR3Row2, "5,39.6,101,35.01,35.00,-2000,25");
+    CHECK(edges.error() == "no error");
+}
+
+TEST_CASE("bad input: air speed, wall temperature and a format-2 channel are range-checked too") {
+    auto campaign = an::make_synthetic_campaign(1, 1);
+    campaign.channels = {{"csat3b", "ux_m_s", "m/s"}};
+    auto& d = campaign.trials[0].data;
+    d.air_speed_m_s.assign(d.rows(), 0.25);
+    d.wall_temp_c.assign(d.rows(), 22.5);
+    d.channel_values.assign(1, std::vector<double>(d.rows(), 0.125));
+    d.channel_quality.assign(1, std::vector<std::uint8_t>(d.rows(), 0));
+    TempDir dir;
+    an::write_campaign(dir.path, campaign);
+    REQUIRE_NOTHROW(an::read_campaign(dir.path));
+    const std::string csv = "trials/" + campaign.trials[0].info.id + ".csv";
+    auto error_with = [&](const std::string& from, const std::string& to) {
+        BrokenCopy copy(dir.path);
+        copy.edit(csv, from, to);
+        return copy.error();
+    };
+    CHECK_THAT(error_with(",0.25,", ",61,"), Catch::Contains(":2:") && Catch::Contains("(field 'air_speed_m_s'): 61 m/s"));
+    CHECK_THAT(error_with(",22.5,", ",151,"), Catch::Contains(":2:") && Catch::Contains("(field 'wall_temp_c'): 151 °C"));
+    CHECK_THAT(error_with(",0.125,", ",2e9,"),
+               Catch::Contains(":2:") && Catch::Contains("(field 'csat3b.ux_m_s'): 2e9 m/s is outside the physical range -1e+09..1e+09 m/s"));
+}
+
+TEST_CASE("bad input: case below 0 and replicate below 1 name campaign.json, the key's line and the field") {
+    BrokenCopy replicate;
+    replicate.edit("campaign.json", "\"replicate\": 3", "\"replicate\": -1");
+    CHECK_THAT(replicate.error(),
+               Catch::Contains("campaign.json:51:7 (field 'trials[2].replicate'): must be within 1..2147483647, found -1"));
+    BrokenCopy zero;
+    zero.edit("campaign.json", "\"replicate\": 1", "\"replicate\": 0");
+    CHECK_THAT(zero.error(), Catch::Contains("(field 'trials[0].replicate'): must be within 1.."));
+    BrokenCopy case_id;
+    case_id.edit("campaign.json", "\"case\": 9", "\"case\": -3");
+    CHECK_THAT(case_id.error(), Catch::Contains("campaign.json:34:7 (field 'trials[0].case'): must be within 0.."));
+    BrokenCopy huge;
+    huge.edit("campaign.json", "\"case\": 9", "\"case\": 99999999999");
+    CHECK_THAT(huge.error(), Catch::Contains("(field 'trials[0].case'): must be within 0..2147483647, found 99999999999"));
+}
+
+TEST_CASE("bad input: 1e400 in campaign.json names the file, line, column and key") {
+    BrokenCopy copy;
+    copy.edit("campaign.json", "\"skin_setpoint_c\": 35.0", "\"skin_setpoint_c\": 1e400");
+    CHECK_THAT(copy.error(),
+               Catch::Contains("campaign.json:37:26 (field 'skin_setpoint_c'): number 1e400 is out of range"));
+}
+
+TEST_CASE("bad input: trial files outside the campaign folder are refused without reading them") {
+    SECTION("an absolute path") {
+        BrokenCopy copy;
+        copy.edit("campaign.json", "\"trials/c09-r3.csv\"", "\"/etc/passwd\"");
+        const auto e = copy.error();
+        CHECK_THAT(e, Catch::Contains("campaign.json:52:7 (field 'trials[2].file'): '/etc/passwd' must be a path relative"));
+        CHECK(e.find("root") == std::string::npos);  // nothing of the file's content
+    }
+    SECTION("../ leading out") {
+        BrokenCopy copy;
+        copy.edit("campaign.json", "\"trials/c09-r3.csv\"", "\"trials/../../outside.csv\"");
+        CHECK_THAT(copy.error(), Catch::Contains("(field 'trials[2].file'): 'trials/../../outside.csv' leads out of the campaign folder"));
+    }
+    SECTION("a symbolic link to a file outside") {
+        BrokenCopy copy;
+        TempDir outside;
+        fs::create_directories(outside.path);
+        fs::copy_file(copy.path / kR3, outside.path / "elsewhere.csv");
+        fs::remove(copy.path / kR3);
+        fs::create_symlink(outside.path / "elsewhere.csv", copy.path / kR3);
+        CHECK_THAT(copy.error(), Catch::Contains("(field 'trials[2].file'): 'trials/c09-r3.csv' is a link that leads out"));
+    }
+    SECTION("a symbolic link inside the folder is fine") {
+        BrokenCopy copy;
+        fs::rename(copy.path / kR3, copy.path / "trials/real.csv");
+        fs::create_symlink("real.csv", copy.path / kR3);
+        CHECK(copy.error() == "no error");
+    }
+}
+
+TEST_CASE("bad input: a trial file that is not a regular file is refused before it is opened") {
+    SECTION("/dev/zero read directly: refused at once (reading it would never end)") {
+        const auto map = an::read_campaign(recordings("good-2zone")).zone_map;
+        CHECK_THROWS_WITH(an::read_trial_csv("/dev/zero", map, "/dev/zero"),
+                          Catch::Contains("/dev/zero: the trial file is not a regular file"));
+    }
+    SECTION("/dev/zero in campaign.json: refused as a path outside the folder") {
+        BrokenCopy copy;
+        copy.edit("campaign.json", "\"trials/c09-r3.csv\"", "\"/dev/zero\"");
+        CHECK_THAT(copy.error(), Catch::Contains("(field 'trials[2].file'): '/dev/zero' must be a path relative"));
+    }
+    SECTION("a FIFO inside the folder (opening it would block)") {
+        BrokenCopy copy;
+        fs::remove(copy.path / kR3);
+        REQUIRE(::mkfifo((copy.path / kR3).c_str(), 0600) == 0);
+        CHECK_THAT(copy.error(),
+                   Catch::Contains("campaign.json:52:7 (field 'trials[2].file'): 'trials/c09-r3.csv': the trial file is not a regular file"));
+    }
+    SECTION("campaign.json a FIFO") {
+        BrokenCopy copy;
+        fs::remove(copy.path / "campaign.json");
+        REQUIRE(::mkfifo((copy.path / "campaign.json").c_str(), 0600) == 0);
+        CHECK_THAT(copy.error(), Catch::Contains("campaign.json: campaign.json is not a regular file"));
+    }
+    SECTION("a directory") {
+        BrokenCopy copy;
+        fs::remove(copy.path / kR3);
+        fs::create_directories(copy.path / kR3);
+        CHECK_THAT(copy.error(), Catch::Contains("(field 'trials[2].file'): 'trials/c09-r3.csv': the trial file is a directory"));
+    }
+}
+
+TEST_CASE("a last number without a final newline reads completely") {
+    BrokenCopy copy;
+    std::ifstream in(copy.path / kR3, std::ios::binary);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    in.close();
+    REQUIRE(text.ends_with(",14,25\n"));
+    text.pop_back();
+    std::ofstream(copy.path / kR3, std::ios::binary | std::ios::trunc) << text;
+    const auto c = an::read_campaign(copy.path);
+    REQUIRE(c.trials[2].data.rows() == 7);
+    CHECK(c.trials[2].data.heat_flux_w_m2[1].back() == 25.0);
 }

@@ -48,3 +48,74 @@ TEST_CASE("manikin replay --db records the capture as a trial, and refuses a bad
     CHECK(b.out.find("bad.log:2") != std::string::npos);
     std::filesystem::remove_all(dir);
 }
+
+namespace {
+
+// A scratch folder with a capture of the given lines, removed at the end.
+struct Capture {
+    std::filesystem::path dir;
+    std::string log, db;
+    explicit Capture(const std::string& lines) {
+        static int counter = 0;
+        dir = std::filesystem::temp_directory_path() /
+              ("manikind-replay-bad-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        std::filesystem::remove_all(dir);
+        std::filesystem::create_directories(dir);
+        log = (dir / "cap.log").string();
+        db = (dir / "replay.db").string();
+        std::ofstream(log) << lines;
+    }
+    ~Capture() { std::filesystem::remove_all(dir); }
+    manikind::test::CliResult replay(const std::string& options = "") const {
+        return run_manikin("replay " + options + " --db " + db + " --campaign bus " + log + " 2>&1");
+    }
+};
+
+constexpr const char* kZone5 = " can0 105#AC0D520352034B03\n";
+
+}  // namespace
+
+TEST_CASE("manikin replay refuses a stamp that is not a time, naming file and line, and stores nothing", "[cli][replay]") {
+    for (const std::string stamp : {"nan", "inf", "99999999999999999999.2", "-0.9", "1e300"}) {
+        INFO(stamp);
+        const Capture c(std::string("(1718000000.100000)") + kZone5 + "(" + stamp + ")" + kZone5);
+        const auto r = c.replay();
+        CHECK(r.exit_code == 2);
+        CHECK(r.out.find("cap.log:2: time stamp") != std::string::npos);
+        CHECK(!std::filesystem::exists(c.db));  // checked before the database is even opened
+    }
+}
+
+TEST_CASE("manikin replay refuses a stamp going backwards, naming both lines, and stores nothing", "[cli][replay]") {
+    const Capture c(std::string("(1718000001.000000)") + kZone5 + "# a comment\n(1718000000.100000)" + kZone5);
+    const auto r = c.replay();
+    CHECK(r.exit_code == 2);
+    CHECK(r.out.find("cap.log:3: time stamp 1718000000.100000 s is before 1718000001.000000 s on line 1") != std::string::npos);
+    CHECK(!std::filesystem::exists(c.db));
+}
+
+TEST_CASE("manikin replay skips identical duplicate frames and prints what it stores", "[cli][replay]") {
+    const std::string frame = std::string("(1718000000.100000)") + kZone5;
+    const Capture c(frame + frame + frame);
+    const auto r = c.replay();
+    REQUIRE(r.exit_code == 0);
+    CHECK(r.out.find("1 frames, 2 identical duplicates skipped, 4 samples stored") != std::string::npos);
+    auto db = manikind::recorder::Database::open(c.db);
+    const auto trials = db.trials(*db.find_campaign("bus"));
+    REQUIRE(trials.size() == 1);
+    CHECK(db.sample_count(trials[0].id) == 4);
+    const auto j = run_manikin("replay --json " + c.log);
+    REQUIRE(j.exit_code == 0);
+    const auto doc = nlohmann::json::parse(j.out);
+    CHECK(doc["frames"] == 1);
+    CHECK(doc["duplicate_frames"] == 2);
+    CHECK(doc["samples"] == 4);
+}
+
+TEST_CASE("manikin replay refuses two different readings of one zone at one stamp and stores nothing", "[cli][replay]") {
+    const Capture c(std::string("(1718000000.100000)") + kZone5 + "(1718000000.100000) can0 105#AD0D4E034E034B03\n");
+    const auto r = c.replay();
+    CHECK(r.exit_code == 2);
+    CHECK(r.out.find("cap.log:2: a second reading of z05.skin_temp_c at the time stamp of line 1") != std::string::npos);
+    CHECK(!std::filesystem::exists(c.db));
+}
