@@ -189,11 +189,11 @@ void add_sim_commands(CLI::App& app) {
             while (std::getline(in, text)) {
                 ++line_no;
                 if (text.empty() || text[0] == '#') continue;
-                const auto parsed = protocol::manikin_can::parse_candump_line(text);
+                const auto parsed = protocol::manikin_can::parse_candump_log_line(text);
                 if (!parsed)
                     throw UserError(fmt::format("{}:{}: not a candump -l line (expected \"(seconds.micro) can0 ID#HEX\")",
                                                 r->file, line_no));
-                captured.emplace_back(static_cast<std::int64_t>(parsed->first * 1e9), parsed->second);
+                captured.push_back(*parsed);
             }
         }
         if (captured.empty()) throw UserError(fmt::format("{}: no frames", r->file));
