@@ -4,6 +4,8 @@
 // parsed with std::from_chars straight out of the chunk (no per-line std::string, no
 // iostreams). A whole campaign is built in local structures and returned only when every
 // file parsed, so an error never leaves a half-imported campaign behind.
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <charconv>
@@ -214,6 +216,11 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
                          const std::vector<RecordedChannel>& channels) {
     FilePtr f(std::fopen(path.c_str(), "rb"));
     if (!f) throw InputError(file, 0, 0, "", fmt::format("cannot open the trial file: {}", std::strerror(errno)));
+    // fopen opens a directory or a device too: the first read would fail (a directory) or never
+    // end (/dev/zero), so campaign.json may name only regular files.
+    struct stat st {};
+    if (::fstat(::fileno(f.get()), &st) != 0 || !S_ISREG(st.st_mode))
+        throw InputError(file, 0, 0, "", "not a regular file: a trial file must be a plain CSV file");
     ChunkedLineReader reader(f.get());
     std::string_view line;
     std::size_t line_no = 0;
