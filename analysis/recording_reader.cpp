@@ -575,7 +575,7 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
         if (!inst.is_object()) cj.fail("instruments", "expected an object keyed by channel", locate(cj.text(), "\"instruments\""));
         for (const auto& [channel, spec] : inst.items()) {
             const bool known = std::any_of(std::begin(kInstrumentChannels), std::end(kInstrumentChannels),
-                                           [&](const char* c) { return channel == c; });
+                                           [&channel_name = channel](const char* c) { return channel_name == c; });  // clang 14: no binding captures
             if (!known) {
                 const Located at = locate(cj.text(), "\"" + channel + "\"");
                 campaign.warnings.push_back(fmt::format("{}:{}:{}: unknown instrument channel 'instruments.{}' ignored",
