@@ -4,6 +4,8 @@
 // parsed with std::from_chars straight out of the chunk (no per-line std::string, no
 // iostreams). A whole campaign is built in local structures and returned only when every
 // file parsed, so an error never leaves a half-imported campaign behind.
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -706,7 +708,7 @@ Campaign read_campaign_checked(const std::filesystem::path& folder, const ReadOp
         if (!inst.is_object()) cj.fail("instruments", "expected an object keyed by channel", locate(cj.text(), "\"instruments\""));
         for (const auto& [channel, spec] : inst.items()) {
             const bool known = std::any_of(std::begin(kInstrumentChannels), std::end(kInstrumentChannels),
-                                           [&](const char* c) { return channel == c; });
+                                           [&channel_name = channel](const char* c) { return channel_name == c; });  // clang 14: no binding captures
             if (!known) {
                 const Located at = locate(cj.text(), "\"" + channel + "\"");
                 campaign.warnings.push_back(fmt::format("{}:{}:{}: unknown instrument channel 'instruments.{}' ignored",

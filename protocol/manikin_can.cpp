@@ -181,4 +181,14 @@ std::optional<std::pair<double, can_frame>> parse_candump_line(const std::string
     return std::make_pair(t, f);
 }
 
+std::optional<std::pair<std::int64_t, can_frame>> parse_candump_log_line(const std::string& line) {
+    const auto parsed = parse_candump_line(line);
+    if (!parsed) return std::nullopt;
+    const double ns = parsed->first * 1e9;
+    // from_chars reads "inf", "nan" and 1e300 too: converting those to an integer is undefined.
+    constexpr double int64_limit = 9.2e18;
+    if (!std::isfinite(ns) || std::fabs(ns) >= int64_limit) return std::nullopt;
+    return std::make_pair(static_cast<std::int64_t>(ns), parsed->second);
+}
+
 }  // namespace manikind::protocol::manikin_can

@@ -83,5 +83,8 @@ std::variant<Message, DecodeError> decode(const can_frame& frame);
 // can-utils `candump -l` log line: "(1718000000.123456) can0 123#11223344".
 std::string to_candump_line(const can_frame& frame, double utc_s, const std::string& interface = "can0");
 std::optional<std::pair<double, can_frame>> parse_candump_line(const std::string& line);
+// The same line with its time in UTC nanoseconds, as `manikin replay` reads a capture; nullopt
+// also when the time is not finite or beyond what int64 nanoseconds hold (about ±292 years).
+std::optional<std::pair<std::int64_t, can_frame>> parse_candump_log_line(const std::string& line);
 
 }  // namespace manikind::protocol::manikin_can

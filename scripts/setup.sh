@@ -3,6 +3,7 @@
 #   scripts/setup.sh                  release build in build/ (what the program needs)
 #   scripts/setup.sh --tests          the same, plus what the test suite drives (peers, tools)
 #   scripts/setup.sh [--tests] asan   AddressSanitizer + UBSan build in build-asan/
+# (--tests also installs clang for the fuzz preset; scripts/fuzz.sh builds and runs that one.)
 # Safe to run again: it installs nothing that is already there and rebuilds incrementally.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -34,6 +35,9 @@ if [ "$with_tests" = yes ]; then
     # The tools labs read exports with (tests/export/): h5py, pandas and GNU Octave; rsvg-convert
     # renders every SVG the tool writes so a malformed one fails (tests/plot/).
     python3-h5py python3-pandas octave librsvg2-bin
+    # scripts/fuzz.sh: clang with libFuzzer and the sanitizer runtimes (libclang-rt-14-dev is
+    # only recommended by clang, and recommends are not installed); llvm-symbolizer for traces.
+    clang libclang-rt-14-dev llvm
   )
 fi
 missing=()

@@ -30,7 +30,7 @@ std::string type_name(const toml::node& node) {
 
 class Reader {
 public:
-    Reader(const toml::table& root, std::string source, Config& out) : root_(root), source_(std::move(source)), out_(out) {}
+    Reader(std::string source, Config& out) : source_(std::move(source)), out_(out) {}
 
     void number(const toml::table& table, const std::string& path, const char* key, double& value, double lo, double hi,
                 const char* unit) {
@@ -118,7 +118,6 @@ public:
     }
 
 private:
-    const toml::table& root_;
     std::string source_;
     Config& out_;
     std::set<std::string> known_;
@@ -143,7 +142,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
     c.source_name = source_name;
     c.file_mode = 0;
     c.source_sha256 = sha256_hex(toml_text);
-    Reader r(root, source_name, c);
+    Reader r(source_name, c);
     r.record_positions(root, "");
     if (const auto* lab = r.table(root, "", "lab")) {
         r.text(*lab, "lab", "name", c.lab_name);

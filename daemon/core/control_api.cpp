@@ -13,6 +13,7 @@
 #include <fmt/format.h>
 
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -105,7 +106,9 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
         if (cmd == "alarms") return {{"ok", true}, {"alarms", daemon.alarms_json()}};
         if (cmd == "ack_alarm") {
             const auto id = number("id");
-            if (!id) return fail("\"id\": expected the alarm's id (a number)");
+            // Bounded before the conversion: a double beyond int64 (1e300) makes it undefined.
+            if (!id || *id != std::trunc(*id) || std::fabs(*id) > 9e15)
+                return fail("\"id\": expected the alarm's id (a whole number)");
             return done(daemon.acknowledge_alarm(static_cast<std::int64_t>(*id)));
         }
         if (cmd == "pause") return done(daemon.pause());

@@ -169,7 +169,6 @@ private:
     std::optional<std::int64_t> steady_since_ns_;
     std::int64_t steady_seen_at_ns_ = 0;
     std::map<std::string, std::int64_t> gap_since_ns_;
-    std::int64_t manikin_silent_since_ns_ = -1;
     std::uint64_t dropped_samples_ = 0;
     // The chamber setpoints last commanded (NaN until the first set_chamber).
     double chamber_setpoint_temp_c_ = std::numeric_limits<double>::quiet_NaN();

@@ -94,8 +94,9 @@ std::optional<SegmentConstants> baseline_segment(const std::string& segment) {
 void validate_term(const Term& term) {
     const TermSpec& spec = spec_of(term.name);
     for (const auto& [key, value] : term.parameters) {
+        // `parameter = key`: clang 14 cannot capture a structured binding (the fuzz build uses clang).
         const bool known = std::any_of(spec.parameters.begin(), spec.parameters.end(),
-                                       [&](const auto& p) { return key == p.first; });
+                                       [&parameter = key](const auto& p) { return parameter == p.first; });
         if (!known) throw std::invalid_argument("twin term '" + term.name + "' has no parameter '" + key + "'");
         if (!std::isfinite(value)) throw std::invalid_argument("twin term '" + term.name + "': " + key + " is not finite");
     }

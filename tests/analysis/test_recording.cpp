@@ -9,11 +9,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <nlohmann/json.hpp>
+
 #include <catch2/catch.hpp>
 
 #include "analysis/input_error.hpp"
 #include "analysis/recording.hpp"
 #include "analysis/synthetic.hpp"
+#include "analysis/zone_map.hpp"
 
 namespace an = manikind::analysis;
 namespace fs = std::filesystem;
@@ -275,6 +278,19 @@ TEST_CASE("bad input: duplicated trial id points at the second one") {
 TEST_CASE("bad input: a missing trial file") {
     const auto e = error_of("bad-missing-file");
     CHECK(e.find("c09-r3.csv: cannot open the trial file") != std::string::npos);
+}
+
+TEST_CASE("bad input: a trial file that is a directory or a device") {
+    // Seen writing fuzz_recording: fopen opens a directory, whose first read failed as a
+    // std::runtime_error (an internal error, exit status 1); /dev/zero, a line without end,
+    // would have been read until memory ran out.
+    TempDir dir;
+    fs::create_directories(dir.path / "trials" / "c09-r1.csv");
+    auto campaign = nlohmann::json::parse(std::ifstream(recordings("good-2zone") + "/campaign.json"));
+    campaign["trials"] = nlohmann::json::array({campaign["trials"][0]});
+    std::ofstream(dir.path / "campaign.json") << campaign.dump();
+    CHECK_THROWS_WITH(an::read_campaign(dir.path), Catch::Contains("c09-r1.csv: not a regular file"));
+    CHECK_THROWS_AS(an::read_trial_csv("/dev/zero", an::andi35_zone_map(), "zero.csv"), an::InputError);
 }
 
 TEST_CASE("bad input: a missing campaign folder, bad JSON, wrong format") {

@@ -98,6 +98,19 @@ TEST_CASE("manikin CAN: bad frames are refused with the reason, error frames rep
     CHECK_FALSE(parse_candump_line("(1.0) can0 10#AC").has_value());
 }
 
+TEST_CASE("manikin CAN: a capture line's time becomes nanoseconds only when it fits", "[protocol][can]") {
+    const auto ok = parse_candump_log_line("(1718000000.123456) can0 105#AC0D7B00C8010A03");
+    REQUIRE(ok.has_value());
+    CHECK(ok->first == Approx(1718000000123456000.0).epsilon(1e-15));
+    CHECK(ok->second.can_id == 0x105);
+    // from_chars reads these; converting them to int64 nanoseconds was undefined behaviour in
+    // `manikin replay` (found reading the parser for the fuzz target fuzz_candump_log).
+    for (const char* line : {"(inf) can0 105#AC", "(nan) can0 105#AC", "(-inf) can0 105#AC",
+                             "(1e300) can0 105#AC", "(9300000000.0) can0 105#AC"})
+        CHECK_FALSE(parse_candump_log_line(line).has_value());
+    CHECK(parse_candump_line("(1e300) can0 105#AC").has_value());  // the line itself is well formed
+}
+
 TEST_CASE("manikin CAN: seeded random frames never crash the decoder and valid ones round-trip", "[protocol][can][fuzz]") {
     std::mt19937 rng(35);
     std::uniform_int_distribution<unsigned> u32;

@@ -1,0 +1,19 @@
+// libFuzzer target for campaign files (daemon/core/campaign_plan.hpp): the input as the TOML
+// text of a plan, then the check against the shipped safety limits the daemon makes before it
+// starts one. Only UserError may escape.
+#include <cstdint>
+#include <string>
+
+#include "daemon/core/campaign_plan.hpp"
+#include "daemon/core/user_error.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    static const auto limits = manikind::config::default_config().safety;
+    const std::string text(reinterpret_cast<const char*>(data), size);
+    try {
+        const auto plan = manikind::parse_campaign_plan(text, "fuzz-campaign.toml");
+        (void)manikind::check_plan_against_limits(plan, limits);
+    } catch (const manikind::UserError&) {
+    }
+    return 0;
+}
