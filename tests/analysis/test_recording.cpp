@@ -289,7 +289,7 @@ TEST_CASE("bad input: a trial file that is a directory or a device") {
     auto campaign = nlohmann::json::parse(std::ifstream(recordings("good-2zone") + "/campaign.json"));
     campaign["trials"] = nlohmann::json::array({campaign["trials"][0]});
     std::ofstream(dir.path / "campaign.json") << campaign.dump();
-    CHECK_THROWS_WITH(an::read_campaign(dir.path), Catch::Contains("c09-r1.csv: not a regular file"));
+    CHECK_THROWS_WITH(an::read_campaign(dir.path), Catch::Contains("c09-r1.csv") && Catch::Contains("not a regular file"));
     CHECK_THROWS_AS(an::read_trial_csv("/dev/zero", an::andi35_zone_map(), "zero.csv"), an::InputError);
 }
 
