@@ -385,6 +385,7 @@ void LabDaemon::finish_trial(const std::string& state, const std::string& reason
     flush_recorder();
     db_.set_trial_state(trial_id_, state, reason, clock_->utc_ns());
     if (dropped_samples_) db_.add_trial_flag(trial_id_, flag_dropped_samples);
+    db_.refresh_trial_table();  // a column for every channel this trial recorded
     trial_summaries_.push_back(fmt::format("case {} replicate {}: {}{}", current_->c.id, current_->replicate, state,
                                            reason.empty() ? "" : " (" + reason + ")"));
     trial_id_ = 0;

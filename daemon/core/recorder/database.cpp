@@ -575,9 +575,10 @@ std::int64_t Database::channel_id(std::int64_t device_id, const std::string& nam
         }
     }
     Query(*impl_, "INSERT INTO channels (device_id, name, unit) VALUES (?, ?, ?)").bind(device_id, name, unit).run();
-    const std::int64_t id = sqlite3_last_insert_rowid(impl_->db);
-    refresh_trial_table();  // a column for the new channel
-    return id;
+    // trial_table is not rebuilt here: a daemon registers its 157 channels one by one as their
+    // first samples arrive, and a schema change per channel cost a busy daemon a fifth of a core
+    // (every connection re-prepares). The daemon refreshes it when a trial ends.
+    return sqlite3_last_insert_rowid(impl_->db);
 }
 
 std::size_t Database::insert_samples(std::span<const SampleRow> rows) {

@@ -138,8 +138,8 @@ public:
     // samples so far are in the old unit).
     std::int64_t device_id(const std::string& name, const std::string& kind, const std::string& address);
     std::int64_t channel_id(std::int64_t device_id, const std::string& name, const std::string& unit);
-    // The analysts' view trial_table has a column per channel; rebuilt when the channels change
-    // (open and channel_id call it; a no-op when current).
+    // The analysts' view trial_table has a column per channel; rebuilt when the channels changed
+    // (open calls it, the daemon when a trial ends; a no-op when current).
     void refresh_trial_table();
 
     // Samples in one transaction (the Recorder's writer calls this; other callers may too).
