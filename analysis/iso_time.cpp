@@ -53,7 +53,8 @@ std::optional<std::int64_t> parse_iso_utc(std::string_view s) {
     if (pos + 1 != s.size() || s[pos] != 'Z') return std::nullopt;
     using namespace std::chrono;
     const year_month_day ymd{year{y}, month{static_cast<unsigned>(mo)}, day{static_cast<unsigned>(d)}};
-    if (!ymd.ok() || h > 23 || mi > 59 || sec > 60) return std::nullopt;
+    // int64 nanoseconds since 1970 span 1677-09-21 .. 2262-04-11: keep to whole years inside it
+    if (!ymd.ok() || y < 1678 || y > 2261 || h > 23 || mi > 59 || sec > 60) return std::nullopt;
     const auto t = sys_days{ymd} + hours{h} + minutes{mi} + seconds{sec};
     return duration_cast<nanoseconds>(t.time_since_epoch()).count() + fraction_ns;
 }

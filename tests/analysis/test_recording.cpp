@@ -217,6 +217,10 @@ TEST_CASE("ISO 8601 UTC: written with milliseconds, read back; malformed times r
     CHECK_FALSE(an::parse_iso_utc("2026-11-18T11:06:40"));
     CHECK_FALSE(an::parse_iso_utc("2026-11-18T11:06:40.Z"));
     CHECK_FALSE(an::parse_iso_utc(""));
+    // outside what int64 nanoseconds hold (found by fuzz_recording: 4274-... overflowed)
+    CHECK_FALSE(an::parse_iso_utc("4274-11-18T11:06:40Z"));
+    CHECK_FALSE(an::parse_iso_utc("0001-01-01T00:00:00Z"));
+    CHECK(an::parse_iso_utc("2261-12-31T23:59:59Z").has_value());
 }
 
 TEST_CASE("round trip of an inline zone map") {
