@@ -119,8 +119,9 @@ std::int64_t LabDaemon::channel_id(const std::string& device, const std::string&
 
 void LabDaemon::event(const std::string& severity, const std::string& kind, const std::string& message) {
     const std::optional<std::int64_t> trial = trial_id_ ? std::optional<std::int64_t>(trial_id_) : std::nullopt;
-    db_.add_event(trial, clock_ ? clock_->mono_ns() : 0, clock_ ? clock_->utc_ns() : system_clock_.utc_ns(), severity, kind,
-                  message);
+    const std::int64_t mono_ns = clock_ ? clock_->mono_ns() : 0;
+    const std::int64_t utc_ns = clock_ ? clock_->utc_ns() : system_clock_.utc_ns();
+    write_or_defer([=, this] { db_.add_event(trial, mono_ns, utc_ns, severity, kind, message); });
     if (severity == "error") spdlog::error("{}: {}", kind, message);
     else if (severity == "warn") spdlog::warn("{}: {}", kind, message);
     else spdlog::debug("{}: {}", kind, message);
@@ -160,6 +161,14 @@ void LabDaemon::set_sample_listener(std::function<void()> listener) {
 
 void LabDaemon::on_sample(const drivers::Sample& s) {
     std::lock_guard lk(lock_);
+    try {
+        record_sample_locked(s);
+    } catch (const recorder::StorageFull& e) {
+        storage_stop_locked(e.what());
+    }
+}
+
+void LabDaemon::record_sample_locked(const drivers::Sample& s) {
     const std::string key = s.device + "/" + s.channel;
     live_[key] = s;
     if (sample_listener_) sample_listener_();
@@ -194,10 +203,10 @@ void LabDaemon::on_sample(const drivers::Sample& s) {
     recorder::SampleRow row{trial_id_, channel_id(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
                             static_cast<std::uint8_t>(s.quality)};
     if (!recorder_->push(row)) {
-        if (o_.virtual_clock) {
-            // Virtual time waits for the disk; nothing is dropped.
-            recorder_->flush();
-            recorder_->push(row);
+        if (o_.virtual_clock && !storage_full_) {
+            // Virtual time waits for the disk; nothing is dropped (unless the disk is full).
+            if (recorder_->flush()) recorder_->push(row);
+            else storage_stop_locked(recorder_->stats().storage_error);
         } else {
             ++dropped_samples_;
         }
@@ -252,6 +261,9 @@ void LabDaemon::enter(Stage s, const std::string& why) {
 std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
     std::lock_guard lk(lock_);
     if (const auto why = check_plan_against_limits(plan, o_.config.safety); !why.empty()) return why;
+    if (storage_full_)
+        return fmt::format("the disk holding {} is full ({}); free space first, recording resumes by itself",
+                           db_path_.string(), storage_error_);
     if ((plan_ && plan_->name == plan.name) ||
         std::any_of(waiting_.begin(), waiting_.end(), [&](const CampaignPlan& p) { return p.name == plan.name; }))
         return fmt::format("a campaign named '{}' is already running or queued", plan.name);
@@ -381,6 +393,72 @@ void LabDaemon::safety_stop(const std::string& why) {
     if (plan_) finish_campaign("aborted");
 }
 
+namespace {
+// What the daemon holds for the database while the disk is full: events and state changes are
+// small, and an hour of 1-Hz gap events is 3600; past this the oldest wait, the newest are counted.
+constexpr std::size_t kMaxDeferredWrites = 100000;
+}  // namespace
+
+void LabDaemon::write_or_defer(std::function<void()> write) {
+    if (!storage_full_) {
+        try {
+            write();
+            return;
+        } catch (const recorder::StorageFull& e) {
+            storage_stop_locked(e.what());
+        }
+    }
+    if (deferred_writes_.size() < kMaxDeferredWrites) deferred_writes_.push_back(std::move(write));
+    else ++deferred_writes_lost_;
+}
+
+void LabDaemon::storage_stop_locked(const std::string& why) {
+    if (storage_full_) return;
+    storage_full_ = true;
+    storage_error_ = why;
+    dropped_when_full_ = recorder_->stats().dropped;
+    if (acq_) acq_->manikin().set_run(false);  // no heating that cannot be recorded
+    const std::string running = plan_ ? fmt::format(" '{}' interrupted (start it again to continue);", plan_->name) : "";
+    event("error", "disk_full",
+          fmt::format("disk full: heating stopped;{} recording resumes by itself when space is freed ({})", running, why));
+    if (trial_id_) {
+        const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
+        const std::string reason = "disk full";
+        write_or_defer([=, this] { db_.set_trial_state(trial, "interrupted", reason, utc_ns); });
+        trial_summaries_.push_back(fmt::format("case {} replicate {}: interrupted (disk full)", current_->c.id,
+                                               current_->replicate));
+        trial_id_ = 0;
+        current_.reset();
+        ++trials_done_;
+    }
+    if (plan_) {
+        const std::int64_t campaign = campaign_id_;
+        write_or_defer([=, this] { db_.set_campaign_state(campaign, "interrupted"); });
+        plan_.reset();
+    }
+    queue_.clear();
+    waiting_.clear();
+    paused_ = false;
+    stage_ = Stage::idle;
+}
+
+// Each tick while the disk is full: once the recorder commits again, write what waited, in order.
+void LabDaemon::retry_storage_locked() {
+    if (recorder_->stats().storage_full) return;  // the recorder retries each second (and at each flush)
+    while (!deferred_writes_.empty()) {
+        deferred_writes_.front()();  // throws StorageFull while there is still no room
+        deferred_writes_.pop_front();
+    }
+    storage_full_ = false;
+    const auto rs = recorder_->stats();
+    event("warn", "disk_full",
+          fmt::format("space is back: recording resumed; {} readings were dropped while the disk was full{}",
+                      rs.dropped - dropped_when_full_,
+                      deferred_writes_lost_ ? fmt::format(", {} events not kept", deferred_writes_lost_) : ""));
+    deferred_writes_lost_ = 0;
+    storage_error_.clear();
+}
+
 void LabDaemon::finish_trial(const std::string& state, const std::string& reason) {
     flush_recorder();
     db_.set_trial_state(trial_id_, state, reason, clock_->utc_ns());
@@ -450,8 +528,20 @@ void LabDaemon::finish_campaign(const std::string& state) {
     }
 }
 
-// The trial state machine: one transition check per call (every tick of the clock).
 void LabDaemon::tick_locked() {
+    try {
+        if (!storage_full_) {
+            if (const auto rs = recorder_->stats(); rs.storage_full) storage_stop_locked(rs.storage_error);
+        }
+        if (storage_full_) retry_storage_locked();
+        advance_locked();
+    } catch (const recorder::StorageFull& e) {
+        storage_stop_locked(e.what());
+    }
+}
+
+// The trial state machine: one transition check per call (every tick of the clock).
+void LabDaemon::advance_locked() {
     const std::int64_t now = clock_->mono_ns();
     // Gaps: a device that goes stale or disconnects is recorded, and flags the running trial.
     for (const auto& st : acq_->status()) {
@@ -619,11 +709,17 @@ void LabDaemon::stop() {
         // SIGTERM (or any stop) mid-campaign: the running trial and the campaign end
         // "interrupted" now, not at the next start; starting the same plan continues it.
         std::lock_guard lk(lock_);
-        if (trial_id_) finish_trial("interrupted", "daemon stopped");
-        if (plan_ && campaign_id_) {
-            db_.set_campaign_state(campaign_id_, "interrupted");
-            event("warn", "campaign", fmt::format("'{}' interrupted: the daemon stopped (start it again to continue)", plan_->name));
-            plan_.reset();
+        try {
+            if (storage_full_) retry_storage_locked();
+            if (trial_id_) finish_trial("interrupted", "daemon stopped");
+            if (plan_ && campaign_id_) {
+                db_.set_campaign_state(campaign_id_, "interrupted");
+                event("warn", "campaign", fmt::format("'{}' interrupted: the daemon stopped (start it again to continue)", plan_->name));
+                plan_.reset();
+            }
+        } catch (const recorder::StorageFull& e) {
+            // The next start marks what was running interrupted (mark_interrupted_trials).
+            spdlog::error("stopping with the disk full: {} writes not made ({})", deferred_writes_.size() + 1, e.what());
         }
     }
     if (acq_) {
@@ -702,6 +798,10 @@ nlohmann::json LabDaemon::status_json() {
                      {"duplicates", rs.duplicates},
                      {"lost_after_retries", rs.lost},
                      {"queue_rows", rs.queue_depth}};
+    j["storage"] = {{"full", storage_full_},
+                    {"error", storage_error_},
+                    {"deferred_writes", deferred_writes_.size()},
+                    {"full_disk_commits", rs.full_disk_commits}};
     j["safety_tripped"] = safety_tripped_;
     j["measured"] = measured_json_locked();
     return j;

@@ -110,7 +110,9 @@ private:
         int replicate = 0;
     };
     void on_sample(const drivers::Sample& s);
-    void tick_locked();
+    void record_sample_locked(const drivers::Sample& s);
+    void tick_locked();     // advance_locked(), surviving a full disk
+    void advance_locked();  // gaps, watchdog, then one step of the trial state machine
     void enter(Stage s, const std::string& why = {});
     void event(const std::string& severity, const std::string& kind, const std::string& message);
     void finish_trial(const std::string& state, const std::string& reason);
@@ -118,6 +120,11 @@ private:
     void start_interim_results();
     void begin_campaign(const CampaignPlan& plan);
     void safety_stop(const std::string& why);
+    // A full disk: heating stops, the trial and campaign end interrupted (continuable), an alarm
+    // is raised; what the daemon could not write waits in deferred_writes_ until space returns.
+    void storage_stop_locked(const std::string& why);
+    void retry_storage_locked();
+    void write_or_defer(std::function<void()> write);
     double stage_elapsed_s() const;
     std::int64_t channel_id(const std::string& device, const std::string& channel);
     double enclosure_air_c() const;
@@ -155,6 +162,11 @@ private:
     bool paused_ = false;
     std::int64_t paused_at_ns_ = 0;
     bool safety_tripped_ = false;
+    bool storage_full_ = false;
+    std::string storage_error_;
+    std::deque<std::function<void()>> deferred_writes_;  // in order; bounded by kMaxDeferredWrites
+    std::uint64_t deferred_writes_lost_ = 0;
+    std::uint64_t dropped_when_full_ = 0;                  // recorder drops when the disk filled
     std::optional<std::string> last_campaign_;
     std::vector<std::string> trial_summaries_;
 

@@ -2,6 +2,7 @@
 
 #include <sqlite3.h>
 
+#include <cerrno>
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -245,6 +246,8 @@ struct Database::Impl {
     }
 
     [[noreturn]] void fail(std::string_view what) const {
+        if (db && ((sqlite3_errcode(db) & 0xff) == SQLITE_FULL || sqlite3_system_errno(db) == ENOSPC))
+            throw StorageFull(fmt::format("{}: {}: {}", path.string(), what, sqlite3_errmsg(db)));
         throw UserError(fmt::format("{}: {}: {}", path.string(), what, db ? sqlite3_errmsg(db) : "out of memory"));
     }
 

@@ -6,7 +6,8 @@
 // daemon's and the Recorder's writer thread) may share one file: WAL lets readers run beside
 // the one writer, and busy_timeout makes writers queue instead of failing.
 //
-// Every SQLite failure throws manikind::UserError naming the file and SQLite's message.
+// Every SQLite failure throws manikind::UserError naming the file and SQLite's message; a
+// full disk throws StorageFull (a UserError), which the recorder and the daemon survive.
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -17,7 +18,16 @@
 #include <string_view>
 #include <vector>
 
+#include "daemon/core/user_error.hpp"
+
 namespace manikind::recorder {
+
+// A write failed for want of space (SQLITE_FULL, or ENOSPC under any other code). Nothing of the
+// failed transaction is stored; everything committed before it still is.
+class StorageFull : public UserError {
+public:
+    explicit StorageFull(const std::string& message) : UserError(message, "disk_full") {}
+};
 
 // Sample quality codes stored in samples.quality.
 enum class Quality : std::uint8_t { good = 0, stale = 1, out_of_range = 2, comm_error = 3 };

@@ -67,14 +67,19 @@ bool Recorder::push(const SampleRow& row) noexcept {
     return true;
 }
 
-void Recorder::flush() {
+bool Recorder::flush() {
     std::unique_lock lock(mutex_);
     const std::uint64_t target = stats_.accepted;
-    if (resolved_ >= target) return;
+    if (resolved_ >= target) return true;
+    const std::uint64_t attempts_before = commit_attempts_;
     ++flush_waiters_;
     wake_writer_.notify_one();
-    progress_.wait(lock, [&] { return resolved_ >= target || writer_gone_; });
+    // A full disk: one more attempt is enough to know (waiting for space could take hours).
+    progress_.wait(lock, [&] {
+        return resolved_ >= target || writer_gone_ || (stats_.storage_full && commit_attempts_ > attempts_before);
+    });
     --flush_waiters_;
+    return resolved_ >= target;
 }
 
 RecorderStats Recorder::stats() const {
@@ -127,21 +132,42 @@ void Recorder::write_loop(Database& db) {
         const auto t0 = Clock::now();
         bool committed = false;
         std::size_t duplicates = 0;
+        std::optional<std::string> full;  // the disk is full: say so, and wait for space
         try {
             duplicates = db.insert_samples(std::span<const SampleRow>(batch.data() + done, n));
             committed = true;
+        } catch (const StorageFull& e) {
+            full = e.what();
         } catch (const std::exception& e) {
             spdlog::error("recorder: commit of {} rows failed (attempt {} of {}): {}", n, attempts + 1,
                           options_.max_commit_attempts, e.what());
         }
         const double commit_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        if (!committed) ++attempts;
+        bool was_full = false, stopping = false;
+        {
+            std::lock_guard peek(mutex_);
+            was_full = stats_.storage_full;
+            stopping = stop_;
+        }
+        if (full && !was_full) spdlog::error("recorder: disk full, {} rows kept in memory until space returns: {}", n, *full);
+        if (committed && was_full) spdlog::warn("recorder: space is back, recording resumed");
+        if (full && stopping) {
+            spdlog::error("recorder: commit of {} rows failed at shutdown (attempt {} of {}): {}", n, attempts + 1,
+                          options_.max_commit_attempts, *full);
+        }
+        if (!committed && (!full || stopping)) ++attempts;
         const bool give_up = !committed && attempts >= options_.max_commit_attempts;
         // Logged before taking the lock: a slow stderr must not hold up push().
         if (duplicates > 0) spdlog::warn("recorder: {} rows skipped, already stored (re-sent readings?)", duplicates);
         if (give_up) spdlog::error("recorder: {} rows discarded after {} failed commits", n, attempts);
 
         lock.lock();
+        ++commit_attempts_;
+        stats_.storage_full = full.has_value();
+        if (full) {
+            stats_.storage_error = *full;
+            ++stats_.full_disk_commits;
+        }
         if (committed) {
             stats_.committed += n - duplicates;
             stats_.duplicates += duplicates;
@@ -150,9 +176,14 @@ void Recorder::write_loop(Database& db) {
         } else {
             ++stats_.failed_commits;
             if (!give_up) {
-                // Keep the rows and retry after a pause (cut short at shutdown), since a full
-                // disk or a lock held elsewhere rarely clears in microseconds.
-                wake_writer_.wait_for(lock, options_.max_batch_delay, [&] { return stop_; });
+                // Keep the rows and retry after a pause (cut short at shutdown, and by a flush
+                // while the disk is full), since a full disk or a lock held elsewhere rarely
+                // clears in microseconds.
+                progress_.notify_all();  // a flush() waiting on a full disk has its answer
+                if (full)
+                    wake_writer_.wait_for(lock, options_.full_disk_retry, [&] { return stop_ || flush_waiters_ > 0; });
+                else
+                    wake_writer_.wait_for(lock, options_.max_batch_delay, [&] { return stop_; });
                 continue;
             }
             stats_.lost += n;

@@ -23,6 +23,10 @@ struct RecorderOptions {
     // bounds what a crash of this process can lose.
     std::chrono::milliseconds max_batch_delay{200};
     int max_commit_attempts = 5;  // then the batch is discarded (counted in lost) and logged
+    // A full disk is not counted against max_commit_attempts: the rows wait in memory (new ones
+    // are dropped once the queue is full) and the commit is tried again this often, and at each
+    // flush(), until space returns. At shutdown the usual attempts apply, then the rows are lost.
+    std::chrono::milliseconds full_disk_retry{1000};
     Durability durability = Durability::process;  // [recorder] durability
 };
 
@@ -36,6 +40,9 @@ struct RecorderStats {
     std::uint64_t lost = 0;            // accepted but discarded after max_commit_attempts failures
     double max_commit_ms = 0.0;        // longest successful transaction, BEGIN to COMMIT
     std::size_t queue_depth = 0;       // accepted, not yet committed or lost
+    bool storage_full = false;         // the latest commit failed for want of space
+    std::string storage_error;         // its message (file, what, SQLite's words)
+    std::uint64_t full_disk_commits = 0;  // commits that failed for want of space
 };
 
 class Recorder {
@@ -51,8 +58,9 @@ public:
     // Never waits for the writer: a short critical section and no allocation. False (and
     // dropped + 1) when the queue is full.
     bool push(const SampleRow& row) noexcept;
-    // Returns when every row accepted before the call is committed (or lost after retries).
-    void flush();
+    // Returns true when every row accepted before the call is committed (or lost after retries);
+    // false, after one more attempt, while the disk is full (the rows stay queued).
+    bool flush();
     RecorderStats stats() const;
 
 private:
@@ -69,6 +77,7 @@ private:
     std::vector<SampleRow> queue_;         // reserved to queue_capacity; swapped with the writer's batch
     RecorderStats stats_;                  // queue_depth kept up to date under mutex_
     std::uint64_t resolved_ = 0;           // committed + duplicates + lost: accepted rows done so far
+    std::uint64_t commit_attempts_ = 0;    // every attempt, for flush() to wait for the next one
     int flush_waiters_ = 0;
     bool stop_ = false;
     bool writer_gone_ = false;
