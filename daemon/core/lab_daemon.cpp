@@ -657,6 +657,12 @@ void LabDaemon::step_virtual(double dt_s) {
     last_tick_steady_ns_ = steady_now_ns();
 }
 
+void LabDaemon::step_wall_clock_virtual(std::int64_t dt_ns) {
+    std::lock_guard lk(lock_);
+    if (!o_.virtual_clock) throw std::logic_error("step_wall_clock_virtual: the daemon runs on the system clock");
+    virtual_clock_.step_utc_ns(dt_ns);
+}
+
 bool LabDaemon::campaign_active() {
     std::lock_guard lk(lock_);
     return plan_.has_value();

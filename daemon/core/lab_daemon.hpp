@@ -88,6 +88,9 @@ public:
     // called after each trial with a one-line summary.
     void run_virtual(std::function<void(const std::string&)> on_trial = {}, double max_virtual_s = 1e12);
     void step_virtual(double dt_s);
+    // Virtual clock only: steps the wall clock (UTC) by dt_ns and leaves monotonic time alone, as
+    // an NTP correction or a hand-set clock does. Trial timing is monotonic: only stamps move.
+    void step_wall_clock_virtual(std::int64_t dt_ns);
     // Real time: acquisition threads plus a 1-s tick thread.
     void start_realtime();
     void stop();
