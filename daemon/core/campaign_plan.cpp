@@ -1,6 +1,7 @@
 #include "daemon/core/campaign_plan.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <initializer_list>
 #include <string_view>
 #include <vector>
@@ -101,13 +102,24 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
         if (!(v >= lo && v <= hi)) throw UserError(fmt::format("{}: {}: {} is outside {}..{}", where(*n), key, v, lo, hi));
         return v;
     };
+    // Counts: 2.5 replicates is a typo, not 2.
+    auto whole = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
+        const double v = number(t, key, fallback, lo, hi);
+        if (v != std::floor(v))
+            throw UserError(fmt::format("{}: {}: {} is not a whole number", where(*t.get(key)), key, v));
+        return static_cast<int>(v);
+    };
     CampaignPlan p;
     const auto* name = root.get("name");
     if (!name || !name->is_string()) throw UserError(fmt::format("{}: name: expected the campaign's name (a string)", source));
     p.name = name->as_string()->get();
     if (p.name.empty() || p.name.find_first_of("/\\") != std::string::npos)
         throw UserError(fmt::format("{}: name: must be non-empty and contain no '/'", where(*name)));
-    p.replicates = static_cast<int>(number(root, "replicates", 3, 1, 20));
+    // The name becomes a folder name and a column in exports: printable and of a sane length.
+    if (p.name.size() > 120 ||
+        std::any_of(p.name.begin(), p.name.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; }))
+        throw UserError(fmt::format("{}: name: at most 120 characters, none of them control characters", where(*name)));
+    p.replicates = whole(root, "replicates", 3, 1, 20);
     p.trial_duration_s = 60.0 * number(root, "trial_duration_min", 75, 1, 24 * 60);
     p.settle_window_s = 60.0 * number(root, "settle_window_min", 10, 0, 600);
     p.settle_band_c = number(root, "settle_band_c", 0.3, 0.01, 10);
@@ -125,7 +137,12 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h"},
                                 source, "cases.");
             PlannedCase c;
-            c.id = static_cast<int>(number(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6));
+            c.id = whole(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6);
+            // A case id names the case in results and exports, and pairs trials on continuing.
+            for (const auto& earlier : p.cases)
+                if (earlier.id == c.id)
+                    throw UserError(fmt::format("{}: cases.id: {} is already the id of an earlier case (ids must differ)",
+                                                where(t->get("id") ? *t->get("id") : node), c.id));
             if (!t->get("chamber_temp_c") || !t->get("chamber_rh_pct"))
                 throw UserError(fmt::format("{}: cases: chamber_temp_c and chamber_rh_pct are required", where(node)));
             c.chamber_temp_c = number(*t, "chamber_temp_c", 0, -40, 80);
@@ -136,6 +153,10 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
                 c.wet = w->as_boolean()->get();
             }
             c.sweat_rate_g_m2_h = number(*t, "sweat_rate_g_m2_h", c.wet ? 300 : 0, 0, 510);
+            if (!c.wet && c.sweat_rate_g_m2_h > 0)
+                throw UserError(fmt::format("{}: cases.sweat_rate_g_m2_h: {} g/m²/h on a dry case (wet = false); set "
+                                            "wet = true, or leave the rate out",
+                                            where(*t->get("sweat_rate_g_m2_h")), c.sweat_rate_g_m2_h));
             p.cases.push_back(c);
         }
     }

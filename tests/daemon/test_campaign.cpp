@@ -205,6 +205,27 @@ TEST_CASE("status carries the measured chamber air, RH, air speed, mean skin tem
     CHECK(live["manikin/z01.skin_temp_c"]["unit"] == "°C");
 }
 
+TEST_CASE("campaign files: counts are whole numbers, case ids unique, a dry case does not sweat, names printable", "[daemon][campaign]") {
+    const std::string case1 = "[[cases]]\nchamber_temp_c = 35\nchamber_rh_pct = 27\n";
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("name = \"t\"\nreplicates = 2.5\n" + case1, "p.toml"),
+                      Catch::Contains("p.toml:2") && Catch::Contains("replicates: 2.5 is not a whole number"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("name = \"t\"\n" + case1 + "id = 4\n" + case1 + "id = 4\n", "p.toml"),
+                      Catch::Contains("p.toml:9") && Catch::Contains("cases.id: 4 is already the id of an earlier case"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("name = \"t\"\n" + case1 + "wet = false\nsweat_rate_g_m2_h = 200\n", "p.toml"),
+                      Catch::Contains("p.toml:6") && Catch::Contains("on a dry case (wet = false)"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("name = \"a\\u0007b\"\n" + case1, "p.toml"),
+                      Catch::Contains("p.toml:1") && Catch::Contains("control characters"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("name = \"" + std::string(121, 'x') + "\"\n" + case1, "p.toml"),
+                      Catch::Contains("at most 120 characters"));
+    // The same file with the mistakes put right is accepted.
+    const auto plan = manikind::parse_campaign_plan("name = \"t\"\nreplicates = 2\n" + case1 + "id = 4\n" + case1 +
+                                                        "id = 5\nwet = true\nsweat_rate_g_m2_h = 200\n",
+                                                    "p.toml");
+    REQUIRE(plan.cases.size() == 2);
+    CHECK(plan.replicates == 2);
+    CHECK(plan.cases[1].sweat_rate_g_m2_h == 200);
+}
+
 TEST_CASE("a misspelt campaign key is refused with file, line, column, key and the nearest known key", "[daemon][campaign]") {
     const std::string text = "name = \"typo\"\nreplicate = 1\nbuiltin_cases = \"table-s3\"\n";
     CHECK_THROWS_WITH(manikind::parse_campaign_plan(text, "typo.toml"),
