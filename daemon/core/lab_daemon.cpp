@@ -252,6 +252,7 @@ double LabDaemon::stage_elapsed_s() const {
 
 void LabDaemon::enter(Stage s, const std::string& why) {
     stage_ = s;
+    device_retry_logged_ = false;
     stage_start_ns_ = clock_->mono_ns();
     event("info", "stage", to_string(s));
     if (!why.empty()) event("info", "stage_reason", why);
@@ -271,7 +272,11 @@ std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
     if (const auto existing = db_.find_campaign(plan.name)) {
         const auto campaigns = db_.campaigns();
         const auto row = std::find_if(campaigns.begin(), campaigns.end(), [&](const auto& c) { return c.id == *existing; });
-        if (row->state == "done")
+        // "done" with a failed trial (a device gave up for good) is not complete: it continues too.
+        std::set<std::pair<std::int64_t, std::int64_t>> done_trials;
+        for (const auto& t : db_.trials(*existing))
+            if (t.state == "done") done_trials.insert({t.case_id, t.replicate});
+        if (row->state == "done" && done_trials.size() >= static_cast<std::size_t>(plan.replicates) * plan.cases.size())
             return fmt::format("campaign '{}' is complete in {}; give the plan a new name to run it again", plan.name,
                                db_path_.string());
         std::vector<nlohmann::json> stored_cases;
@@ -528,6 +533,11 @@ void LabDaemon::finish_campaign(const std::string& state) {
     }
 }
 
+namespace {
+// How long a device's refusal of a trial's setpoint is retried before the trial fails.
+constexpr double kDeviceRetryTimeoutS = 300.0;
+}  // namespace
+
 void LabDaemon::tick_locked() {
     try {
         if (!storage_full_) {
@@ -579,8 +589,20 @@ void LabDaemon::advance_locked() {
             trial_id_ = db_.create_trial(campaign_id_, current_->case_id, current_->replicate);
             dropped_samples_ = 0;
             enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
+            [[fallthrough]];
+        }
+        case Stage::configuring: {
+            // A chamber that answers with an exception or not at all for a while (a controller
+            // rebooting) is retried each tick, not failed at once: otherwise a 4-min glitch fails
+            // every queued trial in as many ticks. The plan was checked against [safety] already.
             if (const auto why = set_chamber(current_->c.chamber_temp_c, current_->c.chamber_rh_pct); !why.empty()) {
-                finish_trial("failed", "chamber setpoint refused: " + why);
+                if (stage_elapsed_s() > kDeviceRetryTimeoutS) {
+                    finish_trial("failed", fmt::format("chamber setpoint refused for {:.0f} min: {}", kDeviceRetryTimeoutS / 60, why));
+                } else if (!device_retry_logged_) {
+                    device_retry_logged_ = true;
+                    event("warn", "setpoint", fmt::format("chamber setpoint refused, retrying for up to {:.0f} min: {}",
+                                                          kDeviceRetryTimeoutS / 60, why));
+                }
                 return;
             }
             enclosure_range_.clear();
@@ -607,7 +629,14 @@ void LabDaemon::advance_locked() {
             sp.sweating = current_->c.wet;
             sp.sweat_rate_g_m2_h = current_->c.sweat_rate_g_m2_h;
             if (!acq_->manikin().send(sp) || !acq_->manikin().set_run(true)) {
-                finish_trial("failed", "the manikin bus refused the setpoint");
+                // Retried each tick, as the chamber's setpoint is (a bus-off recovers in seconds).
+                if (elapsed > kDeviceRetryTimeoutS) {
+                    finish_trial("failed", fmt::format("the manikin bus refused the setpoint for {:.0f} min", kDeviceRetryTimeoutS / 60));
+                } else if (!device_retry_logged_) {
+                    device_retry_logged_ = true;
+                    event("warn", "setpoint", fmt::format("the manikin bus refused the setpoint, retrying for up to {:.0f} min",
+                                                          kDeviceRetryTimeoutS / 60));
+                }
                 return;
             }
             for (auto& r : skin_range_) r.clear();
@@ -645,7 +674,6 @@ void LabDaemon::advance_locked() {
             finish_trial("done", steady_since_ns_ ? "" : "never steady");
             return;
         }
-        case Stage::configuring:
         case Stage::computing: return;
     }
 }

@@ -165,6 +165,7 @@ private:
     bool paused_ = false;
     std::int64_t paused_at_ns_ = 0;
     bool safety_tripped_ = false;
+    bool device_retry_logged_ = false;  // this stage's setpoint refusal was logged once
     bool storage_full_ = false;
     std::string storage_error_;
     std::deque<std::function<void()>> deferred_writes_;  // in order; bounded by kMaxDeferredWrites

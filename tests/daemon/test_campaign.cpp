@@ -312,3 +312,38 @@ TEST_CASE("results so far are stored after each trial, marked interim, with the 
     REQUIRE(interim["twin_parity"].size() == 1);
     CHECK(interim["twin_parity"][0]["case"] == 1);
 }
+
+TEST_CASE("a chamber that refuses setpoints for 4 min delays the trial instead of failing it; for longer the trial fails and the campaign continues", "[daemon][campaign][faults]") {
+    SECTION("4 min of Modbus exceptions at the trial's start: retried, the trial completes") {
+        DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"chamber:exception@0-240"}; });
+        REQUIRE(f.daemon().start_campaign(manikind::test::quick_plan("glitch")).empty());
+        f.daemon().run_virtual();
+        auto& db = f.daemon().db();
+        const auto trials = db.trials(*db.find_campaign("glitch"));
+        REQUIRE(trials.size() == 1);
+        CHECK(trials[0].state == "done");
+        bool retried = false;
+        for (const auto& e : db.events(trials[0].id)) retried |= e.message.find("retrying for up to 5 min") != std::string::npos;
+        CHECK(retried);
+    }
+    SECTION("7 min: the trial fails after 5, the campaign ends; started again it runs that trial and completes") {
+        DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"chamber:exception@0-420"}; });
+        REQUIRE(f.daemon().start_campaign(manikind::test::quick_plan("outage")).empty());
+        f.daemon().run_virtual();
+        auto& db = f.daemon().db();
+        const auto id = db.find_campaign("outage");
+        auto trials = db.trials(*id);
+        REQUIRE(trials.size() == 1);
+        CHECK(trials[0].state == "failed");
+        CHECK(trials[0].reason.find("chamber setpoint refused for 5 min") != std::string::npos);
+        for (int s = 0; s < 200; ++s) f.daemon().step_virtual(1.0);  // past the outage
+        REQUIRE(f.daemon().start_campaign(manikind::test::quick_plan("outage")).empty());
+        f.daemon().run_virtual();
+        trials = db.trials(*id);
+        REQUIRE(trials.size() == 2);
+        CHECK(trials[0].state == "failed");
+        CHECK(trials[1].state == "done");
+        // Now every planned trial is done: the same plan again is refused as complete.
+        CHECK(f.daemon().start_campaign(manikind::test::quick_plan("outage")).find("is complete") != std::string::npos);
+    }
+}
