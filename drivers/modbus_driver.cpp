@@ -10,8 +10,21 @@ namespace manikind::drivers {
 
 namespace mr = protocol::modbus_registers;
 
+namespace mb = protocol::modbus_blocks;
+
 ModbusDriver::ModbusDriver(ModbusOptions options, const Clock& clock, SampleSink sink)
     : options_(std::move(options)), clock_(clock), sink_(std::move(sink)) {
+    std::vector<mb::PointRegisters> regs;
+    std::vector<std::size_t> polled;
+    for (std::size_t i = 0; i < options_.points.size(); ++i) {
+        const auto& p = options_.points[i];
+        if (!p.poll) continue;
+        regs.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type)});
+        polled.push_back(i);
+    }
+    blocks_ = mb::plan_read_blocks(regs);
+    for (auto& b : blocks_)
+        for (auto& i : b.points) i = polled[i];  // indices into options_.points
     status_.name = options_.device_name;
     status_.transport = options_.serial_path.empty()
                             ? fmt::format("modbus-tcp {}:{}", options_.host, options_.port)
@@ -90,6 +103,35 @@ const ModbusPoint* ModbusDriver::find(const std::string& channel) const {
     return nullptr;
 }
 
+// Caller holds io_lock_. Counts the error by kind; a timeout or broken link leaves unknown
+// bytes in flight, so the connection is dropped and opened again from clean.
+void ModbusDriver::count_error(int err, const std::string& what) {
+    {
+        std::lock_guard lk(status_lock_);
+        status_.last_error = fmt::format("{}: {}", what, modbus_strerror(err));
+        if (err == ETIMEDOUT) {
+            ++status_.timeouts;
+        } else if (err > MODBUS_ENOBASE && err < MODBUS_ENOBASE + 16) {
+            ++status_.exceptions;  // an exception response: the link itself is fine
+        } else if (err == EMBBADCRC) {
+            ++status_.checksum_errors;
+        } else {
+            ++status_.comm_errors;
+        }
+    }
+    if (err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EBADF || err == ECONNREFUSED || err == EMBBADDATA ||
+        err == EMBBADEXC || err == EMBBADCRC || err == EIO)
+        disconnect();
+}
+
+double ModbusDriver::decode_point(const ModbusPoint& p, std::span<const std::uint16_t> words, Quality& quality) const {
+    double value = mr::decode(p.spec, words);
+    if (p.scaling) value = p.scaling->to_value(value);
+    quality = (!std::isfinite(value) || value < p.valid_min || value > p.valid_max) ? Quality::out_of_range
+                                                                                     : Quality::good;
+    return value;
+}
+
 // Caller holds io_lock_ and ctx_ is open.
 std::optional<double> ModbusDriver::read_point(const ModbusPoint& p, Quality& quality) {
     const int count = mr::register_count(p.spec.type);
@@ -98,33 +140,21 @@ std::optional<double> ModbusDriver::read_point(const ModbusPoint& p, Quality& qu
     const int rc = p.input_register ? modbus_read_input_registers(ctx_, p.spec.address, count, words)
                                     : modbus_read_registers(ctx_, p.spec.address, count, words);
     if (rc != count) {
-        const int err = errno;
         quality = Quality::comm_error;
-        {
-            std::lock_guard lk(status_lock_);
-            status_.last_error = fmt::format("{} (unit {}, register {}): {}", p.channel, p.unit_id, p.spec.address,
-                                             modbus_strerror(err));
-            if (err == ETIMEDOUT) {
-                ++status_.timeouts;
-            } else if (err > MODBUS_ENOBASE && err < MODBUS_ENOBASE + 16) {
-                ++status_.exceptions;  // an exception response: the link itself is fine
-            } else if (err == EMBBADCRC) {
-                ++status_.checksum_errors;
-            } else {
-                ++status_.comm_errors;
-            }
-        }
-        // A timeout or broken link leaves unknown bytes in flight: start again from a clean socket.
-        if (err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EBADF || err == ECONNREFUSED ||
-            err == EMBBADDATA || err == EMBBADEXC || err == EMBBADCRC || err == EIO)
-            disconnect();
+        count_error(errno, fmt::format("{} (unit {}, register {})", p.channel, p.unit_id, p.spec.address));
         return std::nullopt;
     }
-    double value = mr::decode(p.spec, std::span<const std::uint16_t>(words, static_cast<std::size_t>(count)));
-    if (p.scaling) value = p.scaling->to_value(value);
-    quality = (!std::isfinite(value) || value < p.valid_min || value > p.valid_max) ? Quality::out_of_range
-                                                                                     : Quality::good;
-    return value;
+    return decode_point(p, std::span<const std::uint16_t>(words, static_cast<std::size_t>(count)), quality);
+}
+
+// Caller holds io_lock_ and ctx_ is open.
+bool ModbusDriver::read_block(const mb::ReadBlock& b, std::vector<std::uint16_t>& words, int& err) {
+    words.assign(static_cast<std::size_t>(b.count), 0);
+    modbus_set_slave(ctx_, b.unit_id);
+    const int rc = b.input_register ? modbus_read_input_registers(ctx_, b.start, b.count, words.data())
+                                    : modbus_read_registers(ctx_, b.start, b.count, words.data());
+    err = rc == b.count ? 0 : errno;
+    return rc == b.count;
 }
 
 void ModbusDriver::poll() {
@@ -134,21 +164,65 @@ void ModbusDriver::poll() {
         const std::int64_t now = clock_.mono_ns();
         const std::int64_t utc = clock_.utc_ns();
         bool any_good = false;
-        for (const auto& p : options_.points) {
-            if (!p.poll) continue;
-            Quality q = Quality::comm_error;
-            std::optional<double> v;
-            if (ensure_connected(now)) {
-                v = read_point(p, q);
+        // Per point, in the configured order: value and quality (comm_error until read).
+        std::vector<std::optional<double>> values(options_.points.size());
+        std::vector<Quality> qualities(options_.points.size(), Quality::comm_error);
+        std::vector<std::uint16_t> words;
+        for (std::size_t bi = 0; bi < blocks_.size(); ++bi) {
+            if (!ensure_connected(now)) continue;
+            const mb::ReadBlock& b = blocks_[bi];
+            int err = 0;
+            if (!read_block(b, words, err)) {
+                if (err == EMBXILADD && b.points.size() > 1) {
+                    // The device has a hole in this range: read these points one by one from now on.
+                    {
+                        std::lock_guard sl(status_lock_);
+                        ++status_.exceptions;
+                        status_.last_error = fmt::format("registers {}..{} (unit {}) refused as one request (illegal data "
+                                                         "address); reading them one at a time",
+                                                         b.start, b.start + b.count - 1, b.unit_id);
+                    }
+                    std::vector<mb::ReadBlock> singles;
+                    for (const std::size_t i : b.points) {
+                        const auto& p = options_.points[i];
+                        singles.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type), {i}});
+                    }
+                    blocks_.erase(blocks_.begin() + static_cast<std::ptrdiff_t>(bi));
+                    blocks_.insert(blocks_.begin() + static_cast<std::ptrdiff_t>(bi), singles.begin(), singles.end());
+                    --bi;  // read the first single now
+                    continue;
+                }
+                const auto& first = options_.points[b.points.front()];
+                count_error(err, b.points.size() == 1
+                                     ? fmt::format("{} (unit {}, register {})", first.channel, b.unit_id, b.start)
+                                     : fmt::format("{} and {} more (unit {}, registers {}..{})", first.channel,
+                                                   b.points.size() - 1, b.unit_id, b.start, b.start + b.count - 1));
                 if (!ctx_) backoff_.failed(now);  // dropped after a timeout: the next try waits
+                continue;
             }
-            if (v && q != Quality::comm_error) any_good = true;
-            if (v) {
+            {
                 std::lock_guard sl(status_lock_);
                 ++status_.frames;
-                if (q == Quality::good) ++status_.samples;
             }
-            out.push_back(Sample{options_.device_name, p.channel, v.value_or(std::nan("")), v ? q : Quality::comm_error, now, utc});
+            for (const std::size_t i : b.points) {
+                const auto& p = options_.points[i];
+                const auto offset = static_cast<std::size_t>(p.spec.address - b.start);
+                Quality q = Quality::good;
+                values[i] = decode_point(
+                    p, std::span<const std::uint16_t>(words).subspan(offset, static_cast<std::size_t>(mr::register_count(p.spec.type))), q);
+                qualities[i] = q;
+                any_good = true;
+                if (q == Quality::good) {
+                    std::lock_guard sl(status_lock_);
+                    ++status_.samples;
+                }
+            }
+        }
+        for (std::size_t i = 0; i < options_.points.size(); ++i) {
+            const auto& p = options_.points[i];
+            if (!p.poll) continue;
+            out.push_back(Sample{options_.device_name, p.channel, values[i].value_or(std::nan("")),
+                                 values[i] ? qualities[i] : Quality::comm_error, now, utc});
         }
         if (any_good) backoff_.reset();
         std::lock_guard sl(status_lock_);

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "drivers/driver.hpp"
+#include "protocol/modbus_blocks.hpp"
 #include "protocol/modbus_registers.hpp"
 #include "protocol/probe_scaling.hpp"
 
@@ -74,9 +75,16 @@ private:
     void disconnect();
     void record_error(const std::string& what);
     std::optional<double> read_point(const ModbusPoint& p, Quality& quality);
+    // One request for a block of polled points; false (and the error classified) on failure.
+    bool read_block(const protocol::modbus_blocks::ReadBlock& b, std::vector<std::uint16_t>& words, int& err);
+    void count_error(int err, const std::string& what);  // classify, count, drop a broken link
+    double decode_point(const ModbusPoint& p, std::span<const std::uint16_t> words, Quality& quality) const;
     const ModbusPoint* find(const std::string& channel) const;
 
     ModbusOptions options_;
+    // Polled points grouped into requests (protocol/modbus_blocks.hpp). A block the device
+    // refuses with "illegal data address" is split into single points for good.
+    std::vector<protocol::modbus_blocks::ReadBlock> blocks_;
     const Clock& clock_;
     SampleSink sink_;
     std::mutex io_lock_;                 // one request at a time on the context

@@ -103,3 +103,24 @@ TEST_CASE("the manikin's watchdog stops heating when the host heartbeat stalls",
     CHECK(lab.acq().manikin().last_heartbeat()->error_bits == 1);
     CHECK(lab.acq().manikin().status().device_faults >= 1);
 }
+
+TEST_CASE("the datalogger's eight inputs are polled in two Modbus requests (contiguous registers 0-3 and 16-19), not eight", "[devices][modbus]") {
+    manikind::test::LabFixture lab;
+    lab.run_s(3.0);
+    lab.reset_counts();
+    const auto before = lab.status("datalogger");
+    lab.run_s(10.0);
+    const auto after = lab.status("datalogger");
+    const std::size_t polls = lab.channel("datalogger", "ee181_1.air_temp_c").count;
+    REQUIRE(polls >= 5);
+    // Every point still arrives, good, once per poll.
+    for (const char* ch : {"ee181_1.air_temp_c", "ee181_1.air_rh_pct", "ee181_2.air_temp_c", "ee181_2.air_rh_pct",
+                           "wall_tc_1.wall_temp_c", "wall_tc_2.wall_temp_c", "wall_tc_3.wall_temp_c", "wall_tc_4.wall_temp_c"}) {
+        INFO(ch);
+        CHECK(lab.channel("datalogger", ch).count == polls);
+        CHECK(lab.channel("datalogger", ch).good == polls);
+    }
+    // One answered request per block: the probes' 0..3 and the thermocouples' 16..19.
+    CHECK(after.frames - before.frames == 2 * polls);
+    CHECK(after.samples - before.samples == 8 * polls);
+}

@@ -30,7 +30,20 @@ rh = ModbusSlaveContext(hr=ModbusSequentialDataBlock(0, [0] * 40), zero_mode=Tru
 temp.setValues(3, 1, [231])   # PV 23.1 °C
 temp.setValues(3, 5, [231])
 rh.setValues(3, 1, [456])     # PV 45.6 %
-context = ModbusServerContext(slaves={1: temp, 2: rh}, single=False)
+
+
+class OneRegisterAtATime(ModbusSequentialDataBlock):
+    """A device that answers ILLEGAL DATA ADDRESS to any read of more than one register (some
+    controllers and gateways do): our driver must fall back from its block reads."""
+
+    def validate(self, address, count=1):
+        return count == 1 and super().validate(address, count)
+
+
+single = ModbusSlaveContext(hr=OneRegisterAtATime(0, [0] * 40), zero_mode=True)
+single.setValues(3, 10, [123])
+single.setValues(3, 11, [-45 & 0xFFFF])
+context = ModbusServerContext(slaves={1: temp, 2: rh, 3: single}, single=False)
 server = threading.Thread(target=StartTcpServer, kwargs={"context": context, "address": ("127.0.0.1", port)}, daemon=True)
 server.start()
 # Wait until it accepts connections (a connect attempt, not a sleep).
@@ -84,6 +97,19 @@ r = probe(map_file=bad_map)
 check(r["status"]["exceptions"] == 1, f"exception response counted (got {r['status']})")
 check(r["samples"][0]["quality"] == "comm_error", "the sample is flagged comm_error")
 os.unlink(bad_map)
+
+# Contiguous registers are read in one request; a device that refuses that is read point by point.
+with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as f:
+    f.write('family = "test"\n[units]\nsingle = 3\n'
+            '[[registers]]\nname = "a_c"\nunit_id = "single"\naddress = 10\ntype = "int16"\nscale = 0.1\naccess = "read"\n'
+            '[[registers]]\nname = "b_c"\nunit_id = "single"\naddress = 11\ntype = "int16"\nscale = 0.1\naccess = "read"\n')
+    single_map = f.name
+r = probe(map_file=single_map)
+vals = {s["channel"]: s for s in r["samples"]}
+check(vals["a_c"]["quality"] == "good" and abs(vals["a_c"]["value"] - 12.3) < 1e-9, f"register 10 read alone: 12.3 (got {vals['a_c']})")
+check(vals["b_c"]["quality"] == "good" and abs(vals["b_c"]["value"] + 4.5) < 1e-9, f"register 11 read alone: -4.5 (got {vals['b_c']})")
+check(r["status"]["exceptions"] == 1, f"the refused two-register request counted once (got {r['status']})")
+os.unlink(single_map)
 
 # The server goes away: connection refused is a comm error, not a crash.
 ServerStop()
