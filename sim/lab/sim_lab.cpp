@@ -299,9 +299,11 @@ void SimLab::step(double dt_s) {
     // Manikin bus output.
     const double now = world_.time_s();
     const bool silent = fault_active("manikin", "silent") || fault_active("manikin", "bus_off");
-    auto send = [&](const can_frame& fr) {
-        if (::send(manikin_fd_, &fr, sizeof fr, MSG_DONTWAIT) == static_cast<ssize_t>(sizeof fr)) ++can_frames_last_step_;
-    };
+    // This step's frames go out together in one sendmmsg (36 frames a second: one system call
+    // instead of 36), each still its own datagram, as frames on a bus are.
+    std::vector<can_frame> frames;
+    frames.reserve(static_cast<std::size_t>(world_.zone_count()) + 2);
+    auto send = [&](const can_frame& fr) { frames.push_back(fr); };
     // The heartbeat goes out every step (the real one every 100 ms); zone reports at their period.
     if (!silent) {
         mc::Heartbeat hb;
@@ -327,6 +329,19 @@ void SimLab::step(double dt_s) {
             err.data[1] = CAN_ERR_CRTL_RX_WARNING;
             send(err);
         }
+    }
+    if (!frames.empty()) {
+        std::vector<iovec> iov(frames.size());
+        std::vector<mmsghdr> msgs(frames.size());
+        for (std::size_t i = 0; i < frames.size(); ++i) {
+            iov[i] = {&frames[i], sizeof(can_frame)};
+            msgs[i] = {};
+            msgs[i].msg_hdr.msg_iov = &iov[i];
+            msgs[i].msg_hdr.msg_iovlen = 1;
+        }
+        const int sent = ::sendmmsg(manikin_fd_, msgs.data(), static_cast<unsigned>(msgs.size()), MSG_DONTWAIT);
+        // A full socket buffer (the host not reading) drops the rest, as a bus would for a dead node.
+        if (sent > 0) can_frames_last_step_ += sent;
     }
     serial_output(*windsonic_, dt_s);
     serial_output(*csat3b_, dt_s);
