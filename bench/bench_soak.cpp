@@ -150,6 +150,14 @@ int main(int argc, char** argv) {
         std::printf(" %.1f", per_day.back());
     }
     std::printf(" MB\n");
+    // Resident memory day by day: the plateau is the point (a leak climbs every day).
+    std::printf("resident memory by day, mean (max):");
+    for (int day = 1; day <= days; ++day) {
+        double sum = 0, top = 0;
+        for (int hr = (day - 1) * 24; hr < day * 24; ++hr) sum += rss[static_cast<std::size_t>(hr)], top = std::max(top, rss[static_cast<std::size_t>(hr)]);
+        std::printf(" %.1f (%.1f)", sum / 24, top);
+    }
+    std::printf(" MB\n");
     const auto [day_min, day_max] = std::minmax_element(per_day.begin(), per_day.end());
     std::printf("after day 1: resident memory %+.2f MB/day (least squares; %.1f MB at the end), open fds %.0f..%.0f, "
                 "database +%.1f..%.1f MB/day\n",
