@@ -181,14 +181,25 @@ std::optional<std::pair<double, can_frame>> parse_candump_line(const std::string
     return std::make_pair(t, f);
 }
 
-std::optional<std::pair<std::int64_t, can_frame>> parse_candump_log_line(const std::string& line) {
+CandumpLogLine parse_candump_log_line(const std::string& line) {
+    CandumpLogLine out;
     const auto parsed = parse_candump_line(line);
-    if (!parsed) return std::nullopt;
-    const double ns = parsed->first * 1e9;
+    if (!parsed) {
+        out.error = "not a candump -l line (expected \"(seconds.micro) can0 ID#HEX\")";
+        return out;
+    }
+    const double t_s = parsed->first;
     // from_chars reads "inf", "nan" and 1e300 too: converting those to an integer is undefined.
-    constexpr double int64_limit = 9.2e18;
-    if (!std::isfinite(ns) || std::fabs(ns) >= int64_limit) return std::nullopt;
-    return std::make_pair(static_cast<std::int64_t>(ns), parsed->second);
+    if (!std::isfinite(t_s) || t_s < 0.0 || t_s >= kMaxCandumpStamp_s) {
+        char text[160];
+        std::snprintf(text, sizeof text, "time stamp %g s is not a time: it must be finite, 0 or more and below %g s", t_s,
+                      kMaxCandumpStamp_s);
+        out.error = text;
+        return out;
+    }
+    out.utc_ns = static_cast<std::int64_t>(std::llround(t_s * 1e9));
+    out.frame = parsed->second;
+    return out;
 }
 
 }  // namespace manikind::protocol::manikin_can

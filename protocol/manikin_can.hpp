@@ -83,8 +83,17 @@ std::variant<Message, DecodeError> decode(const can_frame& frame);
 // can-utils `candump -l` log line: "(1718000000.123456) can0 123#11223344".
 std::string to_candump_line(const can_frame& frame, double utc_s, const std::string& interface = "can0");
 std::optional<std::pair<double, can_frame>> parse_candump_line(const std::string& line);
-// The same line with its time in UTC nanoseconds, as `manikin replay` reads a capture; nullopt
-// also when the time is not finite or beyond what int64 nanoseconds hold (about ±292 years).
-std::optional<std::pair<std::int64_t, can_frame>> parse_candump_log_line(const std::string& line);
+// The same line as `manikin replay` stores it: its time in UTC nanoseconds, rounded. The one
+// check of a capture's stamps (the fuzz target fuzz_candump_log runs exactly this): the time
+// must be finite, 0 or more and below kMaxCandumpStamp_s (int64 nanoseconds end in 2262).
+// On failure `error` says what is wrong with the line, for a message naming file and line.
+inline constexpr double kMaxCandumpStamp_s = 9.2e9;
+struct CandumpLogLine {
+    std::int64_t utc_ns = 0;
+    can_frame frame{};
+    std::string error;  // empty when the line is good
+    bool ok() const { return error.empty(); }
+};
+CandumpLogLine parse_candump_log_line(const std::string& line);
 
 }  // namespace manikind::protocol::manikin_can

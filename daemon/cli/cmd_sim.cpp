@@ -170,11 +170,8 @@ bool same_frame(const can_frame& a, const can_frame& b) {
     return a.can_id == b.can_id && a.can_dlc == b.can_dlc && std::memcmp(a.data, b.data, a.can_dlc) == 0;
 }
 
-// The latest stamp whose nanoseconds fit an int64 (year 2262), with room for rounding.
-constexpr double kMaxStamp_s = 9.2e9;
-
-// Reads a `candump -l` capture and checks every line: a candump line, a finite stamp in
-// 0..kMaxStamp_s, never before the previous one. A frame identical to one already seen at
+// Reads a `candump -l` capture and checks every line: a candump line with a good stamp
+// (protocol's parse_candump_log_line), never before the previous one. A frame identical to one already seen at
 // the same stamp (a logger writing a frame twice) is skipped and counted.
 Capture read_capture(const std::string& file) {
     std::error_code ec;
@@ -188,28 +185,23 @@ Capture read_capture(const std::string& file) {
     while (std::getline(in, text)) {
         ++line_no;
         if (text.empty() || text[0] == '#') continue;
-        const auto parsed = protocol::manikin_can::parse_candump_line(text);
-        if (!parsed)
-            throw UserError(fmt::format("{}:{}: not a candump -l line (expected \"(seconds.micro) can0 ID#HEX\")", file, line_no));
-        const double t_s = parsed->first;
-        if (!std::isfinite(t_s) || t_s < 0.0 || t_s >= kMaxStamp_s)
-            throw UserError(fmt::format("{}:{}: time stamp {} s is not a time: it must be finite, 0 or more and below {:g} s",
-                                        file, line_no, t_s, kMaxStamp_s));
-        const auto t_ns = static_cast<std::int64_t>(std::llround(t_s * 1e9));
+        const auto parsed = protocol::manikin_can::parse_candump_log_line(text);
+        if (!parsed.ok()) throw UserError(fmt::format("{}:{}: {}", file, line_no, parsed.error));
+        const std::int64_t t_ns = parsed.utc_ns;
         if (!capture.frames.empty() && t_ns < capture.frames.back().t_ns)
             throw UserError(fmt::format("{}:{}: time stamp {:.6f} s is before {:.6f} s on line {}; a capture must be in time order",
-                                        file, line_no, t_s, static_cast<double>(capture.frames.back().t_ns) * 1e-9,
-                                        previous_line));
+                                        file, line_no, static_cast<double>(t_ns) * 1e-9,
+                                        static_cast<double>(capture.frames.back().t_ns) * 1e-9, previous_line));
         // Earlier frames with this stamp sit at the back, the capture being in time order.
         bool duplicate = false;
         for (auto it = capture.frames.rbegin(); it != capture.frames.rend() && it->t_ns == t_ns && !duplicate; ++it)
-            duplicate = same_frame(it->frame, parsed->second);
+            duplicate = same_frame(it->frame, parsed.frame);
         previous_line = line_no;
         if (duplicate) {
             ++capture.duplicates;
             continue;
         }
-        capture.frames.push_back({t_ns, parsed->second, line_no});
+        capture.frames.push_back({t_ns, parsed.frame, line_no});
     }
     if (capture.frames.empty()) throw UserError(fmt::format("{}: no frames", file));
     return capture;

@@ -100,14 +100,19 @@ TEST_CASE("manikin CAN: bad frames are refused with the reason, error frames rep
 
 TEST_CASE("manikin CAN: a capture line's time becomes nanoseconds only when it fits", "[protocol][can]") {
     const auto ok = parse_candump_log_line("(1718000000.123456) can0 105#AC0D7B00C8010A03");
-    REQUIRE(ok.has_value());
-    CHECK(ok->first == Approx(1718000000123456000.0).epsilon(1e-15));
-    CHECK(ok->second.can_id == 0x105);
+    REQUIRE(ok.ok());
+    CHECK(ok.utc_ns == Approx(1718000000123456000.0).epsilon(1e-15));
+    CHECK(ok.frame.can_id == 0x105);
     // from_chars reads these; converting them to int64 nanoseconds was undefined behaviour in
     // `manikin replay` (found reading the parser for the fuzz target fuzz_candump_log).
     for (const char* line : {"(inf) can0 105#AC", "(nan) can0 105#AC", "(-inf) can0 105#AC",
-                             "(1e300) can0 105#AC", "(9300000000.0) can0 105#AC"})
-        CHECK_FALSE(parse_candump_log_line(line).has_value());
+                             "(1e300) can0 105#AC", "(9300000000.0) can0 105#AC", "(-0.9) can0 105#AC"}) {
+        INFO(line);
+        const auto bad = parse_candump_log_line(line);
+        CHECK_FALSE(bad.ok());
+        CHECK_THAT(bad.error, Catch::Contains("is not a time"));
+    }
+    CHECK_THAT(parse_candump_log_line("(1.0) can0 10#AC").error, Catch::Contains("not a candump -l line"));
     CHECK(parse_candump_line("(1e300) can0 105#AC").has_value());  // the line itself is well formed
 }
 
