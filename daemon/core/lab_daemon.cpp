@@ -538,6 +538,18 @@ namespace {
 constexpr double kDeviceRetryTimeoutS = 300.0;
 }  // namespace
 
+// A device refused this stage's setpoint: warn once and let the next tick try again; after
+// kDeviceRetryTimeoutS in the stage the trial fails. `detail` is ": <device's reason>" or empty.
+void LabDaemon::setpoint_refused(const std::string& what, const std::string& detail) {
+    const double minutes = kDeviceRetryTimeoutS / 60;
+    if (stage_elapsed_s() > kDeviceRetryTimeoutS) {
+        finish_trial("failed", fmt::format("{} for {:.0f} min{}", what, minutes, detail));
+    } else if (!device_retry_logged_) {
+        device_retry_logged_ = true;
+        event("warn", "setpoint", fmt::format("{}, retrying for up to {:.0f} min{}", what, minutes, detail));
+    }
+}
+
 void LabDaemon::tick_locked() {
     try {
         if (!storage_full_) {
@@ -596,13 +608,7 @@ void LabDaemon::advance_locked() {
             // rebooting) is retried each tick, not failed at once: otherwise a 4-min glitch fails
             // every queued trial in as many ticks. The plan was checked against [safety] already.
             if (const auto why = set_chamber(current_->c.chamber_temp_c, current_->c.chamber_rh_pct); !why.empty()) {
-                if (stage_elapsed_s() > kDeviceRetryTimeoutS) {
-                    finish_trial("failed", fmt::format("chamber setpoint refused for {:.0f} min: {}", kDeviceRetryTimeoutS / 60, why));
-                } else if (!device_retry_logged_) {
-                    device_retry_logged_ = true;
-                    event("warn", "setpoint", fmt::format("chamber setpoint refused, retrying for up to {:.0f} min: {}",
-                                                          kDeviceRetryTimeoutS / 60, why));
-                }
+                setpoint_refused("chamber setpoint refused", ": " + why);
                 return;
             }
             enclosure_range_.clear();
@@ -629,14 +635,7 @@ void LabDaemon::advance_locked() {
             sp.sweating = current_->c.wet;
             sp.sweat_rate_g_m2_h = current_->c.sweat_rate_g_m2_h;
             if (!acq_->manikin().send(sp) || !acq_->manikin().set_run(true)) {
-                // Retried each tick, as the chamber's setpoint is (a bus-off recovers in seconds).
-                if (elapsed > kDeviceRetryTimeoutS) {
-                    finish_trial("failed", fmt::format("the manikin bus refused the setpoint for {:.0f} min", kDeviceRetryTimeoutS / 60));
-                } else if (!device_retry_logged_) {
-                    device_retry_logged_ = true;
-                    event("warn", "setpoint", fmt::format("the manikin bus refused the setpoint, retrying for up to {:.0f} min",
-                                                          kDeviceRetryTimeoutS / 60));
-                }
+                setpoint_refused("the manikin bus refused the setpoint", "");  // a bus-off recovers in seconds
                 return;
             }
             for (auto& r : skin_range_) r.clear();

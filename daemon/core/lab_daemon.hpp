@@ -123,6 +123,7 @@ private:
     void start_interim_results();
     void begin_campaign(const CampaignPlan& plan);
     void safety_stop(const std::string& why);
+    void setpoint_refused(const std::string& what, const std::string& detail);
     // A full disk: heating stops, the trial and campaign end interrupted (continuable), an alarm
     // is raised; what the daemon could not write waits in deferred_writes_ until space returns.
     void storage_stop_locked(const std::string& why);
