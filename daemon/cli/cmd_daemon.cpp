@@ -410,14 +410,12 @@ void add_daemon_commands(CLI::App& app) {
             for (const auto& w : *wanted)
                 if (std::none_of(chosen.begin(), chosen.end(), [&](const auto& ch) { return ch.device_name + "/" + ch.name == w; }))
                     throw UserError(fmt::format("--channel {}: no such channel in {} (see `manikin live` for names)", w, *db));
-            // The window ends at the newest idle reading of the chosen channels.
-            std::int64_t newest = 0;
-            std::vector<std::vector<recorder::SampleRow>> rows;
-            for (const auto& ch : chosen) {
-                rows.push_back(database.idle_samples(ch.id, 0));
-                if (!rows.back().empty()) newest = std::max(newest, rows.back().back().utc_ns);
-            }
+            // The window ends at the newest idle reading; the log is keyed by time, so only the
+            // window is read.
+            const std::int64_t newest = database.newest_idle_utc_ns().value_or(0);
             const auto since = newest - static_cast<std::int64_t>(*last_min * 60e9);
+            std::vector<std::vector<recorder::SampleRow>> rows;
+            for (const auto& ch : chosen) rows.push_back(database.idle_samples(ch.id, since));
             nlohmann::json out = nlohmann::json::array();
             if (!*json) std::printf("utc_s,channel,value,unit,quality\n");
             for (std::size_t i = 0; i < chosen.size(); ++i) {

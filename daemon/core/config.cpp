@@ -242,8 +242,10 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*a, "api", "idle_timeout_s", c.api.idle_timeout_s, 1, 86400, "s");
     }
     if (const auto* h = r.table(root, "", "http")) r.text(*h, "http", "listen", c.http.listen);
-    if (const auto* rec = r.table(root, "", "recorder"))
+    if (const auto* rec = r.table(root, "", "recorder")) {
         r.text(*rec, "recorder", "durability", c.recorder_durability, {"process", "power"});
+        r.number(*rec, "recorder", "commit_interval_s", c.recorder_commit_interval_s, 0.05, 60.0, "s");
+    }
     r.warn_unknown(root, "");
     return c;
 }

@@ -92,6 +92,7 @@ struct Config {
     // [recorder] durability: "process" survives a killed daemon (SQLite synchronous = NORMAL);
     // "power" also a power cut (FULL: every commit synced to the disk). docs/recorder.md.
     std::string recorder_durability = "process";
+    double recorder_commit_interval_s = 1.0;  // [recorder] commit_interval_s: the longest a row waits for its commit
     SafetyLimits safety;
     SteadyStateRule steady_state;
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)

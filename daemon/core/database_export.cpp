@@ -33,32 +33,48 @@ struct BinnedChannel {
     std::vector<std::uint8_t> quality;  // analysis::kNoSample where no sample fell in the row
 };
 
-BinnedChannel binned(const std::vector<recorder::SampleRow>& rows, std::int64_t t0_ns, std::size_t n, double period_s) {
-    constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-    std::vector<double> sum(n, 0.0);
-    std::vector<int> good(n, 0);
-    BinnedChannel out{std::vector<double>(n, kNaN), std::vector<std::uint8_t>(n, analysis::kNoSample)};
-    for (const auto& r : rows) {
-        const double t = static_cast<double>(r.mono_ns - t0_ns) * 1e-9;
-        if (t < -period_s) continue;
-        const auto i = static_cast<long>(std::ceil(t / period_s - 1e-9));
-        if (i < 0 || static_cast<std::size_t>(i) >= n) continue;
+// Accumulates one channel's samples as they come (a trial is read once, in time order, for
+// every channel at once) and gives its BinnedChannel at the end.
+class ChannelBinner {
+public:
+    ChannelBinner(std::int64_t t0_ns, std::size_t n, double period_s)
+        : t0_ns_(t0_ns), period_s_(period_s), sum_(n, 0.0), good_(n, 0),
+          out_{std::vector<double>(n, std::numeric_limits<double>::quiet_NaN()), std::vector<std::uint8_t>(n, analysis::kNoSample)} {}
+
+    void add(const recorder::SampleRow& r) {
+        any_ = true;
+        const double t = static_cast<double>(r.mono_ns - t0_ns_) * 1e-9;
+        if (t < -period_s_) return;
+        const auto i = static_cast<long>(std::ceil(t / period_s_ - 1e-9));
+        if (i < 0 || static_cast<std::size_t>(i) >= sum_.size()) return;
         const auto k = static_cast<std::size_t>(i);
         if (r.quality == 0 && std::isfinite(r.value)) {
-            sum[k] += r.value;
-            ++good[k];
-        } else if (good[k] == 0) {
-            out.value[k] = r.value;
-            out.quality[k] = r.quality == 0 ? std::uint8_t{3} : r.quality;  // a "good" NaN is a lost reading
+            sum_[k] += r.value;
+            ++good_[k];
+        } else if (good_[k] == 0) {
+            out_.value[k] = r.value;
+            out_.quality[k] = r.quality == 0 ? std::uint8_t{3} : r.quality;  // a "good" NaN is a lost reading
         }
     }
-    for (std::size_t k = 0; k < n; ++k)
-        if (good[k] > 0) {
-            out.value[k] = good[k] == 1 ? sum[k] : sum[k] / good[k];
-            out.quality[k] = 0;
-        }
-    return out;
-}
+    bool any_sample() const { return any_; }
+
+    BinnedChannel finish() {
+        for (std::size_t k = 0; k < sum_.size(); ++k)
+            if (good_[k] > 0) {
+                out_.value[k] = good_[k] == 1 ? sum_[k] : sum_[k] / good_[k];
+                out_.quality[k] = 0;
+            }
+        return std::move(out_);
+    }
+
+private:
+    std::int64_t t0_ns_;
+    double period_s_;
+    std::vector<double> sum_;
+    std::vector<int> good_;
+    BinnedChannel out_;
+    bool any_ = false;
+};
 
 // Good values only, for the analysis columns (a flagged reading never enters a mean).
 std::vector<double> good_values(const BinnedChannel& c) {
@@ -122,10 +138,15 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
     for (std::size_t s = 0; s < spans.size(); ++s) {
         const auto& sp = spans[s];
         const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(sp.end_mono_ns - sp.start_mono_ns) * 1e-9 / period_s)) + 1;
+        std::vector<ChannelBinner> binners(all_channels.size(), ChannelBinner(sp.start_mono_ns, n, period_s));
+        std::map<std::int64_t, std::size_t> index_of_id;  // channel id -> index into all_channels
+        for (std::size_t k = 0; k < all_channels.size(); ++k) index_of_id[all_channels[k].id] = k;
+        db.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {
+            if (const auto it = index_of_id.find(r.channel_id); it != index_of_id.end()) binners[it->second].add(r);
+        });
         for (std::size_t k = 0; k < all_channels.size(); ++k) {
-            const auto rows = db.samples(sp.row.id, all_channels[k].id);
-            if (!rows.empty()) recorded[k] = true;
-            per_trial[s].push_back(binned(rows, sp.start_mono_ns, n, period_s));
+            if (binners[k].any_sample()) recorded[k] = true;
+            per_trial[s].push_back(binners[k].finish());
         }
     }
     std::vector<std::size_t> exported;  // indexes into all_channels

@@ -78,6 +78,8 @@ LabDaemon::LabDaemon(DaemonOptions options)
                                   interrupted, campaigns_interrupted));
     recorder::RecorderOptions recorder_options;
     recorder_options.durability = durability_of(o_.config);
+    recorder_options.max_batch_delay =
+        std::chrono::milliseconds(std::llround(o_.config.recorder_commit_interval_s * 1000.0));
     recorder_ = std::make_unique<recorder::Recorder>(db_path_, recorder_options);
     skin_range_.resize(analysis::andi35_zone_map().size());
     auto sink = [this](const drivers::Sample& s) { on_sample(s); };

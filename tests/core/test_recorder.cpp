@@ -216,6 +216,82 @@ TEST_CASE("database: campaigns, cases, trials, channels, events and results roun
     CHECK(db.integrity_check() == "ok");
 }
 
+TEST_CASE("database: a version 4 file's samples and idle log survive the move to the time-major key (v5), and its trials get UUIDs (v6)", "[recorder]") {
+    TempDir dir("v4");
+    const auto path = dir.path / "v4.db";
+    std::string v4;
+    for (int i = 0; i < 4; ++i) v4 += Database::migrations()[static_cast<std::size_t>(i)];
+    raw_exec(path, v4 + "PRAGMA user_version = 4;");
+    raw_exec(path,
+             "INSERT INTO campaigns (name, definition_json, created_utc_ns) VALUES ('old', '{}', 1);"
+             "INSERT INTO cases (campaign_id, name, conditions_json, position) VALUES (1, 'c', '{}', 0);"
+             "INSERT INTO trials (campaign_id, case_id, replicate) VALUES (1, 1, 1);"
+             "INSERT INTO devices (name, kind, address) VALUES ('manikin', 'm', 'can0');"
+             "INSERT INTO channels (device_id, name, unit) VALUES (1, 'a', 'W/m2'), (1, 'b', 'degC');"
+             // Stored channel-major, as version 4 keyed them: b's rows come before a's later ones.
+             "INSERT INTO samples VALUES (1, 1, 10, 110, 1.0, 0), (1, 1, 20, 120, 2.0, 0), (1, 2, 10, 110, 3.0, 0),"
+             " (1, 2, 20, 120, NULL, 3);"
+             "INSERT INTO idle_samples VALUES (2, 500, 5, 7.0, 0), (1, 500, 5, 8.0, 0), (1, 400, 4, 9.0, 0);"
+             "INSERT INTO events (trial_id, mono_ns, utc_ns, severity, kind, message) VALUES (1, 5, 105, 'info', 'stage', 'acquiring');");
+    auto db = Database::open(path);
+    CHECK(db.schema_version() == Database::latest_schema_version());
+    CHECK(db.integrity_check() == "ok");
+    CHECK(db.sample_count(1) == 4);
+    std::vector<std::pair<std::int64_t, std::int64_t>> order;  // (mono_ns, channel) as read back
+    db.for_each_trial_sample(1, [&](const SampleRow& r) { order.emplace_back(r.mono_ns, r.channel_id); });
+    CHECK(order == std::vector<std::pair<std::int64_t, std::int64_t>>{{10, 1}, {10, 2}, {20, 1}, {20, 2}});
+    const auto b = db.samples(1, 2);
+    REQUIRE(b.size() == 2);
+    CHECK(b[0].value == 3.0);
+    CHECK(std::isnan(b[1].value));
+    CHECK(b[1].quality == 3);
+    const auto idle = db.idle_samples(1, 0);
+    REQUIRE(idle.size() == 2);
+    CHECK(idle[0].utc_ns == 400);
+    CHECK(idle[1].value == 8.0);
+    CHECK(db.newest_idle_utc_ns() == 500);
+    // Version 6 named the old trial, and a new one gets a different name.
+    const auto old_uuid = db.trial(1)->uuid;
+    CHECK(old_uuid.size() == 32);
+    CHECK(old_uuid.find_first_not_of("0123456789abcdef") == std::string::npos);
+    const auto fresh = db.create_trial(1, 1, 2);
+    CHECK(db.trial(fresh)->uuid.size() == 32);
+    CHECK(db.trial(fresh)->uuid != old_uuid);
+    // The analysts' view still reads the renamed table.
+    sqlite3* raw = nullptr;
+    REQUIRE(sqlite3_open(path.c_str(), &raw) == SQLITE_OK);
+    sqlite3_stmt* q = nullptr;
+    REQUIRE(sqlite3_prepare_v2(raw, "SELECT count(*), sum(value) FROM sample_values WHERE trial_id = 1", -1, &q, nullptr) == SQLITE_OK);
+    REQUIRE(sqlite3_step(q) == SQLITE_ROW);
+    CHECK(sqlite3_column_int(q, 0) == 4);
+    CHECK(sqlite3_column_double(q, 1) == 6.0);
+    sqlite3_finalize(q);
+    sqlite3_close(raw);
+    // A second write and a duplicate behave as before.
+    const SampleRow more[] = {{1, 1, 30, 130, 4.0, 0}, {1, 1, 10, 110, 99.0, 0}};
+    CHECK(db.insert_samples(more) == 1);
+    CHECK(db.sample_count(1) == 5);
+}
+
+TEST_CASE("database: a sample naming a trial or channel that does not exist fails its whole transaction", "[recorder]") {
+    TempDir dir("orphan");
+    auto db = Database::open(dir.path / "trials.db");
+    const auto f = make_fixture(db);
+    const SampleRow no_trial[] = {{f.trial, f.channel_a, 1, 10, 1.0, 0}, {f.trial + 7, f.channel_a, 2, 20, 2.0, 0}};
+    CHECK_THROWS_WITH(db.insert_samples(no_trial), Catch::Contains("trial " + std::to_string(f.trial + 7) + " does not exist"));
+    const SampleRow no_channel[] = {{f.trial, f.channel_a, 1, 10, 1.0, 0}, {f.trial, 999, 2, 20, 2.0, 0}};
+    CHECK_THROWS_WITH(db.insert_samples(no_channel), Catch::Contains("channel 999 does not exist"));
+    const SampleRow idle_no_channel[] = {{0, 998, 1, 10, 1.0, 0}};
+    CHECK_THROWS_WITH(db.insert_samples(idle_no_channel), Catch::Contains("channel 998 does not exist"));
+    CHECK(db.sample_count(f.trial) == 0);  // the good first rows went nowhere either
+    // SQLite's own checks are back on for everything else.
+    CHECK_THROWS_AS(db.create_trial(f.campaign + 50, f.case_id, 1), UserError);
+    const SampleRow good[] = {{f.trial, f.channel_b, 1, 10, 1.0, 0}};
+    CHECK(db.insert_samples(good) == 0);
+    CHECK(db.sample_count(f.trial) == 1);
+    CHECK(db.integrity_check() == "ok");
+}
+
 TEST_CASE("recorder: 100 000 rows from a producer thread are all committed in order", "[recorder]") {
     TempDir dir("bulk");
     const auto path = dir.path / "trials.db";

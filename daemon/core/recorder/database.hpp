@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -68,6 +69,7 @@ struct TrialRow {
     std::optional<std::int64_t> ended_utc_ns;         // entry into a terminal state
     std::optional<std::int64_t> steady_from_mono_ns;  // start of the steady-state window
     std::int64_t quality_flags = 0;                   // OR of the flags added so far
+    std::string uuid;                                 // 32 hex digits, random, unique (schema version 6)
 };
 
 struct ChannelRow {
@@ -173,9 +175,13 @@ public:
     std::optional<TrialRow> trial(std::int64_t trial_id);
     std::vector<ChannelRow> channels();                         // by device name, channel name
     std::vector<SampleRow> samples(std::int64_t trial_id, std::int64_t channel_id);  // by mono_ns
+    // Every sample of a trial in key order (mono_ns, then channel_id), one pass over the trial's
+    // key range: the way to read many channels, since samples is keyed time-major (version 5).
+    void for_each_trial_sample(std::int64_t trial_id, const std::function<void(const SampleRow&)>& visit);
     std::int64_t sample_count(std::int64_t trial_id);
     // The idle log (rows pushed with trial_id 0): one channel's readings since a wall time.
     std::vector<SampleRow> idle_samples(std::int64_t channel_id, std::int64_t since_utc_ns);
+    std::optional<std::int64_t> newest_idle_utc_ns();  // the idle log's last wall time (a key lookup)
     std::int64_t idle_sample_count();
     std::vector<EventRow> events(std::optional<std::int64_t> trial_id);  // empty: all events; by mono_ns
     std::optional<ResultRow> latest_result(std::int64_t campaign_id);

@@ -20,8 +20,10 @@ struct RecorderOptions {
     std::size_t queue_capacity = 1 << 16;  // rows waiting to be taken by the writer
     std::size_t max_batch_rows = 4096;     // rows per transaction
     // A row waits at most this long (plus one commit) before its transaction starts, which
-    // bounds what a crash of this process can lose.
-    std::chrono::milliseconds max_batch_delay{200};
+    // bounds what a crash of this process can lose. Each commit rewrites at least the page it
+    // appends to, so shorter means more bytes written per row ([recorder] commit_interval_s;
+    // docs/recorder.md, "Write amplification").
+    std::chrono::milliseconds max_batch_delay{1000};
     int max_commit_attempts = 5;  // then the batch is discarded (counted in lost) and logged
     // A full disk is not counted against max_commit_attempts: the rows wait in memory (new ones
     // are dropped once the queue is full) and the commit is tried again this often, and at each
