@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <ostream>
 #include <set>
+#include <stdexcept>
 
 #include <fmt/core.h>
 
@@ -24,51 +26,6 @@ double window_mean(const std::vector<double>& values, std::size_t first) {
         ++n;
     }
     return n ? sum / static_cast<double>(n) : kNaN;
-}
-
-TrialResult summarize_trial(const Trial& trial, const ZoneMap& map, const AnalysisOptions& o) {
-    const TrialData& d = trial.data;
-    TrialResult r;
-    r.id = trial.info.id;
-    r.replicate = trial.info.replicate;
-    r.rows = d.rows();
-    r.steady = detect_steady_state(d, map, o.steady);
-    r.whole_body_q_w_m2 = kNaN;
-    r.air_temp_c = r.air_rh_pct = r.air_speed_m_s = r.wall_temp_c = r.mean_skin_temp_c = kNaN;
-    if (d.rows() == 0) {
-        r.exclusion_reason = "empty trial: no samples";
-        return r;
-    }
-    const double start_s = r.steady.window_start_s - 1e-9 * std::max(1.0, std::fabs(r.steady.window_start_s));
-    const auto first = static_cast<std::size_t>(std::lower_bound(d.t_s.begin(), d.t_s.end(), start_s) - d.t_s.begin());
-    std::string missing;
-    const double total_area_m2 = map.total_area_m2();
-    double whole_body = 0.0;
-    double skin = 0.0;
-    for (std::size_t z = 0; z < map.size(); ++z) {
-        r.zone_q_w_m2.push_back(window_mean(d.heat_flux_w_m2[z], first));
-        r.zone_skin_temp_c.push_back(window_mean(d.skin_temp_c[z], first));
-        if ((std::isnan(r.zone_q_w_m2.back()) || std::isnan(r.zone_skin_temp_c.back())) && missing.empty())
-            missing = fmt::format("zone {:02} ({}) has no samples in the window", map.zones[z].zone, map.zones[z].name);
-        const double w = map.zones[z].area_m2 / total_area_m2;
-        whole_body += w * r.zone_q_w_m2.back();  // segmental area weighting (Text S3)
-        skin += w * r.zone_skin_temp_c.back();
-    }
-    r.whole_body_q_w_m2 = whole_body;
-    r.mean_skin_temp_c = skin;
-    r.air_temp_c = window_mean(d.air_temp_c, first);
-    r.air_rh_pct = window_mean(d.air_rh_pct, first);
-    if (!d.air_speed_m_s.empty()) r.air_speed_m_s = window_mean(d.air_speed_m_s, first);
-    if (!d.wall_temp_c.empty()) r.wall_temp_c = window_mean(d.wall_temp_c, first);
-
-    const bool partial = r.steady.window_end_s - d.t_s.front() < o.steady.window_s;
-    if (!missing.empty()) r.exclusion_reason = "unusable: " + missing;
-    else if (partial) r.exclusion_reason = r.steady.reason;  // never averaged, even with include_unsteady
-    else if (std::isnan(r.air_temp_c) || std::isnan(r.air_rh_pct))
-        r.exclusion_reason = "unusable: no air temperature or humidity sample in the window";
-    else if (!r.steady.steady && !o.include_unsteady) r.exclusion_reason = "not steady: " + r.steady.reason;
-    r.included = r.exclusion_reason.empty();
-    return r;
 }
 
 // Region or whole body from the zones `idx`: per-trial area-weighted means give Type A (so
@@ -149,6 +106,51 @@ ConditionEstimate condition(const std::string& channel, const std::vector<const 
 
 }  // namespace
 
+TrialResult summarize_trial(const Trial& trial, const ZoneMap& map, const AnalysisOptions& o) {
+    const TrialData& d = trial.data;
+    TrialResult r;
+    r.id = trial.info.id;
+    r.replicate = trial.info.replicate;
+    r.rows = d.rows();
+    r.steady = detect_steady_state(d, map, o.steady);
+    r.whole_body_q_w_m2 = kNaN;
+    r.air_temp_c = r.air_rh_pct = r.air_speed_m_s = r.wall_temp_c = r.mean_skin_temp_c = kNaN;
+    if (d.rows() == 0) {
+        r.exclusion_reason = "empty trial: no samples";
+        return r;
+    }
+    const double start_s = r.steady.window_start_s - 1e-9 * std::max(1.0, std::fabs(r.steady.window_start_s));
+    const auto first = static_cast<std::size_t>(std::lower_bound(d.t_s.begin(), d.t_s.end(), start_s) - d.t_s.begin());
+    std::string missing;
+    const double total_area_m2 = map.total_area_m2();
+    double whole_body = 0.0;
+    double skin = 0.0;
+    for (std::size_t z = 0; z < map.size(); ++z) {
+        r.zone_q_w_m2.push_back(window_mean(d.heat_flux_w_m2[z], first));
+        r.zone_skin_temp_c.push_back(window_mean(d.skin_temp_c[z], first));
+        if ((std::isnan(r.zone_q_w_m2.back()) || std::isnan(r.zone_skin_temp_c.back())) && missing.empty())
+            missing = fmt::format("zone {:02} ({}) has no samples in the window", map.zones[z].zone, map.zones[z].name);
+        const double w = map.zones[z].area_m2 / total_area_m2;
+        whole_body += w * r.zone_q_w_m2.back();  // segmental area weighting (Text S3)
+        skin += w * r.zone_skin_temp_c.back();
+    }
+    r.whole_body_q_w_m2 = whole_body;
+    r.mean_skin_temp_c = skin;
+    r.air_temp_c = window_mean(d.air_temp_c, first);
+    r.air_rh_pct = window_mean(d.air_rh_pct, first);
+    if (!d.air_speed_m_s.empty()) r.air_speed_m_s = window_mean(d.air_speed_m_s, first);
+    if (!d.wall_temp_c.empty()) r.wall_temp_c = window_mean(d.wall_temp_c, first);
+
+    const bool partial = r.steady.window_end_s - d.t_s.front() < o.steady.window_s;
+    if (!missing.empty()) r.exclusion_reason = "unusable: " + missing;
+    else if (partial) r.exclusion_reason = r.steady.reason;  // never averaged, even with include_unsteady
+    else if (std::isnan(r.air_temp_c) || std::isnan(r.air_rh_pct))
+        r.exclusion_reason = "unusable: no air temperature or humidity sample in the window";
+    else if (!r.steady.steady && !o.include_unsteady) r.exclusion_reason = "not steady: " + r.steady.reason;
+    r.included = r.exclusion_reason.empty();
+    return r;
+}
+
 const char* to_string(TypeBCorrelation c) {
     return c == TypeBCorrelation::correlated ? "correlated" : "uncorrelated";
 }
@@ -162,6 +164,30 @@ CoverageOptions AnalysisOptions::coverage_options() const {
 }
 
 CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions& o) {
+    std::vector<TrialResult> results;
+    results.reserve(campaign.trials.size());
+    for (const auto& t : campaign.trials) results.push_back(summarize_trial(t, campaign.zone_map, o));
+    return aggregate_trials(campaign, results, o);
+}
+
+CampaignResult analyze_campaign_streaming(const std::filesystem::path& folder, const ReadOptions& read,
+                                          const AnalysisOptions& o) {
+    const Campaign metadata = read_campaign_metadata(folder, read);
+    std::vector<TrialResult> results;
+    results.reserve(metadata.trials.size());
+    for (const auto& t : metadata.trials) {
+        // Scoped: the samples are freed before the next trial is read.
+        const Trial trial{t.info, read_trial_data(folder, metadata, t.info)};
+        results.push_back(summarize_trial(trial, metadata.zone_map, o));
+    }
+    return aggregate_trials(metadata, results, o);
+}
+
+CampaignResult aggregate_trials(const Campaign& campaign, const std::vector<TrialResult>& results,
+                                const AnalysisOptions& o) {
+    if (results.size() != campaign.trials.size())
+        throw std::invalid_argument(fmt::format("aggregate_trials: {} results for {} trials", results.size(),
+                                                campaign.trials.size()));
     CampaignResult out;
     out.campaign = campaign.name;
     out.options = o;
@@ -171,20 +197,23 @@ CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions&
                                          ? campaign.instruments.at("heat_flux_w_m2")
                                          : default_instrument_specs().at("heat_flux_w_m2");
 
-    std::map<int, std::vector<const Trial*>> by_case;
-    for (const auto& t : campaign.trials) by_case[t.info.case_id].push_back(&t);
+    // Indices into campaign.trials and results, per case.
+    std::map<int, std::vector<std::size_t>> by_case;
+    for (std::size_t i = 0; i < campaign.trials.size(); ++i) by_case[campaign.trials[i].info.case_id].push_back(i);
 
     for (auto& [case_id, trials] : by_case) {
-        std::stable_sort(trials.begin(), trials.end(),
-                         [](const Trial* a, const Trial* b) { return a->info.replicate < b->info.replicate; });
+        std::stable_sort(trials.begin(), trials.end(), [&](std::size_t a, std::size_t b) {
+            return campaign.trials[a].info.replicate < campaign.trials[b].info.replicate;
+        });
         CaseResult c;
         c.case_id = case_id;
         std::vector<const TrialResult*> used;
         c.trials.reserve(trials.size());
-        for (const auto* t : trials) c.trials.push_back(summarize_trial(*t, map, o));
+        for (const auto i : trials) c.trials.push_back(results[i]);
         std::set<double> wettedness, setpoints;
         for (std::size_t i = 0; i < trials.size(); ++i) {
             const auto& tr = c.trials[i];
+            const TrialInfo& info = campaign.trials[trials[i]].info;
             if (!tr.included) {
                 out.warnings.push_back(fmt::format("case {}: trial '{}' excluded: {}", case_id, tr.id, tr.exclusion_reason));
                 continue;
@@ -192,8 +221,8 @@ CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions&
             if (!tr.steady.steady)
                 c.warnings.push_back(fmt::format("trial '{}' is included although not steady ({})", tr.id, tr.steady.reason));
             used.push_back(&tr);
-            if (trials[i]->info.wettedness) wettedness.insert(*trials[i]->info.wettedness);
-            if (trials[i]->info.skin_setpoint_c) setpoints.insert(*trials[i]->info.skin_setpoint_c);
+            if (info.wettedness) wettedness.insert(*info.wettedness);
+            if (info.skin_setpoint_c) setpoints.insert(*info.skin_setpoint_c);
         }
         c.n_replicates = static_cast<int>(used.size());
         if (used.empty()) {
@@ -358,18 +387,14 @@ std::string fmt_u(double u, int width, int precision) {
     return std::isfinite(u) ? fmt::format("{:>{}.{}f}", u, width, precision) : fmt::format("{:>{}}", "n/a", width);
 }
 
-}  // namespace
-
-json to_json(const CampaignResult& r) {
-    json cases = json::array();
-    for (const auto& c : r.cases) cases.push_back(case_json(c));
-    json unanalysed = json::array();
+// The document without its case lists ("cases", "unanalysed_cases" are empty arrays), which
+// to_json fills and write_json streams.
+json head_json(const CampaignResult& r) {
     json excluded = json::array();
     for (const auto* list : {&r.cases, &r.unanalysed_cases})
         for (const auto& c : *list)
             for (const auto& t : c.trials)
                 if (!t.included) excluded.push_back({{"id", t.id}, {"case", c.case_id}, {"reason", t.exclusion_reason}});
-    for (const auto& c : r.unanalysed_cases) unanalysed.push_back(case_json(c));
     const auto& s = r.options.steady;
     return {{"campaign", r.campaign},
             {"method",
@@ -385,10 +410,59 @@ json to_json(const CampaignResult& r) {
               {"coverage", to_string(r.options.coverage)},
               {"type_b_relative_uncertainty", r.options.type_b_relative_uncertainty},
               {"type_b_dof", number_or_null(type_b_dof(r.options.type_b_relative_uncertainty))}}},
-            {"cases", cases},
-            {"unanalysed_cases", unanalysed},
+            {"cases", json::array()},
+            {"unanalysed_cases", json::array()},
             {"excluded_trials", excluded},
             {"warnings", r.warnings}};
+}
+
+const std::vector<CaseResult>* case_list(const CampaignResult& r, const std::string& key) {
+    return key == "cases" ? &r.cases : key == "unanalysed_cases" ? &r.unanalysed_cases : nullptr;
+}
+
+// `value.dump(indent)` as it appears `depth` levels deep in a document dumped with `indent`.
+// Strings escape their newlines, so every '\n' in a dump starts a line to indent.
+std::string nested_dump(const json& value, int indent, int depth) {
+    const std::string dump = value.dump(indent);
+    const std::string newline = "\n" + std::string(static_cast<std::size_t>(indent * depth), ' ');
+    std::string out;
+    out.reserve(dump.size());
+    for (const char ch : dump) {
+        if (ch == '\n') out += newline;
+        else out += ch;
+    }
+    return out;
+}
+
+}  // namespace
+
+json to_json(const CampaignResult& r) {
+    json j = head_json(r);
+    for (const char* key : {"cases", "unanalysed_cases"})
+        for (const auto& c : *case_list(r, key)) j[key].push_back(case_json(c));
+    return j;
+}
+
+void write_json(std::ostream& out, const CampaignResult& r, int indent, const json& extra) {
+    json head = head_json(r);
+    for (const auto& [key, value] : extra.items()) head[key] = value;
+    const std::string pad(static_cast<std::size_t>(std::max(indent, 0)), ' ');
+    out << "{\n";
+    bool first = true;
+    for (const auto& [key, value] : head.items()) {  // the keys in dump()'s (sorted) order
+        out << (first ? "" : ",\n") << pad << json(key).dump() << ": ";
+        first = false;
+        const auto* cases = case_list(r, key);
+        if (!cases || cases->empty()) {
+            out << nested_dump(value, indent, 1);
+            continue;
+        }
+        out << "[\n";
+        for (std::size_t i = 0; i < cases->size(); ++i)  // one case's JSON in memory at a time
+            out << pad << pad << nested_dump(case_json((*cases)[i]), indent, 2) << (i + 1 < cases->size() ? ",\n" : "\n");
+        out << pad << "]";
+    }
+    out << "\n}";
 }
 
 std::string format_table(const CampaignResult& r) {

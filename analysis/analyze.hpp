@@ -4,8 +4,10 @@
 //   per case:   replicate means, Type A (scatter of the replicates), Type B (instrument
 //               specs), area weighting to regions and whole body, u_C, nu_eff, k, U.
 // Results are plain structs so a recorder can store them (SQLite) as well as print them.
+#include <filesystem>
 #include <map>
 #include <optional>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -113,8 +115,28 @@ struct CampaignResult {
 
 CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions& options = {});
 
+// The same analysis in its two halves, so a campaign need not be in memory all at once.
+// summarize_trial: one trial's steady window and window means; the result keeps no samples.
+TrialResult summarize_trial(const Trial& trial, const ZoneMap& map, const AnalysisOptions& options = {});
+// aggregate_trials: everything per case from already summarised trials, `results[i]` being
+// `campaign.trials[i]`'s. Reads the campaign's name, zone map, instruments, warnings and
+// trial infos, never the trials' samples (they may be empty, as read_campaign_metadata leaves them).
+CampaignResult aggregate_trials(const Campaign& campaign, const std::vector<TrialResult>& results,
+                                const AnalysisOptions& options = {});
+
+// analyze_campaign(read_campaign(folder, read), options), one trial in memory at a time:
+// campaign.json once, then each trial's CSV read, summarised and freed before the next.
+// Same result and the same InputError on bad input.
+CampaignResult analyze_campaign_streaming(const std::filesystem::path& folder, const ReadOptions& read = {},
+                                          const AnalysisOptions& options = {});
+
 // The `manikin analyze --json` contract (docs/formats.md section 2), plus extra fields.
 nlohmann::json to_json(const CampaignResult& result);
+// Writes exactly `j.dump(indent)`, j being to_json(result) with the keys of `extra` (an
+// object) added, but builds the JSON of one case at a time: the whole document of a large
+// campaign (14 MB of text for 450 trials) is never in memory. indent >= 0.
+void write_json(std::ostream& out, const CampaignResult& result, int indent,
+                const nlohmann::json& extra = nlohmann::json::object());
 // A readable table: per case, whole body and regions with u_A, u_B, u_C, nu_eff, k, U, the
 // trials and their steady windows, and the whole-body uncertainty budget.
 std::string format_table(const CampaignResult& result);

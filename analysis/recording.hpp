@@ -127,6 +127,15 @@ struct ReadOptions {
 // is never half-imported.
 Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options = {});
 
+// The two halves of read_campaign, for reading one trial at a time (memory bounded by one
+// trial, not the campaign). read_campaign_metadata reads and checks campaign.json exactly as
+// read_campaign does (zone map, instruments, channels, provenance, warnings, the trial list;
+// each trial file is checked to be a regular file inside the folder) but leaves every
+// `trials[i].data` empty. read_trial_data then parses one trial's CSV with read_campaign's
+// checks and messages; `metadata` is what read_campaign_metadata returned for `folder`.
+Campaign read_campaign_metadata(const std::filesystem::path& folder, const ReadOptions& options = {});
+TrialData read_trial_data(const std::filesystem::path& folder, const Campaign& metadata, const TrialInfo& info);
+
 // Parses one trial CSV (exposed for tests and tools). `display_name` is used in messages.
 // `channels` are the recorded channels campaign.json declares (format 2).
 TrialData read_trial_csv(const std::filesystem::path& file, const ZoneMap& map, const std::string& display_name,

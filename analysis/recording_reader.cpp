@@ -638,7 +638,8 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
     return info;
 }
 
-Campaign read_campaign_checked(const std::filesystem::path& folder, const ReadOptions& options) {
+// campaign.json, every check included (trial files are checked to exist, not parsed).
+Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOptions& options) {
     const std::filesystem::path json_path = folder / "campaign.json";
     const std::string json_file = json_path.string();
     if (const std::string problem = file_problem(json_path, "campaign.json", kMaxCampaignJsonBytes); !problem.empty())
@@ -765,23 +766,21 @@ Campaign read_campaign_checked(const std::filesystem::path& folder, const ReadOp
                                                     info.replicate, info.case_id));
     }
 
-    for (auto& info : infos) {
-        const std::filesystem::path csv = folder / info.file;
-        Trial trial;
-        trial.data = read_trial_csv(csv, campaign.zone_map, csv.string(), campaign.channels);
-        trial.info = std::move(info);
-        campaign.trials.push_back(std::move(trial));
-    }
+    for (auto& info : infos) campaign.trials.push_back({std::move(info), {}});  // samples: read_trial_data
     return campaign;
 }
 
-}  // namespace
+TrialData read_trial_data_checked(const std::filesystem::path& folder, const Campaign& metadata, const TrialInfo& info) {
+    const std::filesystem::path csv = folder / info.file;
+    return read_trial_csv(csv, metadata.zone_map, csv.string(), metadata.channels);
+}
 
-Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options) {
-    // Every bad input above is an InputError with its field; this net keeps anything missed
-    // (a filesystem or JSON library error) a bad-input error naming the file, never "internal".
+// Every bad input above is an InputError with its field; this net keeps anything missed
+// (a filesystem or JSON library error) a bad-input error naming the file, never "internal".
+template <typename Read>
+auto as_input_error(const std::filesystem::path& folder, Read read) {
     try {
-        return read_campaign_checked(folder, options);
+        return read();
     } catch (const InputError&) {
         throw;
     } catch (const std::filesystem::filesystem_error& e) {
@@ -789,6 +788,25 @@ Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& o
     } catch (const json::exception& e) {
         throw InputError((folder / "campaign.json").string(), 0, 0, "", e.what());
     }
+}
+
+}  // namespace
+
+Campaign read_campaign_metadata(const std::filesystem::path& folder, const ReadOptions& options) {
+    return as_input_error(folder, [&] { return read_metadata_checked(folder, options); });
+}
+
+TrialData read_trial_data(const std::filesystem::path& folder, const Campaign& metadata, const TrialInfo& info) {
+    return as_input_error(folder, [&] { return read_trial_data_checked(folder, metadata, info); });
+}
+
+Campaign read_campaign(const std::filesystem::path& folder, const ReadOptions& options) {
+    return as_input_error(folder, [&] {
+        // Parsed into a local campaign and returned only when every file read: never half-imported.
+        Campaign campaign = read_metadata_checked(folder, options);
+        for (auto& trial : campaign.trials) trial.data = read_trial_data_checked(folder, campaign, trial.info);
+        return campaign;
+    });
 }
 
 }  // namespace manikind::analysis

@@ -31,7 +31,8 @@ struct SyntheticTrialOptions {
 TrialData make_synthetic_trial(const ZoneMap& map, const SyntheticTrialOptions& options);
 
 // A campaign of `cases` x `replicates` synthetic trials (ids cNN-rM) with the andi35 map;
-// case c has air temperature 35 + c/2 °C and a flux that depends on the zone and the case.
+// case c has air temperature 35 + c/2 °C (cycling every 60 cases, so at most 65 °C) and a
+// flux that depends on the zone and the case.
 Campaign make_synthetic_campaign(int cases, int replicates, const SyntheticTrialOptions& base = {});
 
 }  // namespace manikind::analysis

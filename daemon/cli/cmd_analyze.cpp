@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iostream>
 #include <memory>
 #include <optional>
 #include <string>
@@ -81,8 +82,11 @@ void run(const AnalyzeOptions& o) {
 
     an::CampaignResult result;
     try {
-        const an::Campaign campaign = read_campaign_source(o.source, read);
-        result = an::analyze_campaign(campaign, a);
+        // A folder is analysed one trial at a time, so memory does not grow with the number of
+        // trials; a database campaign (or no source, an error) goes through read_campaign_source.
+        result = o.source.db.empty() && !o.source.campaign.empty()
+                     ? an::analyze_campaign_streaming(o.source.campaign, read, a)
+                     : an::analyze_campaign(read_campaign_source(o.source, read), a);
         if (!o.csv_path.empty()) {
             std::ofstream out(o.csv_path, std::ios::binary);
             if (!out) throw UserError(fmt::format("{}: cannot write the CSV export", o.csv_path));
@@ -98,9 +102,9 @@ void run(const AnalyzeOptions& o) {
         throw UserError(e.what());
     }
     if (o.json) {
-        auto j = an::to_json(result);
-        j["heat_flux_sign"] = physics::heat_flux_sign;
-        std::printf("%s\n", j.dump(2).c_str());
+        // Streamed case by case: the document of a large campaign is never whole in memory.
+        an::write_json(std::cout, result, 2, {{"heat_flux_sign", physics::heat_flux_sign}});
+        std::cout << '\n' << std::flush;
         return;
     }
     for (const auto& w : result.warnings) spdlog::warn("{}", w);

@@ -1,6 +1,5 @@
 // manikin-recording/2 (and /1, the hand-made campaigns in tests/data/recordings): round trip,
 // the embedded zone map, and bad input that names file, line, column and field.
-#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -17,6 +16,7 @@
 #include "analysis/recording.hpp"
 #include "analysis/synthetic.hpp"
 #include "analysis/zone_map.hpp"
+#include "tests/analysis/temp_dir.hpp"
 
 namespace an = manikind::analysis;
 namespace fs = std::filesystem;
@@ -25,16 +25,7 @@ namespace {
 
 std::string recordings(const std::string& name) { return std::string(MANIKIND_TEST_DATA_DIR) + "/recordings/" + name; }
 
-// A fresh folder under the system temp dir, removed when the test ends.
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        static std::atomic<int> counter{0};
-        path = fs::temp_directory_path() / ("manikind-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-        fs::remove_all(path);
-    }
-    ~TempDir() { fs::remove_all(path); }
-};
+using manikind::test::TempDir;
 
 // Same doubles, NaN where NaN.
 bool same(const std::vector<double>& a, const std::vector<double>& b) {
