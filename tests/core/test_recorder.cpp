@@ -98,6 +98,10 @@ TEST_CASE("database: [recorder] durability picks SQLite's sync level, from the c
     CHECK(manikind::config::default_config().recorder_durability == "process");
     CHECK_THROWS_WITH(manikind::config::parse_config("[recorder]\ndurability = \"fsync\"\n", "test.toml"),
                       Catch::Contains("test.toml:2") && Catch::Contains("durability"));
+    CHECK(manikind::config::default_config().recorder_commit_interval_s == 1.0);
+    CHECK(manikind::config::parse_config("[recorder]\ncommit_interval_s = 5\n", "test.toml").recorder_commit_interval_s == 5.0);
+    CHECK_THROWS_WITH(manikind::config::parse_config("[recorder]\ncommit_interval_s = 0.01\n", "test.toml"),
+                      Catch::Contains("test.toml:2") && Catch::Contains("commit_interval_s"));
 }
 
 TEST_CASE("database: a version 1 file is upgraded and a newer one is refused", "[recorder]") {
