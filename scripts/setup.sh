@@ -23,6 +23,8 @@ packages=(
   libspdlog-dev libfmt-dev catch2 libtomlplusplus-dev nlohmann-json3-dev libcli11-dev libeigen3-dev
   # `manikin export --format hdf5`.
   libhdf5-dev
+  # `manikin archive push`: the PostgreSQL client library (docs/archive.md).
+  libpq-dev
 )
 if [ "$with_tests" = yes ]; then
   packages+=(
@@ -38,6 +40,8 @@ if [ "$with_tests" = yes ]; then
     # scripts/fuzz.sh: clang with libFuzzer and the sanitizer runtimes (libclang-rt-14-dev is
     # only recommended by clang, and recommends are not installed); llvm-symbolizer for traces.
     clang libclang-rt-14-dev llvm
+    # A real PostgreSQL 15 server, started per test by tests/archive/ (initdb, pg_ctl).
+    postgresql
   )
 fi
 missing=()

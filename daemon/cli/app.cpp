@@ -26,6 +26,7 @@ void add_all_commands(CLI::App& app) {
     add_daemon_commands(app);
     add_sim_commands(app);
     add_probe_command(app);
+    add_archive_command(app);
 }
 
 }  // namespace manikind::cli

@@ -17,6 +17,7 @@ void add_thermoreg_command(CLI::App& app);   // cmd_thermoreg.cpp: `manikin ther
 void add_daemon_commands(CLI::App& app);     // cmd_daemon.cpp: status, campaign, setpoint, trial watch, results, export
 void add_sim_commands(CLI::App& app);        // cmd_sim.cpp: `manikin sim serve`, `manikin replay`
 void add_probe_command(CLI::App& app);       // cmd_sim.cpp: `manikin probe <device>`
+void add_archive_command(CLI::App& app);     // cmd_archive.cpp: `manikin archive push`
 
 // The whole `manikin` app: global options and every subcommand above.
 void add_all_commands(CLI::App& app);

@@ -1,0 +1,423 @@
+#include "archive/forwarder.hpp"
+
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include <fmt/core.h>
+
+#include "archive/pg.hpp"
+#include "archive/pg_schema.hpp"
+#include "daemon/core/recorder/database.hpp"
+#include "daemon/core/user_error.hpp"
+
+namespace manikind::archive {
+namespace {
+
+// The recorder's schema version that gave trials their UUID (daemon/core/recorder/database.cpp).
+constexpr int first_sqlite_version_with_uuid = 6;
+
+// The SQLite side, read-only through the C API: the recorder's Database would migrate (write) on open.
+class Source {
+public:
+    explicit Source(const std::filesystem::path& path) : path_(path) {
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(path, ec))
+            throw UserError(fmt::format("{}: no such database", path.string()));
+        sqlite3* db = nullptr;
+        const int rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+        owner_.reset(db);  // closed on every way out, a throw from this constructor included
+        db_ = db;
+        if (rc != SQLITE_OK) fail("cannot open");
+        // The daemon may be committing: wait for its lock rather than fail.
+        sqlite3_busy_timeout(db_, 5000);
+        const auto version = single_int("PRAGMA user_version");
+        if (!has_table("trials") || !has_table("samples"))
+            throw UserError(fmt::format("{}: not a manikind database (no trials or samples table)", path.string()));
+        if (version < first_sqlite_version_with_uuid)
+            throw UserError(fmt::format("{}: schema version {} has no trial UUIDs (version {}); open it once with this "
+                                        "version's manikind or manikin to migrate it, then push",
+                                        path.string(), version, first_sqlite_version_with_uuid));
+        // One read transaction for the whole push: every table is read from the same snapshot.
+        exec("BEGIN");
+        single_int("SELECT count(*) FROM sqlite_schema");  // the snapshot starts at the first read
+    }
+    Source(const Source&) = delete;
+    Source& operator=(const Source&) = delete;
+    ~Source() { sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr); }
+
+    class Stmt {
+    public:
+        Stmt(Source& src, const char* sql) : src_(src) {
+            if (sqlite3_prepare_v2(src.db_, sql, -1, &s_, nullptr) != SQLITE_OK) src.fail("cannot read");
+        }
+        Stmt(const Stmt&) = delete;
+        Stmt& operator=(const Stmt&) = delete;
+        ~Stmt() { sqlite3_finalize(s_); }
+        void bind(int i, std::int64_t v) { sqlite3_bind_int64(s_, i, v); }
+        void bind(int i, const char* v) { sqlite3_bind_text(s_, i, v, -1, SQLITE_TRANSIENT); }
+        void reset() { sqlite3_reset(s_); }
+        bool step() {
+            const int rc = sqlite3_step(s_);
+            if (rc == SQLITE_ROW) return true;
+            if (rc != SQLITE_DONE) src_.fail("cannot read");
+            return false;
+        }
+        std::int64_t int64(int c) const { return sqlite3_column_int64(s_, c); }
+        bool is_null(int c) const { return sqlite3_column_type(s_, c) == SQLITE_NULL; }
+        double real(int c) const { return sqlite3_column_double(s_, c); }
+        std::string text(int c) const {
+            const auto* p = sqlite3_column_text(s_, c);
+            return p ? std::string(reinterpret_cast<const char*>(p), static_cast<std::size_t>(sqlite3_column_bytes(s_, c)))
+                     : std::string();
+        }
+
+    private:
+        Source& src_;
+        sqlite3_stmt* s_ = nullptr;
+    };
+
+    [[noreturn]] void fail(const char* what) const {
+        throw UserError(fmt::format("{}: {}: {}", path_.string(), what, db_ ? sqlite3_errmsg(db_) : "out of memory"));
+    }
+
+private:
+    void exec(const char* sql) {
+        if (sqlite3_exec(db_, sql, nullptr, nullptr, nullptr) != SQLITE_OK) fail("cannot read");
+    }
+    std::int64_t single_int(const char* sql) {
+        Stmt s(*this, sql);
+        return s.step() ? s.int64(0) : 0;
+    }
+    bool has_table(const char* name) {
+        Stmt s(*this, "SELECT 1 FROM sqlite_schema WHERE type = 'table' AND name = ?1");
+        s.bind(1, name);
+        return s.step();
+    }
+
+    struct Close {
+        void operator()(sqlite3* db) const { sqlite3_close_v2(db); }
+    };
+    std::filesystem::path path_;
+    std::unique_ptr<sqlite3, Close> owner_;
+    sqlite3* db_ = nullptr;
+};
+
+void check_lab_id(const std::string& lab_id) {
+    const bool ok_length = !lab_id.empty() && lab_id.size() <= 64;
+    bool ok_chars = true;
+    for (const char c : lab_id)
+        ok_chars = ok_chars && ((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                                c == '-' || c == '_' || c == '.');
+    if (!ok_length || !ok_chars)
+        throw UserError(fmt::format("lab id '{}': expected 1 to 64 letters, digits, '-', '_' or '.'", lab_id));
+}
+
+std::int64_t now_utc_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
+std::string opt_text(const std::optional<std::int64_t>& v) { return v ? std::to_string(*v) : std::string(); }
+
+// A double in COPY's text format: the shortest text that reads back to the same bits.
+void append_copy_double(std::string& out, const Source::Stmt& s, int column) {
+    if (s.is_null(column)) {
+        out += "\\N";
+        return;
+    }
+    const double v = s.real(column);
+    if (std::isnan(v)) out += "\\N";  // the recorder's convention: NaN is stored as NULL
+    else if (std::isinf(v)) out += v > 0 ? "Infinity" : "-Infinity";
+    else out += fmt::format("{}", v);
+}
+
+struct SampleProgress {
+    std::optional<std::int64_t> last_mono_ns, last_channel_id;
+    std::int64_t rows_sent = 0;
+    bool terminal_pass = false;
+    bool complete = false;
+};
+
+class Pusher {
+public:
+    Pusher(Source& src, PgConnection& pg, std::string lab_id, const PushOptions& options)
+        : src_(src), pg_(pg), lab_(std::move(lab_id)), options_(options) {}
+
+    PushResult run() {
+        result_.archive = pg_.describe();
+        result_.lab_id = lab_;
+        result_.archive_schema_version = migrate_archive(pg_);
+        take_lab_lock();
+        in_transaction([&] { send_metadata(); });
+        in_transaction([&] { send_events(); });
+        send_samples();
+        return result_;
+    }
+
+private:
+    template <typename F>
+    void in_transaction(F&& body) {
+        pg_.exec("BEGIN");
+        try {
+            body();
+            pg_.exec("COMMIT");
+        } catch (...) {
+            pg_.rollback();
+            throw;
+        }
+    }
+
+    // Two pushes of one lab at once would only repeat each other's rows (harmless), but their
+    // progress rows would race; the second is refused instead. Released when the session ends.
+    void take_lab_lock() {
+        auto r = pg_.exec("SELECT pg_try_advisory_lock(hashtextextended($1, 7419002))", {lab_}).text(0, 0);
+        if (r != "t")
+            throw UserError(fmt::format("archive {}: another push for lab '{}' is running", result_.archive, lab_),
+                            "archive_refused", ExitStatus::refused);
+    }
+
+    // Campaigns, trials (each with its case's name and conditions) and channels: few rows, upserted
+    // one by one. `added` counts rows inserted or whose values changed (a trial that ended since).
+    void send_metadata() {
+        pg_.exec("INSERT INTO labs (lab_id, name, first_push_utc_ns) VALUES ($1, $2, $3) ON CONFLICT DO NOTHING",
+                 {lab_, options_.lab_name.empty() ? lab_ : options_.lab_name, std::to_string(now_utc_ns())});
+
+        Source::Stmt campaigns(src_, "SELECT name, definition_json, created_utc_ns, state FROM campaigns ORDER BY id");
+        while (campaigns.step()) {
+            auto r = pg_.exec(
+                "INSERT INTO campaigns AS c (lab_id, campaign_name, definition_json, created_utc_ns, state)"
+                " VALUES ($1, $2, $3, $4, $5) ON CONFLICT (lab_id, campaign_name) DO UPDATE"
+                " SET definition_json = EXCLUDED.definition_json, created_utc_ns = EXCLUDED.created_utc_ns,"
+                " state = EXCLUDED.state WHERE (c.definition_json, c.created_utc_ns, c.state)"
+                " IS DISTINCT FROM (EXCLUDED.definition_json, EXCLUDED.created_utc_ns, EXCLUDED.state)",
+                {lab_, campaigns.text(0), campaigns.text(1), std::to_string(campaigns.int64(2)), campaigns.text(3)});
+            count(result_.campaigns, r.affected());
+        }
+
+        Source::Stmt trials(src_,
+                            "SELECT t.id, t.uuid, c.name, k.name, t.replicate, t.state, t.reason, t.started_utc_ns,"
+                            " t.ended_utc_ns, k.conditions_json FROM trials t JOIN campaigns c ON c.id = t.campaign_id"
+                            " JOIN cases k ON k.id = t.case_id ORDER BY t.id");
+        while (trials.step()) {
+            TrialInfo info{trials.int64(0), trials.text(1), recorder::is_terminal_trial_state(trials.text(5))};
+            std::optional<std::int64_t> started, ended;
+            if (!trials.is_null(7)) started = trials.int64(7);
+            if (!trials.is_null(8)) ended = trials.int64(8);
+            // A trial UUID pushed by another lab stays that lab's: the update is skipped and
+            // caught by the ownership check below.
+            auto r = pg_.exec_nullable(
+                "INSERT INTO trials AS t (trial_uuid, lab_id, campaign_name, case_name, replicate, state, reason,"
+                " started_utc_ns, ended_utc_ns, conditions_json) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)"
+                " ON CONFLICT (trial_uuid) DO UPDATE SET campaign_name = EXCLUDED.campaign_name,"
+                " case_name = EXCLUDED.case_name, replicate = EXCLUDED.replicate, state = EXCLUDED.state,"
+                " reason = EXCLUDED.reason, started_utc_ns = EXCLUDED.started_utc_ns,"
+                " ended_utc_ns = EXCLUDED.ended_utc_ns, conditions_json = EXCLUDED.conditions_json"
+                " WHERE t.lab_id = EXCLUDED.lab_id AND (t.campaign_name, t.case_name, t.replicate, t.state, t.reason,"
+                " t.started_utc_ns, t.ended_utc_ns, t.conditions_json) IS DISTINCT FROM (EXCLUDED.campaign_name,"
+                " EXCLUDED.case_name, EXCLUDED.replicate, EXCLUDED.state, EXCLUDED.reason, EXCLUDED.started_utc_ns,"
+                " EXCLUDED.ended_utc_ns, EXCLUDED.conditions_json)",
+                {info.uuid, lab_, trials.text(2), trials.text(3), std::to_string(trials.int64(4)), trials.text(5),
+                 trials.text(6), opt_text(started), opt_text(ended), trials.text(9)},
+                {false, false, false, false, false, false, false, !started, !ended, false});
+            count(result_.trials, r.affected());
+            auto owner = pg_.exec("SELECT lab_id FROM trials WHERE trial_uuid = $1", {info.uuid});
+            if (owner.text(0, 0) != lab_)
+                throw UserError(fmt::format("archive {}: trial {} belongs to lab '{}' there, not '{}': was this "
+                                            "database pushed under another lab id?",
+                                            result_.archive, info.uuid, owner.text(0, 0), lab_),
+                                "archive_refused", ExitStatus::refused);
+            trials_.push_back(std::move(info));
+        }
+
+        Source::Stmt channels(src_, "SELECT ch.id, d.name, ch.name, ch.unit FROM channels ch"
+                                    " JOIN devices d ON d.id = ch.device_id ORDER BY ch.id");
+        while (channels.step()) {
+            std::string device = channels.text(1), channel = channels.text(2);
+            auto r = pg_.exec("INSERT INTO channels AS c (lab_id, device, channel, unit) VALUES ($1, $2, $3, $4)"
+                              " ON CONFLICT (lab_id, device, channel) DO UPDATE SET unit = EXCLUDED.unit"
+                              " WHERE c.unit IS DISTINCT FROM EXCLUDED.unit",
+                              {lab_, device, channel, channels.text(3)});
+            count(result_.channels, r.affected());
+            // Samples carry the names, pre-escaped for COPY.
+            std::string names;
+            append_copy_text(names, device);
+            names += '\t';
+            append_copy_text(names, channel);
+            names += '\t';
+            channel_names_.emplace(channels.int64(0), std::move(names));
+        }
+    }
+
+    // Events are few (stages, alarms, faults) and have no key beyond their content: all of them
+    // go every push, through a staging table, and the unique index drops the ones already there.
+    void send_events() {
+        pg_.exec("CREATE TEMP TABLE IF NOT EXISTS event_staging (trial_uuid text, mono_ns bigint, utc_ns bigint,"
+                 " severity text, kind text, message text) ON COMMIT DELETE ROWS");
+        Source::Stmt events(src_, "SELECT t.uuid, e.mono_ns, e.utc_ns, e.severity, e.kind, e.message FROM events e"
+                                  " LEFT JOIN trials t ON t.id = e.trial_id ORDER BY e.id");
+        std::string data;
+        std::int64_t n = 0;
+        while (events.step()) {
+            if (events.is_null(0)) data += "\\N";
+            else append_copy_text(data, events.text(0));
+            data += fmt::format("\t{}\t{}\t", events.int64(1), events.int64(2));
+            append_copy_text(data, events.text(3));
+            data += '\t';
+            append_copy_text(data, events.text(4));
+            data += '\t';
+            append_copy_text(data, events.text(5));
+            data += '\n';
+            ++n;
+        }
+        if (n == 0) return;
+        pg_.copy_in("COPY event_staging FROM STDIN", data);
+        auto r = pg_.exec("INSERT INTO events (lab_id, trial_uuid, mono_ns, utc_ns, severity, kind, message)"
+                          " SELECT $1, trial_uuid, mono_ns, utc_ns, severity, kind, message FROM event_staging"
+                          " ON CONFLICT DO NOTHING",
+                          {lab_});
+        result_.events.sent += n;
+        result_.events.added += r.affected();
+    }
+
+    SampleProgress load_progress(const std::string& uuid) {
+        auto r = pg_.exec("SELECT last_mono_ns, last_channel_id, rows_sent, terminal_pass, complete FROM forward_progress"
+                          " WHERE lab_id = $1 AND source_table = 'samples' AND scope = $2",
+                          {lab_, uuid});
+        SampleProgress p;
+        if (r.rows() == 0) return p;
+        if (!r.is_null(0, 0)) p.last_mono_ns = r.int64(0, 0);
+        if (!r.is_null(0, 1)) p.last_channel_id = r.int64(0, 1);
+        p.rows_sent = r.int64(0, 2);
+        p.terminal_pass = r.text(0, 3) == "t";
+        p.complete = r.text(0, 4) == "t";
+        return p;
+    }
+
+    void save_progress(const std::string& uuid, const SampleProgress& p) {
+        pg_.exec_nullable(
+            "INSERT INTO forward_progress (lab_id, source_table, scope, last_mono_ns, last_channel_id, rows_sent,"
+            " terminal_pass, complete, updated_utc_ns) VALUES ($1, 'samples', $2, $3, $4, $5, $6, $7, $8)"
+            " ON CONFLICT (lab_id, source_table, scope) DO UPDATE SET last_mono_ns = EXCLUDED.last_mono_ns,"
+            " last_channel_id = EXCLUDED.last_channel_id, rows_sent = EXCLUDED.rows_sent,"
+            " terminal_pass = EXCLUDED.terminal_pass, complete = EXCLUDED.complete,"
+            " updated_utc_ns = EXCLUDED.updated_utc_ns",
+            {lab_, uuid, opt_text(p.last_mono_ns), opt_text(p.last_channel_id), std::to_string(p.rows_sent),
+             p.terminal_pass ? "true" : "false", p.complete ? "true" : "false", std::to_string(now_utc_ns())},
+            {false, false, !p.last_mono_ns, !p.last_channel_id, false, false, false, false});
+    }
+
+    // Each trial from where its progress row says, in chunks of options_.chunk_rows in key order
+    // (mono_ns, channel id), each chunk committed with the progress that covers it.
+    //
+    // A running trial is sent up to the snapshot. Its rows need not commit in key order (each
+    // device's batch commits on its own), so a row committed later may sort before the progress
+    // key: the first push after the trial ends therefore sends it again from the start (a
+    // "terminal pass"; the rows already there cost a key lookup each and are not added twice),
+    // and only that pass marks it complete.
+    void send_samples() {
+        pg_.exec("CREATE TEMP TABLE IF NOT EXISTS sample_staging (device text, channel text, mono_ns bigint,"
+                 " utc_ns bigint, value double precision, quality smallint) ON COMMIT DELETE ROWS");
+        Source::Stmt read(src_, "SELECT mono_ns, channel_id, utc_ns, value, quality FROM samples"
+                                " WHERE trial_id = ?1 AND (mono_ns, channel_id) > (?2, ?3)"
+                                " ORDER BY mono_ns, channel_id LIMIT ?4");
+        const auto chunk_rows = static_cast<std::int64_t>(std::max<std::size_t>(options_.chunk_rows, 1));
+        for (const auto& trial : trials_) {
+            auto progress = load_progress(trial.uuid);
+            if (progress.complete) {
+                ++result_.trials_complete;
+                continue;
+            }
+            if (trial.terminal && !progress.terminal_pass) {
+                progress = SampleProgress{};
+                progress.terminal_pass = true;
+            }
+            for (;;) {
+                read.reset();
+                read.bind(1, trial.id);
+                read.bind(2, progress.last_mono_ns.value_or(std::numeric_limits<std::int64_t>::min()));
+                read.bind(3, progress.last_channel_id.value_or(std::numeric_limits<std::int64_t>::min()));
+                read.bind(4, chunk_rows);
+                std::string data;
+                std::int64_t n = 0;
+                while (read.step()) {
+                    const auto channel = read.int64(1);
+                    const auto names = channel_names_.find(channel);
+                    if (names == channel_names_.end()) src_.fail("a sample names a channel that does not exist");
+                    progress.last_mono_ns = read.int64(0);
+                    progress.last_channel_id = channel;
+                    data += names->second;
+                    data += fmt::format("{}\t{}\t", read.int64(0), read.int64(2));
+                    append_copy_double(data, read, 3);
+                    data += fmt::format("\t{}\n", read.int64(4));
+                    ++n;
+                }
+                const bool last_chunk = n < chunk_rows;
+                if (n == 0 && !trial.terminal) break;  // a running trial with nothing new: no progress to record
+                progress.rows_sent += n;
+                progress.complete = trial.terminal && last_chunk;
+                std::int64_t added = 0;
+                in_transaction([&] {
+                    if (n > 0) {
+                        pg_.copy_in("COPY sample_staging FROM STDIN", data);
+                        added = pg_.exec("INSERT INTO samples (trial_uuid, device, channel, mono_ns, utc_ns, value,"
+                                         " quality) SELECT $1, device, channel, mono_ns, utc_ns, value, quality"
+                                         " FROM sample_staging ON CONFLICT DO NOTHING",
+                                         {trial.uuid})
+                                    .affected();
+                    }
+                    save_progress(trial.uuid, progress);
+                });
+                if (n > 0) {
+                    ++result_.chunks;
+                    result_.samples.sent += n;
+                    result_.samples.added += added;
+                    if (options_.after_chunk) options_.after_chunk(ChunkCommitted{trial.uuid, n, added});
+                }
+                if (last_chunk) break;
+            }
+            if (trial.terminal) ++result_.trials_complete;
+            else ++result_.trials_partial;
+        }
+    }
+
+    static void count(TableCounts& c, std::int64_t added) {
+        ++c.sent;
+        c.added += added;
+    }
+
+    struct TrialInfo {
+        std::int64_t id;
+        std::string uuid;
+        bool terminal;
+    };
+
+    Source& src_;
+    PgConnection& pg_;
+    std::string lab_;
+    const PushOptions& options_;
+    PushResult result_;
+    std::vector<TrialInfo> trials_;
+    std::unordered_map<std::int64_t, std::string> channel_names_;  // id -> "device\tchannel\t", COPY-escaped
+};
+
+}  // namespace
+
+PushResult push(const std::filesystem::path& sqlite_path, const std::string& conninfo, const std::string& lab_id,
+                const PushOptions& options) {
+    check_lab_id(lab_id);
+    PgConnection::check_conninfo(conninfo);
+    Source src(sqlite_path);
+    auto pg = PgConnection::connect(conninfo);
+    return Pusher(src, pg, lab_id, options).run();
+}
+
+}  // namespace manikind::archive

@@ -1,0 +1,132 @@
+#include "archive/pg_schema.hpp"
+
+#include <array>
+#include <string>
+
+#include <fmt/core.h>
+
+#include "daemon/core/user_error.hpp"
+
+namespace manikind::archive {
+namespace {
+
+// Version 1. Every table's key is made of names that mean the same in every lab (lab id, campaign
+// name, trial UUID, device and channel names), never a SQLite file's row ids, so the same row
+// pushed twice, or from a copy of the file, lands on the same key. Times are integers in ns as in
+// the recorder. samples carries device and channel by name: the archive has no channel ids to
+// keep in step with each lab's.
+constexpr const char* migration_1 = R"sql(
+CREATE TABLE labs (
+    lab_id text PRIMARY KEY,
+    name text NOT NULL,
+    first_push_utc_ns bigint NOT NULL
+);
+CREATE TABLE campaigns (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    campaign_name text NOT NULL,
+    definition_json text NOT NULL,
+    created_utc_ns bigint NOT NULL,
+    state text NOT NULL,
+    PRIMARY KEY (lab_id, campaign_name)
+);
+CREATE TABLE trials (
+    trial_uuid text PRIMARY KEY CHECK (trial_uuid ~ '^[0-9a-f]{32}$'),
+    lab_id text NOT NULL,
+    campaign_name text NOT NULL,
+    case_name text NOT NULL,
+    replicate integer NOT NULL,
+    state text NOT NULL,
+    reason text NOT NULL,
+    started_utc_ns bigint,
+    ended_utc_ns bigint,
+    conditions_json text NOT NULL,
+    FOREIGN KEY (lab_id, campaign_name) REFERENCES campaigns (lab_id, campaign_name)
+);
+CREATE INDEX trials_by_campaign ON trials (lab_id, campaign_name);
+CREATE TABLE channels (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    device text NOT NULL,
+    channel text NOT NULL,
+    unit text NOT NULL,
+    PRIMARY KEY (lab_id, device, channel)
+);
+CREATE TABLE samples (
+    trial_uuid text NOT NULL REFERENCES trials (trial_uuid),
+    device text NOT NULL,
+    channel text NOT NULL,
+    mono_ns bigint NOT NULL,
+    utc_ns bigint NOT NULL,
+    value double precision,
+    quality smallint NOT NULL,
+    PRIMARY KEY (trial_uuid, device, channel, mono_ns)
+);
+CREATE TABLE events (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    trial_uuid text REFERENCES trials (trial_uuid),
+    mono_ns bigint NOT NULL,
+    utc_ns bigint NOT NULL,
+    severity text NOT NULL,
+    kind text NOT NULL,
+    message text NOT NULL
+);
+-- An event has no name beyond its file: it is the same event when lab, trial, both clocks, kind
+-- and text agree. md5(message): a long message must not exceed a b-tree entry's size.
+CREATE UNIQUE INDEX events_identity ON events (lab_id, coalesce(trial_uuid, ''), utc_ns, mono_ns, kind, md5(message));
+-- How far each lab has sent. samples: one row per trial (scope = trial UUID), last_key the
+-- SQLite key (mono_ns, channel id) of the last row committed here; complete once a terminal
+-- trial is sent in full. terminal_pass: this pass began after the trial had ended (see forwarder).
+CREATE TABLE forward_progress (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    source_table text NOT NULL,
+    scope text NOT NULL,
+    last_mono_ns bigint,
+    last_channel_id bigint,
+    rows_sent bigint NOT NULL DEFAULT 0,
+    terminal_pass boolean NOT NULL DEFAULT false,
+    complete boolean NOT NULL DEFAULT false,
+    updated_utc_ns bigint NOT NULL,
+    PRIMARY KEY (lab_id, source_table, scope)
+);
+)sql";
+
+constexpr std::array<const char*, 1> all_migrations{migration_1};
+
+// Any fixed number: the key of the lock pushers take while migrating.
+constexpr const char* migration_lock_sql = "SELECT pg_advisory_xact_lock(7419001)";
+
+}  // namespace
+
+std::span<const char* const> pg_migrations() { return all_migrations; }
+int pg_latest_schema_version() { return static_cast<int>(all_migrations.size()); }
+
+int migrate_archive(PgConnection& pg) {
+    const int latest = pg_latest_schema_version();
+    for (;;) {
+        pg.exec("BEGIN");
+        try {
+            pg.exec(migration_lock_sql);
+            pg.exec("CREATE TABLE IF NOT EXISTS schema_version (version integer NOT NULL)");
+            auto current = pg.exec("SELECT coalesce(max(version), 0) FROM schema_version");
+            const auto version = static_cast<int>(current.int64(0, 0));
+            if (version > latest) {
+                throw UserError(fmt::format("archive {} has schema version {}, newer than this program's {}: "
+                                            "update manikin",
+                                            pg.describe(), version, latest),
+                                "archive_refused", ExitStatus::refused);
+            }
+            if (version == latest) {
+                pg.exec("COMMIT");
+                return version;
+            }
+            pg.exec_script(all_migrations[static_cast<std::size_t>(version)]);
+            pg.exec("DELETE FROM schema_version");
+            pg.exec("INSERT INTO schema_version (version) VALUES ($1)", {std::to_string(version + 1)});
+            pg.exec("COMMIT");
+        } catch (...) {
+            pg.rollback();
+            throw;
+        }
+    }
+}
+
+}  // namespace manikind::archive

@@ -1,0 +1,92 @@
+// `manikin archive push`: store and forward a daemon's SQLite file into the lab-wide PostgreSQL
+// archive (issue 19, docs/archive.md). Run it as often as wanted: it sends what is new and
+// resumes a push that was cut off.
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+
+#include "archive/forwarder.hpp"
+#include "daemon/cli/commands.hpp"
+
+namespace manikind::cli {
+namespace {
+
+struct PushArgs {
+    std::string db;
+    std::string conninfo;
+    std::string lab;
+    std::string lab_name;
+    std::size_t chunk_rows = 50'000;
+    bool json = false;
+};
+
+nlohmann::json to_json(const archive::TableCounts& c) { return {{"sent", c.sent}, {"added", c.added}}; }
+
+void run_push(const PushArgs& a) {
+    archive::PushOptions options;
+    options.chunk_rows = a.chunk_rows;
+    options.lab_name = a.lab_name;
+    if (!a.json) {
+        options.after_chunk = [](const archive::ChunkCommitted& c) {
+            std::fprintf(stderr, "trial %s: %lld samples committed (%lld new)\n", c.trial_uuid.c_str(),
+                         static_cast<long long>(c.rows), static_cast<long long>(c.added));
+        };
+    }
+    const auto r = archive::push(a.db, a.conninfo, a.lab, options);
+    if (a.json) {
+        const nlohmann::json doc = {{"archive", r.archive},
+                                    {"lab", r.lab_id},
+                                    {"database", a.db},
+                                    {"archive_schema_version", r.archive_schema_version},
+                                    {"campaigns", to_json(r.campaigns)},
+                                    {"trials", to_json(r.trials)},
+                                    {"channels", to_json(r.channels)},
+                                    {"events", to_json(r.events)},
+                                    {"samples", to_json(r.samples)},
+                                    {"chunks", r.chunks},
+                                    {"trials_complete", r.trials_complete},
+                                    {"trials_partial", r.trials_partial}};
+        std::printf("%s\n", doc.dump(2).c_str());
+        return;
+    }
+    std::printf("pushed %s as lab %s to %s (archive schema v%d)\n", a.db.c_str(), r.lab_id.c_str(), r.archive.c_str(),
+                r.archive_schema_version);
+    std::printf("%-10s %12s %12s\n", "table", "sent", "new/changed");
+    const auto row = [](const char* name, const archive::TableCounts& c) {
+        std::printf("%-10s %12lld %12lld\n", name, static_cast<long long>(c.sent), static_cast<long long>(c.added));
+    };
+    row("campaigns", r.campaigns);
+    row("trials", r.trials);
+    row("channels", r.channels);
+    row("events", r.events);
+    row("samples", r.samples);
+    std::printf("trials with every sample archived: %lld; still running, sent so far: %lld\n",
+                static_cast<long long>(r.trials_complete), static_cast<long long>(r.trials_partial));
+}
+
+}  // namespace
+
+void add_archive_command(CLI::App& app) {
+    auto* cmd = app.add_subcommand("archive", "Lab-wide PostgreSQL archive: store and forward (docs/archive.md)");
+    cmd->require_subcommand(1);
+    auto args = std::make_shared<PushArgs>();
+    auto* push = cmd->add_subcommand("push", "Send a daemon database's campaigns, trials, channels, events and samples "
+                                             "to the archive; sends only what is new, resumes an interrupted push");
+    push->add_option("db", args->db, "The daemon's SQLite database (read only; the daemon may be running)")->required();
+    push->add_option("--to", args->conninfo, "libpq connection string, e.g. \"host=archive dbname=manikin user=lab3\"")
+        ->required();
+    push->add_option("--lab", args->lab, "This lab's id in the archive (letters, digits, - _ .)")->required();
+    push->add_option("--lab-name", args->lab_name, "Name stored for a lab the archive has not seen (default: the id)");
+    push->add_option("--chunk-rows", args->chunk_rows, "Samples per transaction")
+        ->check(CLI::Range(std::size_t{1}, std::size_t{10'000'000}));
+    push->add_flag("--json", args->json, "Print the counts as JSON");
+    push->footer("Exit status 0 when everything was sent, 2 for a missing or foreign database or a bad --lab or --to,\n"
+                 "3 when the server cannot be reached or the connection drops (run again: it resumes), 4 when the\n"
+                 "server refuses (permissions, a trial another lab owns, another push of this lab running).");
+    push->callback([args] { run_push(*args); });
+}
+
+}  // namespace manikind::cli

@@ -1,0 +1,334 @@
+// Store and forward to PostgreSQL (issue 19, docs/archive.md) against a real PostgreSQL 15 server:
+// what the archive holds equals the SQLite file, a second push adds nothing, and a push cut off by
+// the server stopping is finished by the next one with every sample exactly once.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdint>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include "archive/forwarder.hpp"
+#include "archive/pg.hpp"
+#include "archive/pg_schema.hpp"
+#include "daemon/core/recorder/database.hpp"
+#include "daemon/core/user_error.hpp"
+#include "tests/archive/pg_server.hpp"
+
+namespace {
+
+using manikind::ExitStatus;
+using manikind::UserError;
+using manikind::archive::PgConnection;
+using manikind::archive::push;
+using manikind::archive::PushOptions;
+using manikind::recorder::Database;
+using manikind::recorder::SampleRow;
+using manikind::test::PgServer;
+
+class TempDir {
+public:
+    TempDir() {
+        char pattern[] = "/tmp/manikind-archive-test-XXXXXX";
+        if (!mkdtemp(pattern)) throw std::runtime_error("mkdtemp failed");
+        path_ = pattern;
+    }
+    TempDir(const TempDir&) = delete;
+    TempDir& operator=(const TempDir&) = delete;
+    ~TempDir() {
+        std::error_code ec;
+        std::filesystem::remove_all(path_, ec);
+    }
+    const std::filesystem::path& path() const { return path_; }
+
+private:
+    std::filesystem::path path_;
+};
+
+// Per trial UUID: rows, sum of value (NULLs left out, as SQL's sum does), sum of mono_ns.
+struct TrialSums {
+    std::int64_t rows = 0;
+    double value_sum = 0.0;
+    std::int64_t mono_ns_sum = 0;
+};
+
+std::map<std::string, TrialSums> sqlite_sums(const std::filesystem::path& path) {
+    auto db = Database::open(path);
+    std::map<std::string, TrialSums> sums;
+    for (const auto& campaign : db.campaigns()) {
+        for (const auto& trial : db.trials(campaign.id)) {
+            auto& s = sums[trial.uuid];
+            db.for_each_trial_sample(trial.id, [&](const SampleRow& row) {
+                ++s.rows;
+                if (!std::isnan(row.value)) s.value_sum += row.value;
+                s.mono_ns_sum += row.mono_ns;
+            });
+        }
+    }
+    return sums;
+}
+
+std::map<std::string, TrialSums> archive_sums(const std::string& conninfo) {
+    auto pg = PgConnection::connect(conninfo);
+    auto r = pg.exec("SELECT trial_uuid, count(*), coalesce(sum(value), 0), sum(mono_ns) FROM samples GROUP BY trial_uuid");
+    std::map<std::string, TrialSums> sums;
+    for (int i = 0; i < r.rows(); ++i)
+        sums[r.text(i, 0)] = TrialSums{r.int64(i, 1), std::stod(r.text(i, 2)), std::stoll(r.text(i, 3))};
+    return sums;
+}
+
+void check_archive_equals_sqlite(const std::filesystem::path& db, const std::string& conninfo) {
+    const auto want = sqlite_sums(db);
+    const auto got = archive_sums(conninfo);
+    REQUIRE(got.size() == want.size());
+    for (const auto& [uuid, w] : want) {
+        INFO("trial " << uuid);
+        REQUIRE(got.count(uuid) == 1);
+        const auto& g = got.at(uuid);
+        CHECK(g.rows == w.rows);
+        CHECK(g.mono_ns_sum == w.mono_ns_sum);
+        CHECK(g.value_sum == Approx(w.value_sum).epsilon(1e-12));  // summed in another order
+    }
+}
+
+std::int64_t archive_count(const std::string& conninfo, const std::string& sql) {
+    auto pg = PgConnection::connect(conninfo);
+    return pg.exec(sql).int64(0, 0);
+}
+
+struct CliResult {
+    int status = -1;
+    std::string out;
+};
+
+// build/bin/manikin as a user runs it; stdout captured, stderr left to the test's log.
+CliResult run_manikin(const std::string& args) {
+    CliResult r;
+    const std::string cmd = std::string(MANIKIND_BIN_DIR) + "/manikin " + args;
+    FILE* pipe = popen(cmd.c_str(), "r");
+    if (!pipe) return r;
+    char buffer[4096];
+    for (std::size_t n; (n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0;) r.out.append(buffer, n);
+    const int status = pclose(pipe);
+    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
+}
+
+constexpr std::int64_t second_ns = 1'000'000'000;
+
+// Three channels (one with a backslash, to exercise COPY's escaping) sampled every second from
+// `from_step`; every 97th value is NaN (stored as NULL).
+void add_samples(Database& db, std::int64_t trial, const std::vector<std::int64_t>& channels, int from_step,
+                 int steps) {
+    std::vector<SampleRow> rows;
+    for (int step = from_step; step < from_step + steps; ++step) {
+        for (std::size_t c = 0; c < channels.size(); ++c) {
+            SampleRow row;
+            row.trial_id = trial;
+            row.channel_id = channels[c];
+            row.mono_ns = 5'000 * second_ns + step * second_ns;
+            row.utc_ns = 1'790'000'000 * second_ns + step * second_ns;
+            row.value = step % 97 == 0 ? std::numeric_limits<double>::quiet_NaN()
+                                       : 20.0 + 0.001 * step + 1.5 * static_cast<double>(c) + 1e-7 * static_cast<double>(trial);
+            row.quality = static_cast<std::uint8_t>(step % 4 == 0 ? 1 : 0);
+            rows.push_back(row);
+        }
+    }
+    db.insert_samples(rows);
+}
+
+struct LabDb {
+    std::int64_t done_trial = 0;
+    std::int64_t running_trial = 0;
+    std::vector<std::int64_t> channels;
+};
+
+// Two trials of one case: the first done with 1500 time steps, the second still acquiring with 1200.
+LabDb build_lab_db(const std::filesystem::path& path) {
+    auto db = Database::open(path);
+    LabDb lab;
+    const auto campaign = db.create_campaign("archive-test", R"({"name": "archive-test", "replicates": 2})");
+    const auto case_id = db.add_case(campaign, "case 1", R"({"id": 1, "air_temp_c": 30, "rh_pct": 40})", 0);
+    lab.done_trial = db.create_trial(campaign, case_id, 1);
+    lab.running_trial = db.create_trial(campaign, case_id, 2);
+    const auto chamber = db.device_id("chamber", "modbus", "127.0.0.1:502");
+    const auto manikin = db.device_id("manikin", "can", "socketpair");
+    lab.channels = {db.channel_id(chamber, "air_temp_pv_c", "degC"), db.channel_id(chamber, "air_rh_pv_pct", "%"),
+                    db.channel_id(manikin, "zone\\1 skin_c", "degC")};
+    db.set_trial_state(lab.done_trial, "acquiring", "", 1'790'000'000 * second_ns);
+    add_samples(db, lab.done_trial, lab.channels, 0, 1500);
+    db.set_trial_state(lab.done_trial, "done", "steady", 1'790'002'000 * second_ns);
+    db.set_trial_state(lab.running_trial, "acquiring", "", 1'790'003'000 * second_ns);
+    add_samples(db, lab.running_trial, lab.channels, 0, 1200);
+    db.add_event(lab.done_trial, 5'000 * second_ns, 1'790'000'000 * second_ns, "info", "stage", "acquiring");
+    db.add_event(std::nullopt, 5'001 * second_ns, 1'790'000'001 * second_ns, "warn", "device",
+                 "windsonic: silent\tfor 3 s\nback");
+    return lab;
+}
+
+}  // namespace
+
+TEST_CASE("archive push sends everything once and a second push adds nothing", "[archive]") {
+    if (!PgServer::available()) {
+        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
+        return;
+    }
+    PgServer server;
+    TempDir tmp;
+    const auto db_path = tmp.path() / "lab.db";
+    const auto lab = build_lab_db(db_path);
+
+    auto first = push(db_path, server.conninfo(), "lab-3");
+    CHECK(first.archive_schema_version == manikind::archive::pg_latest_schema_version());
+    CHECK(first.campaigns.sent == 1);
+    CHECK(first.campaigns.added == 1);
+    CHECK(first.trials.added == 2);
+    CHECK(first.channels.added == 3);
+    CHECK(first.events.sent == 2);
+    CHECK(first.events.added == 2);
+    CHECK(first.samples.sent == (1500 + 1200) * 3);
+    CHECK(first.samples.added == (1500 + 1200) * 3);
+    CHECK(first.trials_complete == 1);
+    CHECK(first.trials_partial == 1);
+    check_archive_equals_sqlite(db_path, server.conninfo());
+    // NaN travels as NULL: steps 0, 97, ... of each trial, on each of the 3 channels.
+    CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM samples WHERE value IS NULL") ==
+          3 * ((1 + 1499 / 97) + (1 + 1199 / 97)));
+    CHECK(archive_count(server.conninfo(),
+                        "SELECT count(*) FROM events WHERE message = E'windsonic: silent\\tfor 3 s\\nback'") == 1);
+
+    SECTION("a second push sends no samples and adds nothing") {
+        auto again = push(db_path, server.conninfo(), "lab-3");
+        CHECK(again.campaigns.added == 0);
+        CHECK(again.trials.added == 0);
+        CHECK(again.channels.added == 0);
+        CHECK(again.events.added == 0);
+        CHECK(again.samples.sent == 0);
+        CHECK(again.samples.added == 0);
+        check_archive_equals_sqlite(db_path, server.conninfo());
+    }
+
+    SECTION("once the running trial ends, the next push completes it without doubling a row") {
+        {
+            auto db = Database::open(db_path);
+            add_samples(db, lab.running_trial, lab.channels, 1200, 300);
+            db.set_trial_state(lab.running_trial, "done", "steady", 1'790'005'000 * second_ns);
+        }
+        auto after = push(db_path, server.conninfo(), "lab-3");
+        CHECK(after.trials.added == 1);  // its state changed
+        CHECK(after.samples.sent == 1500 * 3);  // the terminal pass reads it again from the start
+        CHECK(after.samples.added == 300 * 3);
+        CHECK(after.trials_complete == 2);
+        CHECK(after.trials_partial == 0);
+        check_archive_equals_sqlite(db_path, server.conninfo());
+        auto last = push(db_path, server.conninfo(), "lab-3");
+        CHECK(last.samples.sent == 0);
+        CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM forward_progress WHERE complete") == 2);
+    }
+
+    SECTION("the CLI: counts as JSON, exit 0; the server gone, exit 3 with archive_unreachable") {
+        auto r = run_manikin("archive push " + db_path.string() + " --to '" + server.conninfo() + "' --lab lab-3 --json");
+        CHECK(r.status == 0);
+        const auto doc = nlohmann::json::parse(r.out);
+        CHECK(doc["samples"]["sent"] == 0);
+        CHECK(doc["trials_complete"] == 1);
+        CHECK(doc["lab"] == "lab-3");
+        server.stop();
+        r = run_manikin("archive push " + db_path.string() + " --to '" + server.conninfo() + "' --lab lab-3 --json");
+        CHECK(r.status == 3);
+        CHECK(nlohmann::json::parse(r.out)["error"]["code"] == "archive_unreachable");
+        server.start();
+    }
+
+    SECTION("the same file under another lab id is refused: its trials belong to lab-3") {
+        try {
+            push(db_path, server.conninfo(), "lab-4");
+            FAIL("no error");
+        } catch (const UserError& e) {
+            CHECK(e.status() == ExitStatus::refused);
+            CHECK_THAT(e.what(), Catch::Contains("belongs to lab 'lab-3'"));
+        }
+    }
+}
+
+TEST_CASE("archive push cut off by the server stopping resumes with every sample exactly once", "[archive]") {
+    if (!PgServer::available()) {
+        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
+        return;
+    }
+    PgServer server;
+    TempDir tmp;
+    const auto db_path = tmp.path() / "lab.db";
+    const auto lab = build_lab_db(db_path);
+    {
+        auto db = Database::open(db_path);
+        db.set_trial_state(lab.running_trial, "done", "steady", 1'790'005'000 * second_ns);
+    }
+    const std::int64_t total = (1500 + 1200) * 3;
+
+    SECTION("bad input and an unreachable server are told apart") {
+        try {
+            push(db_path, server.conninfo(), "lab 3");
+            FAIL("no error");
+        } catch (const UserError& e) {
+            CHECK(e.status() == ExitStatus::bad_input);
+        }
+        try {
+            push(tmp.path() / "none.db", server.conninfo(), "lab-3");
+            FAIL("no error");
+        } catch (const UserError& e) {
+            CHECK(e.status() == ExitStatus::bad_input);
+            CHECK_THAT(e.what(), Catch::Contains("none.db"));
+        }
+        try {
+            push(db_path, "host=" + tmp.path().string() + " port=1 dbname=postgres", "lab-3");
+            FAIL("no error");
+        } catch (const UserError& e) {
+            CHECK(e.status() == ExitStatus::unreachable);
+            CHECK(e.code() == "archive_unreachable");
+        }
+    }
+
+    SECTION("stopped after the first chunk: a clear error, then the next push sends the rest") {
+        PushOptions options;
+        options.chunk_rows = 1000;
+        int chunks_seen = 0;
+        options.after_chunk = [&](const manikind::archive::ChunkCommitted& chunk) {
+            ++chunks_seen;
+            CHECK(chunk.rows == 1000);
+            server.stop();
+        };
+        try {
+            push(db_path, server.conninfo(), "lab-3", options);
+            FAIL("the push went on with the server stopped");
+        } catch (const UserError& e) {
+            CHECK(e.status() == ExitStatus::unreachable);
+            CHECK(e.code() == "archive_unreachable");
+            CHECK_THAT(e.what(), Catch::Contains("archive"));
+        }
+        CHECK(chunks_seen == 1);
+
+        server.start();
+        CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM samples") == 1000);
+        options.after_chunk = nullptr;
+        auto resumed = push(db_path, server.conninfo(), "lab-3", options);
+        CHECK(resumed.samples.sent == total - 1000);  // resumed after the committed chunk, not from the start
+        CHECK(resumed.samples.added == total - 1000);
+        CHECK(resumed.trials_complete == 2);
+        check_archive_equals_sqlite(db_path, server.conninfo());
+        CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM samples") == total);
+
+        auto again = push(db_path, server.conninfo(), "lab-3", options);
+        CHECK(again.samples.sent == 0);
+        CHECK(again.samples.added == 0);
+    }
+}
