@@ -159,6 +159,10 @@ public:
     // first; returns how many were skipped. A trial or channel id that does not exist fails
     // the whole transaction (foreign keys), so ids must come from create_trial/channel_id.
     std::size_t insert_samples(std::span<const SampleRow> rows);
+    // For a connection that only inserts samples (the Recorder's): SQLite's foreign-key checks
+    // off for good, since insert_samples checks trial and channel ids itself. Other statements on
+    // this connection would go unchecked, so nothing else may use it.
+    void check_sample_keys_here();
 
     std::int64_t add_event(std::optional<std::int64_t> trial_id, std::int64_t mono_ns, std::int64_t utc_ns,
                            const std::string& severity, const std::string& kind, const std::string& message);

@@ -25,6 +25,7 @@ Recorder::Recorder(std::filesystem::path db_path, RecorderOptions options)
         std::optional<Database> db;
         try {
             db.emplace(Database::open(path_, options_.durability));
+            db->check_sample_keys_here();  // this connection only inserts samples
         } catch (...) {
             opened.set_exception(std::current_exception());
             return;
