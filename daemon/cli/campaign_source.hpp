@@ -1,7 +1,8 @@
 #pragma once
-// Where a command reads a recorded campaign from: a folder (manikin-recording/1), or the daemon's
-// database with --db FILE [--campaign NAME]. One rule for every command that reads campaigns
-// (analyze, reconcile; docs/cli.md).
+// Where a command reads a recorded campaign from: a folder (manikin-recording/1), the daemon's
+// database with --db FILE [--campaign NAME], or the PostgreSQL archive with --archive CONNINFO
+// --lab ID --campaign NAME. One rule for every command that reads campaigns (analyze, reconcile;
+// docs/cli.md).
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -11,14 +12,22 @@
 namespace manikind::cli {
 
 struct CampaignSource {
-    std::string campaign;  // the folder, or with --db the campaign's name (empty = the newest)
-    std::string db;        // the daemon's SQLite database; empty = read a folder
+    std::string campaign;  // the folder, or with --db/--archive the campaign's name (empty = the newest in --db)
+    std::string db;        // the daemon's SQLite database; empty = read a folder (or the archive)
+    std::string archive;   // a libpq conninfo of the archive (docs/archive.md); empty = not the archive
+    std::string lab;       // with --archive: the lab id the campaign was pushed under
 };
 
-// The positional `campaign`, --db and --campaign (the same as the positional).
+// The positional `campaign`, --db, --campaign (the same as the positional), --archive and --lab.
 void add_campaign_source_options(CLI::App* cmd, CampaignSource& source);
 
-// Reads the campaign; input problems (no such folder or database, unknown campaign) are UserError.
+// Reads the campaign; input problems (no such folder or database, unknown campaign or lab) are
+// UserError, an unreachable archive too (status 3).
 analysis::Campaign read_campaign_source(const CampaignSource& source, const analysis::ReadOptions& options = {});
+
+// One lab's campaign from the archive: pulled into a temporary SQLite file (removed before this
+// returns or throws) and read by campaign_from_database, as a lab's own file would be.
+analysis::Campaign campaign_from_archive(const std::string& conninfo, const std::string& lab_id,
+                                         const std::string& campaign_name);
 
 }  // namespace manikind::cli

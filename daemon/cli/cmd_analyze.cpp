@@ -83,8 +83,8 @@ void run(const AnalyzeOptions& o) {
     an::CampaignResult result;
     try {
         // A folder is analysed one trial at a time, so memory does not grow with the number of
-        // trials; a database campaign (or no source, an error) goes through read_campaign_source.
-        result = o.source.db.empty() && !o.source.campaign.empty()
+        // trials; a database or archive campaign (or no source, an error) goes through read_campaign_source.
+        result = o.source.db.empty() && o.source.archive.empty() && !o.source.campaign.empty()
                      ? an::analyze_campaign_streaming(o.source.campaign, read, a)
                      : an::analyze_campaign(read_campaign_source(o.source, read), a);
         if (!o.csv_path.empty()) {

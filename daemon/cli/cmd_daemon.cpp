@@ -22,6 +22,7 @@
 #include "daemon/core/campaign_plan.hpp"
 #include "daemon/core/config.hpp"
 #include "daemon/core/toml_input.hpp"
+#include "daemon/cli/campaign_source.hpp"
 #include "daemon/cli/commands.hpp"
 #include "daemon/core/control_api.hpp"
 #include "daemon/core/database_export.hpp"
@@ -436,7 +437,7 @@ void add_daemon_commands(CLI::App& app) {
     }
     {
         struct ExportOptions {
-            std::string db = "manikind.db", campaign, out, format = "csv";
+            std::string db = "manikind.db", campaign, out, format = "csv", archive, lab;
             bool json = false;
         };
         auto o = std::make_shared<ExportOptions>();
@@ -444,7 +445,11 @@ void add_daemon_commands(CLI::App& app) {
                                                  "quality, UTC beside trial time (CSV folder or one HDF5 file)");
         cmd->add_option("campaign", o->campaign, "Campaign name (manikin campaigns --db FILE lists them)")->required();
         cmd->add_option("out", o->out, "Output: a folder for csv (campaign.json + trials/*.csv), a file for hdf5")->required();
-        cmd->add_option("--db", o->db, "The daemon's database")->capture_default_str();
+        auto* db_option = cmd->add_option("--db", o->db, "The daemon's database")->capture_default_str();
+        auto* archive_option = cmd->add_option("--archive", o->archive, "Read the campaign from the PostgreSQL archive "
+                                                                        "instead (a libpq conninfo, docs/archive.md)");
+        cmd->add_option("--lab", o->lab, "With --archive: the lab id the campaign was pushed under")->needs(archive_option);
+        archive_option->excludes(db_option);
         cmd->add_option("--format", o->format, "csv: manikin-recording/2, read by manikin analyze, pandas, MATLAB; "
                                                "hdf5: manikin-hdf5/1 with the analysis beside the data")
             ->check(CLI::IsMember({"csv", "hdf5"}))
@@ -452,11 +457,18 @@ void add_daemon_commands(CLI::App& app) {
         cmd->add_flag("--json", o->json, "Print what was written as one JSON object");
         cmd->footer(std::string("The formats are in docs/formats.md (section 1 and \"HDF5\"). Heat flux: ") + analysis::kHeatFluxSign +
                     ".\nExamples:\n  manikin export --db lab.db validation-2026 recordings/validation-2026\n"
-                    "  manikin export --db lab.db validation-2026 validation-2026.h5 --format hdf5");
+                    "  manikin export --db lab.db validation-2026 validation-2026.h5 --format hdf5\n"
+                    "  manikin export --archive postgresql://archive.example/manikin --lab lab-3 validation-2026 out");
         cmd->callback([o] {
-            if (!std::filesystem::exists(o->db)) throw UserError(fmt::format("{}: no such database", o->db));
-            auto database = recorder::Database::open(o->db);
-            auto c = campaign_from_database(database, o->campaign);
+            auto c = [&] {
+                if (!o->archive.empty()) {
+                    if (o->lab.empty()) throw UserError("--archive needs --lab <id>: the lab the campaign was pushed under");
+                    return campaign_from_archive(o->archive, o->lab, o->campaign);
+                }
+                if (!std::filesystem::exists(o->db)) throw UserError(fmt::format("{}: no such database", o->db));
+                auto database = recorder::Database::open(o->db);
+                return campaign_from_database(database, o->campaign);
+            }();
             c.provenance["exported_utc"] = analysis::iso_utc_ms(
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
             std::size_t rows = 0;

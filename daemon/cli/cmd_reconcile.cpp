@@ -73,7 +73,9 @@ void add_reconcile_command(CLI::App& app) {
         const auto base = twin_store::load_twin_version(o->twin);
         const analysis::Campaign campaign = read_campaign_source(o->source);
         // With --db the positional names a campaign in it, otherwise a folder: report what was read.
-        const std::string campaign_label = o->source.db.empty() ? o->source.campaign : o->source.db + ": " + campaign.name;
+        const std::string campaign_label = !o->source.archive.empty() ? "archive lab " + o->source.lab + ": " + campaign.name
+                                            : o->source.db.empty()    ? o->source.campaign
+                                                                      : o->source.db + ": " + campaign.name;
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
         const auto result = analysis::analyze_campaign(campaign);
         std::vector<int> skipped;

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -20,6 +21,8 @@
 #include "archive/forwarder.hpp"
 #include "archive/pg.hpp"
 #include "archive/pg_schema.hpp"
+#include "archive/pull.hpp"
+#include "daemon/core/database_export.hpp"
 #include "daemon/core/recorder/database.hpp"
 #include "daemon/core/user_error.hpp"
 #include "tests/archive/pg_server.hpp"
@@ -173,6 +176,57 @@ LabDb build_lab_db(const std::filesystem::path& path) {
     db.add_event(std::nullopt, 5'001 * second_ns, 1'790'000'001 * second_ns, "warn", "device",
                  "windsonic: silent\tfor 3 s\nback");
     return lab;
+}
+
+// The same bits, NaN included (== would call two NaNs different and -0.0 equal to 0.0).
+bool same_bits(const std::vector<double>& a, const std::vector<double>& b) {
+    return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0);
+}
+
+// What campaign_from_database made of the lab's file and of the pulled copy: equal in every
+// number. provenance "database" names the file it read, so it differs by design.
+void check_same_campaign(const manikind::analysis::Campaign& want, const manikind::analysis::Campaign& got) {
+    CHECK(got.name == want.name);
+    REQUIRE(got.channels.size() == want.channels.size());
+    for (std::size_t k = 0; k < want.channels.size(); ++k) {
+        CHECK(got.channels[k].column() == want.channels[k].column());
+        CHECK(got.channels[k].unit == want.channels[k].unit);
+    }
+    auto want_provenance = want.provenance, got_provenance = got.provenance;
+    want_provenance.erase("database");
+    got_provenance.erase("database");
+    CHECK(got_provenance == want_provenance);
+    REQUIRE(got.trials.size() == want.trials.size());
+    for (std::size_t t = 0; t < want.trials.size(); ++t) {
+        const auto &w = want.trials[t], &g = got.trials[t];
+        INFO("trial " << w.info.id);
+        CHECK(g.info.id == w.info.id);
+        CHECK(g.info.case_id == w.info.case_id);
+        CHECK(g.info.replicate == w.info.replicate);
+        CHECK(g.info.started_utc == w.info.started_utc);
+        CHECK(g.info.t0_utc_ns == w.info.t0_utc_ns);
+        CHECK(g.info.skin_setpoint_c == w.info.skin_setpoint_c);
+        CHECK(g.info.wettedness == w.info.wettedness);
+        CHECK(g.info.chamber_setpoint_temp_c == w.info.chamber_setpoint_temp_c);
+        CHECK(g.info.chamber_setpoint_rh_pct == w.info.chamber_setpoint_rh_pct);
+        CHECK(same_bits(g.data.t_s, w.data.t_s));
+        CHECK(g.data.utc_ns == w.data.utc_ns);
+        CHECK(same_bits(g.data.air_temp_c, w.data.air_temp_c));
+        CHECK(same_bits(g.data.air_rh_pct, w.data.air_rh_pct));
+        CHECK(same_bits(g.data.air_speed_m_s, w.data.air_speed_m_s));
+        CHECK(same_bits(g.data.wall_temp_c, w.data.wall_temp_c));
+        REQUIRE(g.data.skin_temp_c.size() == w.data.skin_temp_c.size());
+        for (std::size_t z = 0; z < w.data.skin_temp_c.size(); ++z) {
+            CHECK(same_bits(g.data.skin_temp_c[z], w.data.skin_temp_c[z]));
+            CHECK(same_bits(g.data.heat_flux_w_m2[z], w.data.heat_flux_w_m2[z]));
+        }
+        REQUIRE(g.data.channel_values.size() == w.data.channel_values.size());
+        for (std::size_t k = 0; k < w.data.channel_values.size(); ++k) {
+            INFO("channel " << want.channels[k].column());
+            CHECK(same_bits(g.data.channel_values[k], w.data.channel_values[k]));
+            CHECK(g.data.channel_quality[k] == w.data.channel_quality[k]);
+        }
+    }
 }
 
 }  // namespace
@@ -330,5 +384,107 @@ TEST_CASE("archive push cut off by the server stopping resumes with every sample
         auto again = push(db_path, server.conninfo(), "lab-3", options);
         CHECK(again.samples.sent == 0);
         CHECK(again.samples.added == 0);
+    }
+}
+
+TEST_CASE("archive pull gives analyze the same campaign as the lab database", "[archive]") {
+    if (!PgServer::available()) {
+        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
+        return;
+    }
+    PgServer server;
+    TempDir tmp;
+
+    SECTION("a hand-made database: NaN, flagged samples and a backslash in a name come back bit for bit") {
+        const auto db_path = tmp.path() / "lab.db";
+        const auto lab = build_lab_db(db_path);
+        {
+            // campaign_from_database reads done trials between their "acquiring" and "stopping" stages.
+            auto db = Database::open(db_path);
+            db.add_event(lab.done_trial, 6'499 * second_ns, 1'790'001'499 * second_ns, "info", "stage", "stopping");
+            db.add_event(lab.running_trial, 5'000 * second_ns, 1'790'003'000 * second_ns, "info", "stage", "acquiring");
+            add_samples(db, lab.running_trial, lab.channels, 1200, 300);
+            db.add_event(lab.running_trial, 6'499 * second_ns, 1'790'004'499 * second_ns, "info", "stage", "stopping");
+            db.set_trial_state(lab.running_trial, "done", "steady", 1'790'005'000 * second_ns);
+        }
+        push(db_path, server.conninfo(), "lab-3");
+
+        auto original = Database::open(db_path);
+        const auto want = manikind::campaign_from_database(original, "archive-test");
+        auto pulled_db = Database::open(tmp.path() / "pulled.db");
+        const auto pulled = manikind::archive::pull_campaign(server.conninfo(), "lab-3", "archive-test", pulled_db);
+        CHECK(pulled.trials == 2);
+        CHECK(pulled.samples == 1500 * 3 * 2);
+        const auto got = manikind::campaign_from_database(pulled_db, "archive-test");
+        REQUIRE(want.trials.size() == 2);
+        check_same_campaign(want, got);
+        // The UUIDs, states and times travel as they were.
+        const auto want_trials = original.trials(original.find_campaign("archive-test").value());
+        const auto got_trials = pulled_db.trials(pulled_db.find_campaign("archive-test").value());
+        REQUIRE(got_trials.size() == want_trials.size());
+        for (std::size_t i = 0; i < want_trials.size(); ++i) {
+            CHECK(got_trials[i].uuid == want_trials[i].uuid);
+            CHECK(got_trials[i].state == want_trials[i].state);
+            CHECK(got_trials[i].reason == want_trials[i].reason);
+            CHECK(got_trials[i].replicate == want_trials[i].replicate);
+            CHECK(got_trials[i].started_utc_ns == want_trials[i].started_utc_ns);
+            CHECK(got_trials[i].ended_utc_ns == want_trials[i].ended_utc_ns);
+        }
+
+        // Unknown names are input errors that say what there is.
+        try {
+            Database scratch = Database::open(tmp.path() / "scratch.db");
+            manikind::archive::pull_campaign(server.conninfo(), "lab-3", "no-such-campaign", scratch);
+            FAIL("no error");
+        } catch (const UserError& e) {
+            CHECK(e.status() == ExitStatus::bad_input);
+            CHECK_THAT(e.what(), Catch::Contains("archive-test"));
+        }
+        try {
+            Database scratch = Database::open(tmp.path() / "scratch2.db");
+            manikind::archive::pull_campaign(server.conninfo(), "lab-9", "archive-test", scratch);
+            FAIL("no error");
+        } catch (const UserError& e) {
+            CHECK(e.status() == ExitStatus::bad_input);
+            CHECK_THAT(e.what(), Catch::Contains("lab-9"));
+        }
+    }
+
+    SECTION("a simulated campaign: manikin analyze --archive prints what analyze --db prints") {
+        const auto demo = tmp.path() / "demo";
+        const auto made = run_manikin("demo --cases 2 --replicates 2 --json --out " + demo.string() + " >/dev/null 2>&1");
+        REQUIRE(made.status == 0);
+        const std::string db = (demo / "manikind.db").string();
+        const auto campaigns = nlohmann::json::parse(run_manikin("campaigns --json --db " + db).out);
+        REQUIRE(campaigns.size() == 1);
+        const std::string name = campaigns[0]["name"];
+        push(db, server.conninfo(), "lab-7");
+
+        {
+            auto original = Database::open(db);
+            auto pulled_db = Database::open(tmp.path() / "demo-pulled.db");
+            manikind::archive::pull_campaign(server.conninfo(), "lab-7", name, pulled_db);
+            check_same_campaign(manikind::campaign_from_database(original, name),
+                                manikind::campaign_from_database(pulled_db, name));
+        }
+
+        const auto from_db = run_manikin("analyze --db " + db + " --campaign " + name + " --json");
+        const auto from_archive =
+            run_manikin("analyze --archive '" + server.conninfo() + "' --lab lab-7 --campaign " + name + " --json");
+        REQUIRE(from_db.status == 0);
+        REQUIRE(from_archive.status == 0);
+        CHECK(nlohmann::json::parse(from_db.out)["cases"].size() == 2);
+        CHECK(from_archive.out == from_db.out);
+
+        // The temporary database is gone afterwards.
+        const auto unknown =
+            run_manikin("analyze --archive '" + server.conninfo() + "' --lab lab-7 --campaign nope --json");
+        CHECK(unknown.status == 2);
+        CHECK_THAT(unknown.out, Catch::Contains(name));
+        server.stop();
+        const auto gone =
+            run_manikin("analyze --archive '" + server.conninfo() + "' --lab lab-7 --campaign " + name + " --json");
+        CHECK(gone.status == 3);
+        server.start();
     }
 }
