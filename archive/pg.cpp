@@ -42,7 +42,12 @@ void PgConnection::check_conninfo(const std::string& conninfo) {
 PgConnection PgConnection::connect(const std::string& conninfo) {
     // Parsed first, so a typo in the conninfo is bad input (2), not an unreachable server (3).
     check_conninfo(conninfo);
-    PgConnection c(PQconnectdb(conninfo.c_str()));
+    // A server that does not answer is given up after 10 s, and (over TCP) a connection whose
+    // peer vanished after 60 s, unless the conninfo says otherwise: the daemon's forwarder retries
+    // rather than hang. Entries after the expanded dbname override the ones before it.
+    const char* const keywords[] = {"connect_timeout", "tcp_user_timeout", "dbname", nullptr};
+    const char* const values[] = {"10", "60000", conninfo.c_str(), nullptr};
+    PgConnection c(PQconnectdbParams(keywords, values, 1));
     if (!c.c_) throw UserError::unreachable("libpq could not allocate a connection", "archive_unreachable");
     if (PQstatus(c.c_) != CONNECTION_OK)
         throw UserError::unreachable(

@@ -8,6 +8,8 @@
 // restarted.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <memory>
 #include <csignal>
 #include <cstdio>
 #include <string>
@@ -24,6 +26,7 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include "archive/background.hpp"
 #include "daemon/core/config.hpp"
 #include "daemon/core/control_api.hpp"
 #include "daemon/core/lab_daemon.hpp"
@@ -112,6 +115,21 @@ int main(int argc, char** argv) {
         InstanceLock socket_lock = InstanceLock::acquire(api.socket_path, "control socket");
         api.token = load_or_create_token(cfg.api.token, api.socket_path);
         LabDaemon daemon({cfg, virtual_clock, speed});
+        // [archive]: forwarded from the recorder's file on a thread of its own (docs/archive.md).
+        std::unique_ptr<archive::BackgroundForwarder> forwarder;
+        if (!cfg.archive.postgresql.empty()) {
+            archive::ForwardingOptions fo;
+            fo.database = daemon.database_path();
+            fo.conninfo = cfg.archive.postgresql;
+            fo.lab_id = cfg.archive.lab_id;
+            fo.lab_name = cfg.archive.lab_name.empty() ? cfg.lab_name : cfg.archive.lab_name;
+            fo.interval = std::chrono::milliseconds(std::llround(cfg.archive.interval_s * 1000.0));
+            forwarder = std::make_unique<archive::BackgroundForwarder>(
+                fo, [&daemon](const std::string& severity, const std::string& message) {
+                    daemon.external_event(severity, "archive", message);
+                });
+            daemon.add_status_section("archive", [f = forwarder.get()] { return f->status_json(); });
+        }
         ControlServer server(daemon, api);
         server.adopt_socket_lock(std::move(socket_lock));
         server.start();
@@ -183,6 +201,9 @@ int main(int argc, char** argv) {
         if (console) console->stop();
         server.stop();
         daemon.stop();
+        // What the last seconds committed goes now if the archive answers within 10 s; else at
+        // the next start (nothing is lost either way).
+        if (forwarder) forwarder->finish(std::chrono::seconds(10));
         return 0;
     } catch (const UserError& e) {
         std::fprintf(stderr, "manikind: %s\n", e.what());

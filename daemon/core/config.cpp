@@ -246,6 +246,12 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*rec, "recorder", "durability", c.recorder_durability, {"process", "power"});
         r.number(*rec, "recorder", "commit_interval_s", c.recorder_commit_interval_s, 0.05, 60.0, "s");
     }
+    if (const auto* a = r.table(root, "", "archive")) {
+        r.text(*a, "archive", "postgresql", c.archive.postgresql);
+        r.text(*a, "archive", "lab_id", c.archive.lab_id);
+        r.text(*a, "archive", "lab_name", c.archive.lab_name);
+        r.number(*a, "archive", "interval_s", c.archive.interval_s, 0.5, 3600.0, "s");
+    }
     r.warn_unknown(root, "");
     return c;
 }

@@ -83,6 +83,16 @@ struct HttpConfig {
     std::string listen;                      // "127.0.0.1:8470"; loopback addresses only; port 0: any free port
 };
 
+// [archive]: forward what the recorder commits to a lab-wide PostgreSQL archive (docs/archive.md).
+// Off while `postgresql` is empty. The local database stays the source of truth: forwarding runs
+// on its own thread and its own read-only connection, and acquisition never waits for it.
+struct ArchiveConfig {
+    std::string postgresql;   // a libpq connection string or URI; a password belongs in ~/.pgpass
+    std::string lab_id;       // this lab's key in the archive: 1-64 of [A-Za-z0-9._-], the same for every push
+    std::string lab_name;     // shown beside the id; empty: [lab] name
+    double interval_s = 5.0;  // between forwarding passes while the server answers
+};
+
 struct Config {
     std::string lab_name = "simulated lab";
     std::string mode = "simulated";        // simulated | real
@@ -100,6 +110,7 @@ struct Config {
     SimulationConfig simulation;
     ApiConfig api;
     HttpConfig http;
+    ArchiveConfig archive;
     std::filesystem::path source_dir;      // relative paths in the file resolve from here
     std::vector<std::string> warnings;     // unknown keys and similar, with file:line
     // Where each key present in the text was: "devices.chamber.register_map" -> "file:line:column";

@@ -10,6 +10,7 @@
 #include <set>
 
 #include <fmt/core.h>
+#include <libpq-fe.h>
 
 #include "daemon/core/config.hpp"
 #include "daemon/core/web_server.hpp"
@@ -132,6 +133,47 @@ void check_token(const Config& c, std::vector<std::string>& problems) {
                                        c.source_name, c.file_mode & 07777, c.source_name));
 }
 
+// [archive]: a conninfo libpq parses, a lab id the archive accepts, no password in a file every
+// user can read (docs/archive.md).
+void check_archive(const Config& c, std::vector<std::string>& problems) {
+    const auto& a = c.archive;
+    if (a.postgresql.empty()) {
+        if (!a.lab_id.empty())
+            problems.push_back(fmt::format("{}: archive.lab_id: set, but archive.postgresql is empty: nothing would "
+                                           "be forwarded; give the archive's connection string",
+                                           where_of(c, "archive.lab_id")));
+        return;
+    }
+    char* parse_error = nullptr;
+    PQconninfoOption* options = PQconninfoParse(a.postgresql.c_str(), &parse_error);
+    if (!options) {
+        std::string why = parse_error ? parse_error : "out of memory";
+        while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
+        PQfreemem(parse_error);
+        problems.push_back(fmt::format("{}: archive.postgresql: does not parse as a libpq connection string or URI: {}",
+                                       where_of(c, "archive.postgresql"), why));
+    } else {
+        bool has_password = false;
+        for (const PQconninfoOption* o = options; o->keyword; ++o)
+            if (std::string(o->keyword) == "password" && o->val && *o->val) has_password = true;
+        PQconninfoFree(options);
+        if (has_password && set_in_file(c, "archive.postgresql") && c.file_mode != 0 && (c.file_mode & 0004) != 0)
+            problems.push_back(fmt::format("{}: archive.postgresql holds a password but the file is readable by every "
+                                           "user (mode {:04o}): chmod 640 {}, or move the password to ~/.pgpass",
+                                           c.source_name, c.file_mode & 07777, c.source_name));
+    }
+    const bool ok_chars = std::all_of(a.lab_id.begin(), a.lab_id.end(), [](char ch) {
+        return std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' || ch == '.';
+    });
+    if (a.lab_id.empty())
+        problems.push_back(fmt::format("{}: archive.lab_id: needed with archive.postgresql: this lab's key in the "
+                                       "archive (1 to 64 letters, digits, '-', '_' or '.'), the same at every push",
+                                       where_of(c, "archive")));
+    else if (a.lab_id.size() > 64 || !ok_chars)
+        problems.push_back(fmt::format("{}: archive.lab_id: '{}': expected 1 to 64 letters, digits, '-', '_' or '.'",
+                                       where_of(c, "archive.lab_id"), a.lab_id));
+}
+
 }  // namespace
 
 std::string token_problem(const std::string& token) {
@@ -167,6 +209,7 @@ std::vector<std::string> validate(const Config& c) {
     check_socket(c, problems);
     if (c.mode == "real") check_real_mode(c, problems);
     check_token(c, problems);
+    check_archive(c, problems);
     return problems;
 }
 

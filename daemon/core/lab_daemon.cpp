@@ -133,6 +133,16 @@ void LabDaemon::event(const std::string& severity, const std::string& kind, cons
     }
 }
 
+void LabDaemon::external_event(const std::string& severity, const std::string& kind, const std::string& message) {
+    std::lock_guard lk(lock_);
+    event(severity, kind, message);
+}
+
+void LabDaemon::add_status_section(const std::string& name, std::function<nlohmann::json()> section) {
+    std::lock_guard lk(lock_);
+    status_sections_.emplace_back(name, std::move(section));
+}
+
 nlohmann::json LabDaemon::alarms_json() {
     std::lock_guard lk(lock_);
     nlohmann::json a = nlohmann::json::array();
@@ -839,6 +849,7 @@ nlohmann::json LabDaemon::status_json() {
                     {"full_disk_commits", rs.full_disk_commits}};
     j["safety_tripped"] = safety_tripped_;
     j["measured"] = measured_json_locked();
+    for (const auto& [name, section] : status_sections_) j[name] = section();
     return j;
 }
 

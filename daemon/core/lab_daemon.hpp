@@ -70,6 +70,12 @@ public:
     std::string set_chamber(double temp_c, double rh_pct);
 
     nlohmann::json status_json();
+    // Parts the daemon's owner adds to status_json() under `name` (the archive forwarder's state);
+    // `section` is called under the daemon's lock: it must not call back into the daemon.
+    void add_status_section(const std::string& name, std::function<nlohmann::json()> section);
+    // An event from a part the daemon's owner runs beside it (the archive forwarder): logged,
+    // stored, and an alarm when severity is warn or error. Any thread.
+    void external_event(const std::string& severity, const std::string& kind, const std::string& message);
     nlohmann::json live_json();
     nlohmann::json results_json(const std::string& campaign);   // latest stored results
     // The latest stored results, or nothing while none are stored; throws for an unknown campaign.
@@ -200,6 +206,7 @@ private:
     std::deque<Alarm> alarms_;
     std::int64_t next_alarm_id_ = 1;
     std::function<void()> sample_listener_;
+    std::vector<std::pair<std::string, std::function<nlohmann::json()>>> status_sections_;
 
     std::thread tick_thread_;
     bool stop_ = false;
