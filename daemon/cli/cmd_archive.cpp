@@ -8,8 +8,13 @@
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
 
+#include "analysis/interlab_report.hpp"
 #include "archive/forwarder.hpp"
+#include "archive/pg.hpp"
+#include "daemon/cli/campaign_source.hpp"
 #include "daemon/cli/commands.hpp"
+#include "daemon/core/config.hpp"
+#include "daemon/core/user_error.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -67,6 +72,38 @@ void run_push(const PushArgs& a) {
                 static_cast<long long>(r.trials_complete), static_cast<long long>(r.trials_partial));
 }
 
+struct CompareArgs {
+    std::string conninfo;
+    std::string campaign;
+    std::vector<std::string> labs;
+    bool json = false;
+};
+
+// Every lab's copy of the campaign, pulled and analysed as `analyze --archive` does, then ISO
+// 5725-2 across the labs case by case.
+void run_compare(const CompareArgs& a) {
+    std::vector<std::string> labs = a.labs;
+    if (labs.empty()) {
+        auto pg = archive::PgConnection::connect(a.conninfo);
+        auto r = pg.exec("SELECT lab_id FROM campaigns WHERE campaign_name = $1 ORDER BY lab_id", {a.campaign});
+        for (int i = 0; i < r.rows(); ++i) labs.push_back(r.text(i, 0));
+        if (labs.empty())
+            throw UserError(fmt::format("archive {}: no lab holds a campaign named '{}'", pg.describe(), a.campaign));
+    }
+    const config::Config cfg = config::default_config();
+    analysis::AnalysisOptions options;
+    options.steady.window_s = cfg.steady_state.window_s;
+    options.steady.max_skin_fluctuation_c = cfg.steady_state.max_skin_fluctuation_c;
+    std::vector<analysis::LabCampaignResult> results;
+    for (const auto& lab : labs) {
+        if (!a.json) std::fprintf(stderr, "lab %s: pulling and analysing '%s'\n", lab.c_str(), a.campaign.c_str());
+        results.push_back({lab, analysis::analyze_campaign(campaign_from_archive(a.conninfo, lab, a.campaign), options)});
+    }
+    const auto report = analysis::compare_labs(a.campaign, results);
+    if (a.json) std::printf("%s\n", analysis::interlab_to_json(report).dump(2).c_str());
+    else std::printf("%s", analysis::interlab_to_text(report).c_str());
+}
+
 }  // namespace
 
 void add_archive_command(CLI::App& app) {
@@ -87,6 +124,22 @@ void add_archive_command(CLI::App& app) {
                  "3 when the server cannot be reached or the connection drops (run again: it resumes), 4 when the\n"
                  "server refuses (permissions, a trial another lab owns, another push of this lab running).");
     push->callback([args] { run_push(*args); });
+
+    auto cmp = std::make_shared<CompareArgs>();
+    auto* compare = cmd->add_subcommand(
+        "compare", "One campaign measured in several labs: each lab's whole-body flux with its 95 % CI per case, and "
+                   "ISO 5725-2 repeatability and reproducibility SDs across the labs");
+    compare->add_option("--archive", cmp->conninfo, "libpq connection string of the archive")->required();
+    compare->add_option("--campaign", cmp->campaign, "The campaign's name, the same in every lab")->required();
+    compare->add_option("--lab", cmp->labs, "A lab to compare (repeatable; default: every lab holding the campaign)");
+    compare->add_flag("--json", cmp->json, "Print the report as JSON");
+    compare->footer("Example: manikin archive compare --archive \"host=archive.lab dbname=manikin\" --campaign round-robin-2026\n"
+                    "Cases are matched by id; a case needs two labs with two usable replicates each. Then, per case:\n"
+                    "s_r (within labs), s_L (between labs), s_R = sqrt(s_r^2 + s_L^2), r = 2.8 s_r, R = 2.8 s_R,\n"
+                    "Mandel's h and k per lab and Cochran's C (ISO 5725-2 7.3-7.4). Per lab, reconcile finds what\n"
+                    "sets one lab apart: manikin reconcile --archive ... --lab <id> --campaign <name>.\n"
+                    "Exit status 2 for an unknown campaign or lab, 3 when the archive cannot be reached.");
+    compare->callback([cmp] { run_compare(*cmp); });
 }
 
 }  // namespace manikind::cli

@@ -25,6 +25,7 @@
 #include "daemon/core/database_export.hpp"
 #include "daemon/core/recorder/database.hpp"
 #include "daemon/core/user_error.hpp"
+#include "tests/archive/archive_checks.hpp"
 #include "tests/archive/pg_server.hpp"
 
 namespace {
@@ -57,74 +58,14 @@ private:
     std::filesystem::path path_;
 };
 
-// Per trial UUID: rows, sum of value (NULLs left out, as SQL's sum does), sum of mono_ns.
-struct TrialSums {
-    std::int64_t rows = 0;
-    double value_sum = 0.0;
-    std::int64_t mono_ns_sum = 0;
-};
-
-std::map<std::string, TrialSums> sqlite_sums(const std::filesystem::path& path) {
-    auto db = Database::open(path);
-    std::map<std::string, TrialSums> sums;
-    for (const auto& campaign : db.campaigns()) {
-        for (const auto& trial : db.trials(campaign.id)) {
-            auto& s = sums[trial.uuid];
-            db.for_each_trial_sample(trial.id, [&](const SampleRow& row) {
-                ++s.rows;
-                if (!std::isnan(row.value)) s.value_sum += row.value;
-                s.mono_ns_sum += row.mono_ns;
-            });
-        }
-    }
-    return sums;
-}
-
-std::map<std::string, TrialSums> archive_sums(const std::string& conninfo) {
-    auto pg = PgConnection::connect(conninfo);
-    auto r = pg.exec("SELECT trial_uuid, count(*), coalesce(sum(value), 0), sum(mono_ns) FROM samples GROUP BY trial_uuid");
-    std::map<std::string, TrialSums> sums;
-    for (int i = 0; i < r.rows(); ++i)
-        sums[r.text(i, 0)] = TrialSums{r.int64(i, 1), std::stod(r.text(i, 2)), std::stoll(r.text(i, 3))};
-    return sums;
-}
-
-void check_archive_equals_sqlite(const std::filesystem::path& db, const std::string& conninfo) {
-    const auto want = sqlite_sums(db);
-    const auto got = archive_sums(conninfo);
-    REQUIRE(got.size() == want.size());
-    for (const auto& [uuid, w] : want) {
-        INFO("trial " << uuid);
-        REQUIRE(got.count(uuid) == 1);
-        const auto& g = got.at(uuid);
-        CHECK(g.rows == w.rows);
-        CHECK(g.mono_ns_sum == w.mono_ns_sum);
-        CHECK(g.value_sum == Approx(w.value_sum).epsilon(1e-12));  // summed in another order
-    }
-}
+using manikind::test::check_archive_equals_sqlite;
 
 std::int64_t archive_count(const std::string& conninfo, const std::string& sql) {
     auto pg = PgConnection::connect(conninfo);
     return pg.exec(sql).int64(0, 0);
 }
 
-struct CliResult {
-    int status = -1;
-    std::string out;
-};
-
-// build/bin/manikin as a user runs it; stdout captured, stderr left to the test's log.
-CliResult run_manikin(const std::string& args) {
-    CliResult r;
-    const std::string cmd = std::string(MANIKIND_BIN_DIR) + "/manikin " + args;
-    FILE* pipe = popen(cmd.c_str(), "r");
-    if (!pipe) return r;
-    char buffer[4096];
-    for (std::size_t n; (n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0;) r.out.append(buffer, n);
-    const int status = pclose(pipe);
-    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return r;
-}
+using manikind::test::run_manikin;
 
 constexpr std::int64_t second_ns = 1'000'000'000;
 
