@@ -175,11 +175,11 @@ int main(int argc, char** argv) {
                 if (signalled() || server.shutdown_requested() || (console && console->shutdown_requested())) break;
                 feed_watchdog();
                 daemon.step_virtual(dt);
-                const auto st = daemon.status_json();
-                const std::string stage = st["stage"].get<std::string>() + (st.contains("trial") ? fmt::format(" trial {}", st["trial"]["id"].get<long>()) : "");
+                // Not status_json(): it measures the steady window and every device, each step.
+                const std::string stage = daemon.stage_line();
                 if (stage != last_stage) {
-                    std::printf("t=%.0f s %s committed=%llu\n", st["time_s"].get<double>(), stage.c_str(),
-                                static_cast<unsigned long long>(st["recorder"]["committed"].get<std::uint64_t>()));
+                    std::printf("t=%.0f s %s committed=%llu\n", daemon.virtual_time_s(), stage.c_str(),
+                                static_cast<unsigned long long>(daemon.committed_rows()));
                     std::fflush(stdout);
                     last_stage = stage;
                 }

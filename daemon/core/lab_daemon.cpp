@@ -707,6 +707,11 @@ bool LabDaemon::campaign_active() {
     return plan_.has_value();
 }
 
+std::string LabDaemon::stage_line() {
+    std::lock_guard lk(lock_);
+    return current_ ? fmt::format("{} trial {}", to_string(stage_), trial_id_) : std::string(to_string(stage_));
+}
+
 void LabDaemon::run_virtual(std::function<void(const std::string&)> on_trial, double max_virtual_s) {
     const double dt = o_.config.simulation.step_s;
     std::size_t reported = 0;

@@ -101,6 +101,11 @@ public:
     void start_realtime();
     void stop();
     bool campaign_active();
+    // The stage and trial now, cheaply (status_json() measures the steady window and every device):
+    // "acquiring trial 3", "idle". For a loop that reports each change.
+    std::string stage_line();
+    std::uint64_t committed_rows() const { return recorder_->stats().committed; }
+    double virtual_time_s() const { return static_cast<double>(clock_->mono_ns()) * 1e-9; }
 
     recorder::Database& db() { return db_; }
     // Returns when every sample recorded so far is committed (exports and tests read after it).
