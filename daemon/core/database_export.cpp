@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <ctime>
 #include <limits>
@@ -135,14 +136,23 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
     // set, so a script reads each trial alike).
     std::vector<std::vector<BinnedChannel>> per_trial(spans.size());
     std::vector<bool> recorded(all_channels.size(), false);
+    // Channel id -> index into all_channels, looked up once per sample: a vector by id (ids are
+    // SQLite rowids from 1, one per channel, so it stays small), not a map.
+    constexpr std::size_t no_channel = static_cast<std::size_t>(-1);
+    std::vector<std::size_t> index_of_id;
+    for (std::size_t k = 0; k < all_channels.size(); ++k) {
+        const auto id = static_cast<std::size_t>(std::max<std::int64_t>(all_channels[k].id, 0));
+        if (id >= index_of_id.size()) index_of_id.resize(id + 1, no_channel);
+        index_of_id[id] = k;
+    }
     for (std::size_t s = 0; s < spans.size(); ++s) {
         const auto& sp = spans[s];
         const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(sp.end_mono_ns - sp.start_mono_ns) * 1e-9 / period_s)) + 1;
         std::vector<ChannelBinner> binners(all_channels.size(), ChannelBinner(sp.start_mono_ns, n, period_s));
-        std::map<std::int64_t, std::size_t> index_of_id;  // channel id -> index into all_channels
-        for (std::size_t k = 0; k < all_channels.size(); ++k) index_of_id[all_channels[k].id] = k;
         db.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {
-            if (const auto it = index_of_id.find(r.channel_id); it != index_of_id.end()) binners[it->second].add(r);
+            const auto id = static_cast<std::size_t>(r.channel_id);
+            if (r.channel_id >= 0 && id < index_of_id.size() && index_of_id[id] != no_channel)
+                binners[index_of_id[id]].add(r);
         });
         for (std::size_t k = 0; k < all_channels.size(); ++k) {
             if (binners[k].any_sample()) recorded[k] = true;
