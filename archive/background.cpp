@@ -91,6 +91,8 @@ bool BackgroundForwarder::pass() {
     PushOptions push_options;
     push_options.chunk_rows = o_.chunk_rows;
     push_options.lab_name = o_.lab_name;
+    const auto now_steady = std::chrono::steady_clock::now();
+    push_options.check_idle_log = !idle_checked_ || now_steady - idle_checked_at_ >= o_.idle_check_interval;
     push_options.after_chunk = [this](const ChunkCommitted& chunk) {
         {
             std::lock_guard lk(m_);
@@ -127,6 +129,7 @@ bool BackgroundForwarder::pass() {
                 severity = "info", message = fmt::format("forwarding to the archive as lab '{}'", o_.lab_id);
             consecutive_failures_ = 0;
             archived_through_utc_ns_ = began_utc_ns;
+            if (push_options.check_idle_log) idle_checked_ = true, idle_checked_at_ = now_steady;
             state_ = "forwarding";
             last_error_.clear();
         } else {

@@ -27,6 +27,8 @@ struct ForwardingOptions {
     std::chrono::milliseconds interval{5000};          // between passes while the server answers
     std::chrono::milliseconds max_retry_delay{60000};  // the backoff's cap while it does not
     std::size_t chunk_rows = 50'000;
+    // How often a pass also checks the idle log for rows behind its progress (PushOptions::check_idle_log).
+    std::chrono::milliseconds idle_check_interval{3'600'000};
     // Tests: called after each committed chunk, as PushOptions::after_chunk.
     std::function<void(const ChunkCommitted&)> after_chunk;
 };
@@ -75,6 +77,8 @@ private:
     std::uint64_t passes_ = 0, failures_ = 0, consecutive_failures_ = 0;
     std::int64_t samples_added_ = 0;
     std::int64_t archived_through_utc_ns_ = 0;  // 0: not yet
+    std::chrono::steady_clock::time_point idle_checked_at_{};  // the last pass that checked and succeeded
+    bool idle_checked_ = false;
     std::string last_error_;
     std::thread thread_;
 };

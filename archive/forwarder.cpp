@@ -160,6 +160,7 @@ public:
         in_transaction([&] { send_metadata(); });
         in_transaction([&] { send_events(); });
         send_samples();
+        send_idle_samples();
         return result_;
     }
 
@@ -254,6 +255,41 @@ private:
             append_copy_text(names, channel);
             names += '\t';
             channel_names_.emplace(channels.int64(0), std::move(names));
+        }
+
+        // The SQLite column is the device's address (host:port, serial port, CAN interface).
+        Source::Stmt devices(src_, "SELECT name, kind, address FROM devices ORDER BY id");
+        while (devices.step()) {
+            auto r = pg_.exec("INSERT INTO devices AS d (lab_id, device, kind, transport) VALUES ($1, $2, $3, $4)"
+                              " ON CONFLICT (lab_id, device) DO UPDATE SET kind = EXCLUDED.kind,"
+                              " transport = EXCLUDED.transport WHERE (d.kind, d.transport)"
+                              " IS DISTINCT FROM (EXCLUDED.kind, EXCLUDED.transport)",
+                              {lab_, devices.text(0), devices.text(1), devices.text(2)});
+            count(result_.devices, r.affected());
+        }
+
+        // A stored result is never changed in SQLite (a new analysis is a new row): insert only.
+        Source::Stmt results(src_, "SELECT c.name, r.computed_utc_ns, r.json FROM results r"
+                                   " JOIN campaigns c ON c.id = r.campaign_id ORDER BY r.id");
+        while (results.step()) {
+            auto r = pg_.exec("INSERT INTO results (lab_id, campaign_name, computed_utc_ns, json)"
+                              " VALUES ($1, $2, $3, $4) ON CONFLICT DO NOTHING",
+                              {lab_, results.text(0), std::to_string(results.int64(1)), results.text(2)});
+            count(result_.results, r.affected());
+        }
+
+        // The recorder refuses new text under a stored (name, version); the update covers a
+        // file replaced by another that reuses the pair.
+        Source::Stmt twins(src_, "SELECT name, version, toml, created_utc_ns FROM twin_versions ORDER BY id");
+        while (twins.step()) {
+            auto r = pg_.exec("INSERT INTO twin_versions AS t (lab_id, twin_name, version, toml, created_utc_ns)"
+                              " VALUES ($1, $2, $3, $4, $5) ON CONFLICT (lab_id, twin_name, version) DO UPDATE"
+                              " SET toml = EXCLUDED.toml, created_utc_ns = EXCLUDED.created_utc_ns"
+                              " WHERE (t.toml, t.created_utc_ns) IS DISTINCT FROM (EXCLUDED.toml,"
+                              " EXCLUDED.created_utc_ns)",
+                              {lab_, twins.text(0), std::to_string(twins.int64(1)), twins.text(2),
+                               std::to_string(twins.int64(3))});
+            count(result_.twin_versions, r.affected());
         }
     }
 
@@ -386,6 +422,112 @@ private:
             }
             if (trial.terminal) ++result_.trials_complete;
             else ++result_.trials_partial;
+        }
+    }
+
+    // The idle log, in chunks in the SQLite key order (utc_ns, channel id), each committed with
+    // the progress row (source_table 'idle_samples', scope ''), as send_samples.
+    //
+    // The log is appended in wall-clock order, but not exactly: devices stamp their readings
+    // themselves and the recorder commits in batches, so a row may commit after one a little
+    // newer; and a clock stepped back (NTP, set by hand) writes rows far behind what was sent.
+    // Hence (docs/archive.md): rows of the last idle_settle_ns before the snapshot's newest are
+    // sent every push but the progress key stops short of them, so a late row there is still
+    // sent; and rows_sent always equals the number of SQLite rows up to the progress key (the
+    // chunks are exactly those rows), so a count that differs means rows appeared behind the key
+    // (or were removed): the log is then sent again from the start, rows already there skipped.
+    // The count is one scan of the key range, the price of not losing those rows; the daemon's
+    // forwarder makes it hourly (PushOptions::check_idle_log), so such rows may wait up to an hour.
+    static constexpr std::int64_t idle_settle_ns = 60'000'000'000;
+
+    void send_idle_samples() {
+        pg_.exec("CREATE TEMP TABLE IF NOT EXISTS idle_staging (device text, channel text, utc_ns bigint,"
+                 " value double precision, quality smallint) ON COMMIT DELETE ROWS");
+        // A key before every row stands for "none" (plain values: GCC's maybe-uninitialized
+        // misfires on an optional of this struct).
+        struct Key {
+            std::int64_t utc_ns = std::numeric_limits<std::int64_t>::min();
+            std::int64_t channel_id = std::numeric_limits<std::int64_t>::min();
+        };
+        Key progress;               // last settled row committed
+        bool has_progress = false;
+        std::int64_t rows_sent = 0;  // SQLite rows up to `progress`
+        {
+            auto r = pg_.exec("SELECT last_utc_ns, last_channel_id, rows_sent FROM forward_progress"
+                              " WHERE lab_id = $1 AND source_table = 'idle_samples' AND scope = ''",
+                              {lab_});
+            if (r.rows() > 0 && !r.is_null(0, 0) && !r.is_null(0, 1)) {
+                progress = Key{r.int64(0, 0), r.int64(0, 1)};
+                has_progress = true;
+                rows_sent = r.int64(0, 2);
+            }
+        }
+        if (has_progress && options_.check_idle_log) {
+            Source::Stmt behind(src_, "SELECT count(*) FROM idle_samples WHERE (utc_ns, channel_id) <= (?1, ?2)");
+            behind.bind(1, progress.utc_ns);
+            behind.bind(2, progress.channel_id);
+            if (behind.step() && behind.int64(0) != rows_sent) {
+                result_.idle_resent = true;
+                progress = Key{};
+                has_progress = false;
+                rows_sent = 0;
+            }
+        }
+        std::int64_t settled_utc_ns = std::numeric_limits<std::int64_t>::min();
+        {
+            Source::Stmt newest(src_, "SELECT max(utc_ns) FROM idle_samples");
+            if (newest.step() && !newest.is_null(0)) settled_utc_ns = newest.int64(0) - idle_settle_ns;
+        }
+        Source::Stmt read(src_, "SELECT utc_ns, channel_id, value, quality FROM idle_samples"
+                                " WHERE (utc_ns, channel_id) > (?1, ?2) ORDER BY utc_ns, channel_id LIMIT ?3");
+        const auto chunk_rows = static_cast<std::int64_t>(std::max<std::size_t>(options_.chunk_rows, 1));
+        Key cursor = progress;  // last row read, settled or not
+        for (;;) {
+            read.reset();
+            read.bind(1, cursor.utc_ns);
+            read.bind(2, cursor.channel_id);
+            read.bind(3, chunk_rows);
+            std::string data;
+            std::int64_t n = 0;
+            while (read.step()) {
+                const Key key{read.int64(0), read.int64(1)};
+                const auto names = channel_names_.find(key.channel_id);
+                if (names == channel_names_.end()) src_.fail("an idle sample names a channel that does not exist");
+                cursor = key;
+                if (key.utc_ns <= settled_utc_ns) {
+                    progress = key;
+                    has_progress = true;
+                    ++rows_sent;
+                }
+                data += names->second;
+                data += fmt::format("{}\t", key.utc_ns);
+                append_copy_double(data, read, 2);
+                data += fmt::format("\t{}\n", read.int64(3));
+                ++n;
+            }
+            if (n == 0) break;
+            std::int64_t added = 0;
+            in_transaction([&] {
+                pg_.copy_in("COPY idle_staging FROM STDIN", data);
+                added = pg_.exec("INSERT INTO idle_samples (lab_id, device, channel, utc_ns, value, quality)"
+                                 " SELECT $1, device, channel, utc_ns, value, quality FROM idle_staging"
+                                 " ON CONFLICT DO NOTHING",
+                                 {lab_})
+                            .affected();
+                pg_.exec_nullable(
+                    "INSERT INTO forward_progress (lab_id, source_table, scope, last_utc_ns, last_channel_id,"
+                    " rows_sent, updated_utc_ns) VALUES ($1, 'idle_samples', '', $2, $3, $4, $5)"
+                    " ON CONFLICT (lab_id, source_table, scope) DO UPDATE SET last_utc_ns = EXCLUDED.last_utc_ns,"
+                    " last_channel_id = EXCLUDED.last_channel_id, rows_sent = EXCLUDED.rows_sent,"
+                    " updated_utc_ns = EXCLUDED.updated_utc_ns",
+                    {lab_, std::to_string(progress.utc_ns), std::to_string(progress.channel_id),
+                     std::to_string(rows_sent), std::to_string(now_utc_ns())},
+                    {false, !has_progress, !has_progress, false, false});
+            });
+            ++result_.idle_chunks;
+            result_.idle_samples.sent += n;
+            result_.idle_samples.added += added;
+            if (n < chunk_rows) break;
         }
     }
 

@@ -26,10 +26,14 @@ struct ChunkCommitted {
 };
 
 struct PushOptions {
-    std::size_t chunk_rows = 50'000;  // samples per transaction
+    std::size_t chunk_rows = 50'000;  // samples (and idle samples) per transaction
     std::string lab_name;             // labs.name for a lab the archive has not seen; empty: the lab id
     // Called after every committed chunk (progress output; tests stop the server here).
     std::function<void(const ChunkCommitted&)> after_chunk;
+    // Count the idle log up to its progress key to catch rows written behind it (a wall clock
+    // stepped back): one scan of the log, which grows for as long as the lab records. The daemon's
+    // forwarder asks for it at its first pass and then hourly, not at every 5-s pass.
+    bool check_idle_log = true;
 };
 
 struct PushResult {
@@ -37,7 +41,10 @@ struct PushResult {
     std::string lab_id;
     int archive_schema_version = 0;
     TableCounts campaigns, trials, channels, events, samples;
-    std::int64_t chunks = 0;
+    TableCounts devices, results, twin_versions, idle_samples;
+    std::int64_t chunks = 0;       // of samples
+    std::int64_t idle_chunks = 0;  // of idle_samples
+    bool idle_resent = false;      // rows appeared behind the idle log's progress (clock stepped back): resent all
     std::int64_t trials_complete = 0;  // terminal trials whose samples the archive now holds in full
     std::int64_t trials_partial = 0;   // trials still running: sent up to what was committed
 };

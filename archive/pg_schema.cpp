@@ -89,7 +89,53 @@ CREATE TABLE forward_progress (
 );
 )sql";
 
-constexpr std::array<const char*, 1> all_migrations{migration_1};
+// Version 2: what version 1 left in the lab's file (docs/archive.md). results and twin_versions
+// have no name beyond their content: results are keyed by campaign, computation time and an md5
+// of the JSON (as events: a long text must not exceed a b-tree entry), twin versions by their
+// own (name, version), which the recorder keeps immutable. idle_samples is the idle log by
+// device and channel name; its progress row (scope '') keys on the SQLite key (utc_ns, channel
+// id), hence last_utc_ns. trial_steps: one row per time step of a trial for analysts.
+constexpr const char* migration_2 = R"sql(
+CREATE TABLE devices (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    device text NOT NULL,
+    kind text NOT NULL,
+    transport text NOT NULL,
+    PRIMARY KEY (lab_id, device)
+);
+CREATE TABLE results (
+    lab_id text NOT NULL,
+    campaign_name text NOT NULL,
+    computed_utc_ns bigint NOT NULL,
+    json text NOT NULL,
+    FOREIGN KEY (lab_id, campaign_name) REFERENCES campaigns (lab_id, campaign_name)
+);
+CREATE UNIQUE INDEX results_identity ON results (lab_id, campaign_name, computed_utc_ns, md5(json));
+CREATE TABLE twin_versions (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    twin_name text NOT NULL,
+    version bigint NOT NULL,
+    toml text NOT NULL,
+    created_utc_ns bigint NOT NULL,
+    PRIMARY KEY (lab_id, twin_name, version)
+);
+CREATE TABLE idle_samples (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    device text NOT NULL,
+    channel text NOT NULL,
+    utc_ns bigint NOT NULL,
+    value double precision,
+    quality smallint NOT NULL,
+    PRIMARY KEY (lab_id, device, channel, utc_ns)
+);
+ALTER TABLE forward_progress ADD COLUMN last_utc_ns bigint;
+CREATE VIEW trial_steps AS
+SELECT trial_uuid, mono_ns, min(utc_ns) AS utc_ns, count(*) AS n_channels,
+       jsonb_object_agg(device || '.' || channel, value) AS channel_values
+FROM samples GROUP BY trial_uuid, mono_ns;
+)sql";
+
+constexpr std::array<const char*, 2> all_migrations{migration_1, migration_2};
 
 // Any fixed number: the key of the lock pushers take while migrating.
 constexpr const char* migration_lock_sql = "SELECT pg_advisory_xact_lock(7419001)";

@@ -51,7 +51,13 @@ void run_push(const PushArgs& a) {
                                     {"channels", to_json(r.channels)},
                                     {"events", to_json(r.events)},
                                     {"samples", to_json(r.samples)},
+                                    {"devices", to_json(r.devices)},
+                                    {"results", to_json(r.results)},
+                                    {"twin_versions", to_json(r.twin_versions)},
+                                    {"idle_samples", to_json(r.idle_samples)},
                                     {"chunks", r.chunks},
+                                    {"idle_chunks", r.idle_chunks},
+                                    {"idle_resent", r.idle_resent},
                                     {"trials_complete", r.trials_complete},
                                     {"trials_partial", r.trials_partial}};
         std::printf("%s\n", doc.dump(2).c_str());
@@ -59,15 +65,20 @@ void run_push(const PushArgs& a) {
     }
     std::printf("pushed %s as lab %s to %s (archive schema v%d)\n", a.db.c_str(), r.lab_id.c_str(), r.archive.c_str(),
                 r.archive_schema_version);
-    std::printf("%-10s %12s %12s\n", "table", "sent", "new/changed");
+    std::printf("%-13s %12s %12s\n", "table", "sent", "new/changed");
     const auto row = [](const char* name, const archive::TableCounts& c) {
-        std::printf("%-10s %12lld %12lld\n", name, static_cast<long long>(c.sent), static_cast<long long>(c.added));
+        std::printf("%-13s %12lld %12lld\n", name, static_cast<long long>(c.sent), static_cast<long long>(c.added));
     };
     row("campaigns", r.campaigns);
     row("trials", r.trials);
     row("channels", r.channels);
     row("events", r.events);
     row("samples", r.samples);
+    row("devices", r.devices);
+    row("results", r.results);
+    row("twin_versions", r.twin_versions);
+    row("idle_samples", r.idle_samples);
+    if (r.idle_resent) std::printf("idle log: rows appeared behind what was sent (clock stepped back?): resent all\n");
     std::printf("trials with every sample archived: %lld; still running, sent so far: %lld\n",
                 static_cast<long long>(r.trials_complete), static_cast<long long>(r.trials_partial));
 }
@@ -110,8 +121,9 @@ void add_archive_command(CLI::App& app) {
     auto* cmd = app.add_subcommand("archive", "Lab-wide PostgreSQL archive: store and forward (docs/archive.md)");
     cmd->require_subcommand(1);
     auto args = std::make_shared<PushArgs>();
-    auto* push = cmd->add_subcommand("push", "Send a daemon database's campaigns, trials, channels, events and samples "
-                                             "to the archive; sends only what is new, resumes an interrupted push");
+    auto* push = cmd->add_subcommand("push", "Send a daemon database's campaigns, trials, devices, channels, events, "
+                                             "samples, idle log, results and twin versions to the archive; sends "
+                                             "only what is new, resumes an interrupted push");
     push->add_option("db", args->db, "The daemon's SQLite database (read only; the daemon may be running)")->required();
     push->add_option("--to", args->conninfo, "libpq connection string, e.g. \"host=archive dbname=manikin user=lab3\"")
         ->required();

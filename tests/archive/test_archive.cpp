@@ -12,6 +12,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -428,4 +429,137 @@ TEST_CASE("archive pull gives analyze the same campaign as the lab database", "[
         CHECK(gone.status == 3);
         server.start();
     }
+}
+
+namespace {
+
+// The idle log: `steps` readings of every channel 10 s apart from `from_step` (wall clock only:
+// the idle log is keyed by utc_ns).
+void add_idle_samples(Database& db, const std::vector<std::int64_t>& channels, int from_step, int steps) {
+    std::vector<SampleRow> rows;
+    for (int step = from_step; step < from_step + steps; ++step) {
+        for (std::size_t c = 0; c < channels.size(); ++c) {
+            SampleRow row;
+            row.trial_id = 0;
+            row.channel_id = channels[c];
+            row.mono_ns = 100 * second_ns + step * 10 * second_ns;
+            row.utc_ns = 1'789'000'000 * second_ns + step * 10 * second_ns;
+            row.value = 18.0 + 0.01 * step + static_cast<double>(c);
+            row.quality = 0;
+            rows.push_back(row);
+        }
+    }
+    db.insert_samples(rows);
+}
+
+}  // namespace
+
+TEST_CASE("archive push sends the idle log and lab metadata once and trial_steps has a row per time step",
+          "[archive]") {
+    if (!PgServer::available()) {
+        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
+        return;
+    }
+    PgServer server;
+    TempDir tmp;
+    const auto db_path = tmp.path() / "lab.db";
+    const auto lab = build_lab_db(db_path);
+    std::string done_uuid;
+    double idle_sum = 0.0;  // of the values add_idle_samples wrote
+    const auto idle_value_sum = [](int from_step, int steps) {
+        double sum = 0.0;
+        for (int step = from_step; step < from_step + steps; ++step)
+            for (int c = 0; c < 3; ++c) sum += 18.0 + 0.01 * step + c;
+        return sum;
+    };
+    {
+        auto db = Database::open(db_path);
+        const auto campaign = db.find_campaign("archive-test").value();
+        db.store_result(campaign, R"({"cases": [{"case": 1, "n_replicates": 1}]})", 1'790'006'000 * second_ns);
+        db.store_result(campaign, R"({"cases": [{"case": 1, "n_replicates": 2}]})", 1'790'007'000 * second_ns);
+        db.store_twin_version("andi", 1, "[zones]\nn = 35\n");
+        add_idle_samples(db, lab.channels, 0, 50);
+        idle_sum += idle_value_sum(0, 50);
+        done_uuid = db.trial(lab.done_trial).value().uuid;
+    }
+    const auto idle_count = [&] {
+        return archive_count(server.conninfo(), "SELECT count(*) FROM idle_samples WHERE lab_id = 'lab-3'");
+    };
+    const auto archive_idle_sum = [&] {
+        auto pg = PgConnection::connect(server.conninfo());
+        return std::stod(pg.exec("SELECT sum(value) FROM idle_samples WHERE lab_id = 'lab-3'").text(0, 0));
+    };
+
+    auto first = push(db_path, server.conninfo(), "lab-3");
+    CHECK(first.devices.sent == 2);
+    CHECK(first.devices.added == 2);
+    CHECK(first.results.sent == 2);
+    CHECK(first.results.added == 2);
+    CHECK(first.twin_versions.added == 1);
+    CHECK(first.idle_samples.sent == 50 * 3);
+    CHECK(first.idle_samples.added == 50 * 3);
+    CHECK_FALSE(first.idle_resent);
+    CHECK(idle_count() == 50 * 3);
+    CHECK(archive_idle_sum() == Approx(idle_sum).epsilon(1e-12));
+    CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM devices WHERE lab_id = 'lab-3' AND device = 'chamber'"
+                                           " AND kind = 'modbus' AND transport = '127.0.0.1:502'") == 1);
+    CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM results WHERE campaign_name = 'archive-test'"
+                                           " AND json LIKE '%\"n_replicates\": 2%'") == 1);
+    CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM twin_versions WHERE twin_name = 'andi' AND version = 1"
+                                           " AND toml = E'[zones]\\nn = 35\\n'") == 1);
+
+    // A second push adds nothing; only the idle log's last minute (6 steps of 10 s) is read
+    // again, in case a late row lands there.
+    auto again = push(db_path, server.conninfo(), "lab-3");
+    CHECK(again.devices.added == 0);
+    CHECK(again.results.added == 0);
+    CHECK(again.twin_versions.added == 0);
+    CHECK(again.samples.added == 0);
+    CHECK(again.events.added == 0);
+    CHECK(again.idle_samples.added == 0);
+    CHECK(again.idle_samples.sent == 6 * 3);
+    CHECK_FALSE(again.idle_resent);
+
+    // New idle readings: only they arrive.
+    {
+        auto db = Database::open(db_path);
+        add_idle_samples(db, lab.channels, 50, 20);
+        idle_sum += idle_value_sum(50, 20);
+    }
+    auto more = push(db_path, server.conninfo(), "lab-3");
+    CHECK(more.idle_samples.added == 20 * 3);
+    CHECK(more.idle_samples.sent == (6 + 20) * 3);
+    CHECK_FALSE(more.idle_resent);
+    CHECK(idle_count() == 70 * 3);
+
+    // The wall clock stepped back an hour: rows behind the progress are noticed and sent.
+    {
+        auto db = Database::open(db_path);
+        add_idle_samples(db, lab.channels, -400, 10);
+        idle_sum += idle_value_sum(-400, 10);
+    }
+    auto stepped = push(db_path, server.conninfo(), "lab-3");
+    CHECK(stepped.idle_resent);
+    CHECK(stepped.idle_samples.added == 10 * 3);
+    CHECK(idle_count() == 80 * 3);
+    CHECK(archive_idle_sum() == Approx(idle_sum).epsilon(1e-12));
+    auto settled = push(db_path, server.conninfo(), "lab-3");
+    CHECK_FALSE(settled.idle_resent);
+    CHECK(settled.idle_samples.added == 0);
+
+    // trial_steps: one row per time step of the trial, values by "device.channel".
+    auto db = Database::open(db_path);
+    std::set<std::int64_t> mono_ns;
+    db.for_each_trial_sample(lab.done_trial, [&](const SampleRow& row) { mono_ns.insert(row.mono_ns); });
+    auto pg = PgConnection::connect(server.conninfo());
+    CHECK(pg.exec("SELECT count(*) FROM trial_steps WHERE trial_uuid = $1", {done_uuid}).int64(0, 0) ==
+          static_cast<std::int64_t>(mono_ns.size()));
+    const auto want = db.samples(lab.done_trial, lab.channels[0]).at(1);
+    auto step = pg.exec("SELECT channel_values ->> 'chamber.air_temp_pv_c', utc_ns, n_channels FROM trial_steps"
+                        " WHERE trial_uuid = $1 AND mono_ns = $2",
+                        {done_uuid, std::to_string(want.mono_ns)});
+    REQUIRE(step.rows() == 1);
+    CHECK(std::stod(step.text(0, 0)) == want.value);
+    CHECK(step.int64(0, 1) == want.utc_ns);
+    CHECK(step.int64(0, 2) == 3);
 }
