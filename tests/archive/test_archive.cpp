@@ -120,6 +120,23 @@ LabDb build_lab_db(const std::filesystem::path& path) {
     return lab;
 }
 
+// A test's own server and a lab database with two trials (build_lab_db) in a fresh folder.
+struct LabAndServer {
+    PgServer server;
+    TempDir tmp;
+    std::filesystem::path db_path = tmp.path() / "lab.db";
+    LabDb lab = build_lab_db(db_path);
+};
+
+// run_if_postgres.sh skips under CTest; run by hand, a test says it skipped.
+#define SKIP_WITHOUT_POSTGRES()                                                          \
+    do {                                                                                 \
+        if (!PgServer::available()) {                                                    \
+            WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir); \
+            return;                                                                      \
+        }                                                                                \
+    } while (false)
+
 // The same bits, NaN included (== would call two NaNs different and -0.0 equal to 0.0).
 bool same_bits(const std::vector<double>& a, const std::vector<double>& b) {
     return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0);
@@ -174,14 +191,11 @@ void check_same_campaign(const manikind::analysis::Campaign& want, const manikin
 }  // namespace
 
 TEST_CASE("archive push sends everything once and a second push adds nothing", "[archive]") {
-    if (!PgServer::available()) {
-        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
-        return;
-    }
-    PgServer server;
-    TempDir tmp;
-    const auto db_path = tmp.path() / "lab.db";
-    const auto lab = build_lab_db(db_path);
+    SKIP_WITHOUT_POSTGRES();
+    LabAndServer f;
+    auto& server = f.server;
+    const auto& db_path = f.db_path;
+    const auto& lab = f.lab;
 
     auto first = push(db_path, server.conninfo(), "lab-3");
     CHECK(first.archive_schema_version == manikind::archive::pg_latest_schema_version());
@@ -257,14 +271,11 @@ TEST_CASE("archive push sends everything once and a second push adds nothing", "
 }
 
 TEST_CASE("archive push cut off by the server stopping resumes with every sample exactly once", "[archive]") {
-    if (!PgServer::available()) {
-        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
-        return;
-    }
-    PgServer server;
-    TempDir tmp;
-    const auto db_path = tmp.path() / "lab.db";
-    const auto lab = build_lab_db(db_path);
+    SKIP_WITHOUT_POSTGRES();
+    LabAndServer f;
+    auto& server = f.server;
+    const auto& db_path = f.db_path;
+    const auto& lab = f.lab;
     {
         auto db = Database::open(db_path);
         db.set_trial_state(lab.running_trial, "done", "steady", 1'790'005'000 * second_ns);
@@ -279,14 +290,14 @@ TEST_CASE("archive push cut off by the server stopping resumes with every sample
             CHECK(e.status() == ExitStatus::bad_input);
         }
         try {
-            push(tmp.path() / "none.db", server.conninfo(), "lab-3");
+            push(f.tmp.path() / "none.db", server.conninfo(), "lab-3");
             FAIL("no error");
         } catch (const UserError& e) {
             CHECK(e.status() == ExitStatus::bad_input);
             CHECK_THAT(e.what(), Catch::Contains("none.db"));
         }
         try {
-            push(db_path, "host=" + tmp.path().string() + " port=1 dbname=postgres", "lab-3");
+            push(db_path, "host=" + f.tmp.path().string() + " port=1 dbname=postgres", "lab-3");
             FAIL("no error");
         } catch (const UserError& e) {
             CHECK(e.status() == ExitStatus::unreachable);
@@ -330,10 +341,7 @@ TEST_CASE("archive push cut off by the server stopping resumes with every sample
 }
 
 TEST_CASE("archive pull gives analyze the same campaign as the lab database", "[archive]") {
-    if (!PgServer::available()) {
-        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
-        return;
-    }
+    SKIP_WITHOUT_POSTGRES();
     PgServer server;
     TempDir tmp;
 
@@ -456,14 +464,11 @@ void add_idle_samples(Database& db, const std::vector<std::int64_t>& channels, i
 
 TEST_CASE("archive push sends the idle log and lab metadata once and trial_steps has a row per time step",
           "[archive]") {
-    if (!PgServer::available()) {
-        WARN("skipped: no PostgreSQL 15 server binaries in " << PgServer::bin_dir);
-        return;
-    }
-    PgServer server;
-    TempDir tmp;
-    const auto db_path = tmp.path() / "lab.db";
-    const auto lab = build_lab_db(db_path);
+    SKIP_WITHOUT_POSTGRES();
+    LabAndServer f;
+    auto& server = f.server;
+    const auto& db_path = f.db_path;
+    const auto& lab = f.lab;
     std::string done_uuid;
     double idle_sum = 0.0;  // of the values add_idle_samples wrote
     const auto idle_value_sum = [](int from_step, int steps) {
