@@ -8,6 +8,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <thread>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -178,12 +179,18 @@ private:
     }
 
     // Two pushes of one lab at once would only repeat each other's rows (harmless), but their
-    // progress rows would race; the second is refused instead. Released when the session ends.
+    // progress rows would race; the second is refused instead. Released when the session ends,
+    // which the server sees a moment after the client has gone: a push that follows another at
+    // once (the daemon's next pass) would find it still held, so it is retried for up to 10 s.
     void take_lab_lock() {
-        auto r = pg_.exec("SELECT pg_try_advisory_lock(hashtextextended($1, 7419002))", {lab_}).text(0, 0);
-        if (r != "t")
-            throw UserError(fmt::format("archive {}: another push for lab '{}' is running", result_.archive, lab_),
-                            "archive_refused", ExitStatus::refused);
+        const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+        for (;;) {
+            if (pg_.exec("SELECT pg_try_advisory_lock(hashtextextended($1, 7419002))", {lab_}).text(0, 0) == "t") return;
+            if (std::chrono::steady_clock::now() >= give_up)
+                throw UserError(fmt::format("archive {}: another push for lab '{}' is running", result_.archive, lab_),
+                                "archive_refused", ExitStatus::refused);
+            std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        }
     }
 
     // Campaigns, trials (each with its case's name and conditions) and channels: few rows, upserted
