@@ -65,7 +65,8 @@ PrecisionEstimate estimate_precision(const std::vector<LabCell>& cells) {
     const double p = e.labs;
 
     // Cell averages and standard deviations (7.2); two-pass for accuracy with large offsets.
-    double t1 = 0.0, t2 = 0.0, t3 = 0.0, t4 = 0.0, t5 = 0.0;
+    // T2 = Σ n_i ȳ_i² is not accumulated: the between-cell term below uses deviations instead.
+    double t1 = 0.0, t3 = 0.0, t4 = 0.0, t5 = 0.0;
     e.cells.reserve(cells.size());
     for (const auto& c : cells) {
         LabCellSummary s;
@@ -79,7 +80,6 @@ PrecisionEstimate estimate_precision(const std::vector<LabCell>& cells) {
         for (double y : c.results) ss += (y - s.mean) * (y - s.mean);
         s.sd = std::sqrt(ss / (n - 1.0));
         t1 += n * s.mean;                 // T1 = Σ n_i ȳ_i     (7.4.5)
-        t2 += n * s.mean * s.mean;        // T2 = Σ n_i ȳ_i²
         t3 += n;                          // T3 = Σ n_i
         t4 += n * n;                      // T4 = Σ n_i²
         t5 += (n - 1.0) * s.sd * s.sd;    // T5 = Σ (n_i - 1) s_i²
