@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "physics/range_check.hpp"
+#include "physics/thermoreg/stepwise_math.hpp"
 
 namespace manikind::physics::thermoreg {
 namespace {
@@ -62,6 +63,16 @@ int skin(int segment) { return 4 * segment + 3; }
 // exponent: one exp and one log per call (this runs ~10^5 times per simulated hour).
 double psat_pa(double t_k) { return std::exp(77.3450 + 0.0057 * t_k - 7235.0 / t_k - 8.2 * std::log(t_k)); }
 double quarter_power(double x) { return std::sqrt(std::sqrt(std::abs(x))); }
+
+// A sum in four interleaved partial sums: one running sum is a chain of dependent additions
+// (25 x 4 cycles per reduction), three of which ran every step.
+double sum_of(const double* v, int n) {
+    double a = 0.0, b = 0.0, c = 0.0, d = 0.0;
+    int i = 0;
+    for (; i + 4 <= n; i += 4) a += v[i], b += v[i + 1], c += v[i + 2], d += v[i + 3];
+    for (; i < n; ++i) a += v[i];
+    return (a + b) + (c + d);
+}
 
 }  // namespace
 
@@ -130,6 +141,11 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
     const double per_step_1_s = 1.0 / e.time_step_s;
     double forced_speed_m_s = -1.0;  // the speed h_forced_w_m2k was computed for
     Segments h_forced_w_m2k{};
+    // Per segment: ln T_skin, the saturation pressure's exponentials and the local vasomotor
+    // factor, each updated from its previous step's value (stepwise_math.hpp).
+    std::array<SteppedLog, segment_count> ln_skin_k;
+    std::array<SteppedExp, segment_count> psat_growth_exp, psat_scale_exp, local_factor_exp;
+    constexpr double ln2_over_30 = 0.69314718055994530942 / 30.0;
 
     for (long step = 0; step < steps; ++step) {
         const double time_s = static_cast<double>(step) * e.time_step_s;
@@ -139,22 +155,25 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
             for (int i = 0; i < segment_count; ++i)
                 h_forced_w_m2k[i] = v_m_s > 0.0 ? forced_a[i] * std::pow(v_m_s, forced_b[i]) : 0.0;
         }
-        Segments t_skin_k{}, h_conv{}, h_total{}, t_operative_k{}, f_cl{};
+        // The per-step arrays are left uninitialised where every element is written before it is
+        // read: zeroing them was a tenth of a step (rep stos per array).
+        Segments t_skin_k, h_conv, h_total, t_operative_k, f_cl;
         for (int i = 0; i < segment_count; ++i) t_skin_k[i] = t_k[skin(i)];
 
         // ---- Convection: free law, mixed with forced by Eq. 9 (n = 3) ----
-        Segments c_skin{}, p_skin_pa{};
+        Segments c_skin, p_skin_pa;
         // The seed's mixed-index p_sat (D2 below) factors: exp(77.345 + 0.0057 T_j - 7235/T_i -
         // 8.2 ln T_i) = growth_j x scale_i, so its 36 terms per step cost 12 exp and 6 log, and
         // p_sat(T_i) itself is growth_i x scale_i.
-        Segments psat_growth{}, psat_scale{};
+        Segments psat_growth, psat_scale;  // written and read only in seed-compatible mode
         for (int i = 0; i < segment_count; ++i) {
+            const double ln_t = ln_skin_k[i](t_skin_k[i]);
             if (seed) {
-                psat_growth[i] = std::exp(0.0057 * t_skin_k[i]);
-                psat_scale[i] = std::exp(77.3450 - 7235.0 / t_skin_k[i] - 8.2 * std::log(t_skin_k[i]));
+                psat_growth[i] = psat_growth_exp[i](0.0057 * t_skin_k[i]);
+                psat_scale[i] = psat_scale_exp[i](77.3450 - 7235.0 / t_skin_k[i] - 8.2 * ln_t);
                 p_skin_pa[i] = psat_growth[i] * psat_scale[i];
             } else {
-                p_skin_pa[i] = psat_pa(t_skin_k[i]);
+                p_skin_pa[i] = psat_scale_exp[i](77.3450 + 0.0057 * t_skin_k[i] - 7235.0 / t_skin_k[i] - 8.2 * ln_t);  // psat_pa
             }
             c_skin[i] = concentration(p_skin_pa[i], t_skin_k[i]);
         }
@@ -200,7 +219,7 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
         }
 
         // ---- Control: error signals, skin receptors, vasomotion, shivering, sweating (JOS-3) ----
-        Nodes err{};
+        Nodes err;
         for (int j = 0; j < node_count; ++j) err[j] = t_k[j] - set_point_k[j];
         double warm_skin = 0.0, cold_skin = 0.0;
         for (int i = 0; i < segment_count; ++i) {
@@ -214,11 +233,11 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
         if (!seed) shivering_w = std::max(shivering_w, 0.0);
         const double sweat_signal_w = std::max(371.2 * err[0] + 33.64 * (warm_skin - cold_skin), 0.0);
 
-        Segments skin_blood_l_h{}, q_sweat_w{}, wettedness{};
+        Segments skin_blood_l_h, q_sweat_w, wettedness;
         for (int i = 0; i < segment_count; ++i) {
             const int k = skin(i);
             // 2^(e/6) and 2^(e/10) as powers of one 2^(e/30): one exp2 per segment, not two.
-            const double local_factor = std::exp2(err[k] / 30.0);
+            const double local_factor = local_factor_exp[i](err[k] * ln2_over_30);
             const double local_factor_sq = local_factor * local_factor;
             skin_blood_l_h[i] = std::min((basal_blood_flow_l_h[k] + df_vasodilation[i] * vasodilation) /
                                              (1.0 + df_vasoconstriction[i] * vasoconstriction) *
@@ -234,7 +253,7 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
         }
 
         // ---- Heat generation, conduction and blood flow per node ----
-        Nodes q_w{}, blood_l_h{}, q_cond_w{};
+        Nodes q_w, blood_l_h, q_cond_w;  // q_cond_w of a skin node and blood_l_h of the central blood are never read
         for (int i = 0; i < segment_count; ++i) {
             const int k = 4 * i;
             q_w[k] = basal_metabolism_w[k];
@@ -247,8 +266,9 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
             blood_l_h[k + 3] = basal_blood_flow_l_h[k + 3] + skin_blood_l_h[i];
             for (int n = 0; n < 3; ++n) q_cond_w[k + n] = conductance_w_k[k + n] * (t_k[k + n] - t_k[k + n + 1]);
         }
-        const double production_w = std::accumulate(q_w.begin(), q_w.end(), 0.0);
-        Nodes q_blood_w{};
+        q_w[central_blood] = 0.0;  // no metabolism of its own
+        const double production_w = sum_of(q_w.data(), node_count);
+        Nodes q_blood_w;  // the central blood's own entry is never read
         for (int j = 0; j < central_blood; ++j)
             q_blood_w[j] = blood_heat_w_h_per_l_k * blood_l_h[j] * (t_k[j] - t_k[central_blood]);
 
@@ -276,18 +296,18 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
         }
         const double respiration_w = (0.0014 * ((34.0 + 273.15) - air_k) + 0.0173 * (5.87 - p_air_pa / 1000.0)) * q_total_w;
         q_w[core_trunk] -= respiration_w;
-        q_w[central_blood] = std::accumulate(q_blood_w.begin(), q_blood_w.begin() + central_blood, 0.0);
+        q_w[central_blood] = sum_of(q_blood_w.data(), central_blood);
 
         // ---- Explicit step ----
-        Nodes t_new_k{};
-        double storage_true_w = 0.0;
+        Nodes t_new_k, storage_node_w;
         for (int j = 0; j < node_count; ++j) {
             t_new_k[j] = t_k[j] + q_w[j] * step_per_capacity_s_k_j[j];
             if (!std::isfinite(t_new_k[j]) || std::abs(t_new_k[j] - t_k[j]) > 2.0)
                 throw std::domain_error("the explicit scheme went unstable (a node moved more than 2 K in one step): "
                                         "use a shorter time step");
-            storage_true_w += heat_capacity_j_k[j] * (t_new_k[j] - t_k[j]) * per_step_1_s;
+            storage_node_w[j] = heat_capacity_j_k[j] * (t_new_k[j] - t_k[j]) * per_step_1_s;
         }
+        const double storage_true_w = sum_of(storage_node_w.data(), node_count);
         const double losses_w = sensible_w + evaporation_loss_w + respiration_w;
         const double residual_w = storage_true_w - (production_w - losses_w);
         result.max_abs_energy_residual_w = std::max(result.max_abs_energy_residual_w, std::abs(residual_w));
