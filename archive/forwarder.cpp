@@ -89,6 +89,11 @@ public:
     [[noreturn]] void fail(const char* what) const {
         throw UserError(fmt::format("{}: {}: {}", path_.string(), what, db_ ? sqlite3_errmsg(db_) : "out of memory"));
     }
+    bool has_table(const char* name) {
+        Stmt s(*this, "SELECT 1 FROM sqlite_schema WHERE type = 'table' AND name = ?1");
+        s.bind(1, name);
+        return s.step();
+    }
 
 private:
     void exec(const char* sql) {
@@ -98,11 +103,7 @@ private:
         Stmt s(*this, sql);
         return s.step() ? s.int64(0) : 0;
     }
-    bool has_table(const char* name) {
-        Stmt s(*this, "SELECT 1 FROM sqlite_schema WHERE type = 'table' AND name = ?1");
-        s.bind(1, name);
-        return s.step();
-    }
+
 
     struct Close {
         void operator()(sqlite3* db) const { sqlite3_close_v2(db); }
@@ -211,10 +212,29 @@ private:
             count(result_.campaigns, r.affected());
         }
 
-        Source::Stmt trials(src_,
-                            "SELECT t.id, t.uuid, c.name, k.name, t.replicate, t.state, t.reason, t.started_utc_ns,"
-                            " t.ended_utc_ns, k.conditions_json FROM trials t JOIN campaigns c ON c.id = t.campaign_id"
-                            " JOIN cases k ON k.id = t.case_id ORDER BY t.id");
+        // Set-ups before the trials that name them. A file from before version 7 has none.
+        const bool has_setups = src_.has_table("setups");
+        if (has_setups) {
+            Source::Stmt setups(src_, "SELECT sha256, lab_name, chamber, manikin, calibration_json, config_toml,"
+                                      " first_used_utc_ns FROM setups ORDER BY id");
+            while (setups.step()) {
+                auto r = pg_.exec("INSERT INTO setups (lab_id, setup_sha256, lab_name, chamber, manikin,"
+                                  " calibration_json, config_toml, first_used_utc_ns)"
+                                  " VALUES ($1, $2, $3, $4, $5, $6, $7, $8) ON CONFLICT DO NOTHING",
+                                  {lab_, setups.text(0), setups.text(1), setups.text(2), setups.text(3), setups.text(4),
+                                   setups.text(5), std::to_string(setups.int64(6))});
+                count(result_.setups, r.affected());
+            }
+        }
+        Source::Stmt trials(src_, has_setups
+                                      ? "SELECT t.id, t.uuid, c.name, k.name, t.replicate, t.state, t.reason, t.started_utc_ns,"
+                                        " t.ended_utc_ns, k.conditions_json, s.sha256 FROM trials t"
+                                        " JOIN campaigns c ON c.id = t.campaign_id JOIN cases k ON k.id = t.case_id"
+                                        " LEFT JOIN setups s ON s.id = t.setup_id ORDER BY t.id"
+                                      : "SELECT t.id, t.uuid, c.name, k.name, t.replicate, t.state, t.reason, t.started_utc_ns,"
+                                        " t.ended_utc_ns, k.conditions_json, NULL FROM trials t"
+                                        " JOIN campaigns c ON c.id = t.campaign_id JOIN cases k ON k.id = t.case_id"
+                                        " ORDER BY t.id");
         while (trials.step()) {
             TrialInfo info{trials.int64(0), trials.text(1), recorder::is_terminal_trial_state(trials.text(5))};
             std::optional<std::int64_t> started, ended;
@@ -222,20 +242,23 @@ private:
             if (!trials.is_null(8)) ended = trials.int64(8);
             // A trial UUID pushed by another lab stays that lab's: the update is skipped and
             // caught by the ownership check below.
+            const bool no_setup = trials.is_null(10);
             auto r = pg_.exec_nullable(
                 "INSERT INTO trials AS t (trial_uuid, lab_id, campaign_name, case_name, replicate, state, reason,"
-                " started_utc_ns, ended_utc_ns, conditions_json) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)"
+                " started_utc_ns, ended_utc_ns, conditions_json, setup_sha256)"
+                " VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
                 " ON CONFLICT (trial_uuid) DO UPDATE SET campaign_name = EXCLUDED.campaign_name,"
                 " case_name = EXCLUDED.case_name, replicate = EXCLUDED.replicate, state = EXCLUDED.state,"
                 " reason = EXCLUDED.reason, started_utc_ns = EXCLUDED.started_utc_ns,"
-                " ended_utc_ns = EXCLUDED.ended_utc_ns, conditions_json = EXCLUDED.conditions_json"
+                " ended_utc_ns = EXCLUDED.ended_utc_ns, conditions_json = EXCLUDED.conditions_json,"
+                " setup_sha256 = EXCLUDED.setup_sha256"
                 " WHERE t.lab_id = EXCLUDED.lab_id AND (t.campaign_name, t.case_name, t.replicate, t.state, t.reason,"
-                " t.started_utc_ns, t.ended_utc_ns, t.conditions_json) IS DISTINCT FROM (EXCLUDED.campaign_name,"
-                " EXCLUDED.case_name, EXCLUDED.replicate, EXCLUDED.state, EXCLUDED.reason, EXCLUDED.started_utc_ns,"
-                " EXCLUDED.ended_utc_ns, EXCLUDED.conditions_json)",
+                " t.started_utc_ns, t.ended_utc_ns, t.conditions_json, t.setup_sha256) IS DISTINCT FROM"
+                " (EXCLUDED.campaign_name, EXCLUDED.case_name, EXCLUDED.replicate, EXCLUDED.state, EXCLUDED.reason,"
+                " EXCLUDED.started_utc_ns, EXCLUDED.ended_utc_ns, EXCLUDED.conditions_json, EXCLUDED.setup_sha256)",
                 {info.uuid, lab_, trials.text(2), trials.text(3), std::to_string(trials.int64(4)), trials.text(5),
-                 trials.text(6), opt_text(started), opt_text(ended), trials.text(9)},
-                {false, false, false, false, false, false, false, !started, !ended, false});
+                 trials.text(6), opt_text(started), opt_text(ended), trials.text(9), no_setup ? "" : trials.text(10)},
+                {false, false, false, false, false, false, false, !started, !ended, false, no_setup});
             count(result_.trials, r.affected());
             auto owner = pg_.exec("SELECT lab_id FROM trials WHERE trial_uuid = $1", {info.uuid});
             if (owner.text(0, 0) != lab_)

@@ -42,6 +42,7 @@ struct PushResult {
     int archive_schema_version = 0;
     TableCounts campaigns, trials, channels, events, samples;
     TableCounts devices, results, twin_versions, idle_samples;
+    TableCounts setups;  // lab, chamber, manikin, calibration, configuration (recorder schema v7)
     std::int64_t chunks = 0;       // of samples
     std::int64_t idle_chunks = 0;  // of idle_samples
     bool idle_resent = false;      // rows appeared behind the idle log's progress (clock stepped back): resent all

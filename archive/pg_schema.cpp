@@ -135,7 +135,30 @@ SELECT trial_uuid, mono_ns, min(utc_ns) AS utc_ns, count(*) AS n_channels,
 FROM samples GROUP BY trial_uuid, mono_ns;
 )sql";
 
-constexpr std::array<const char*, 2> all_migrations{migration_1, migration_2};
+// Version 3: the set-up each trial ran with (the recorder's schema version 7): lab, chamber,
+// manikin, the calibration (Type B specs, register maps with probe scaling) and the configuration
+// text, once per lab and SHA-256. The hash is over the recorder's text, so the JSON stays text.
+constexpr const char* migration_3 = R"sql(
+CREATE TABLE setups (
+    lab_id text NOT NULL REFERENCES labs (lab_id),
+    setup_sha256 text NOT NULL CHECK (setup_sha256 ~ '^[0-9a-f]{64}$'),
+    lab_name text NOT NULL,
+    chamber text NOT NULL,
+    manikin text NOT NULL,
+    calibration_json text NOT NULL,
+    config_toml text NOT NULL,
+    first_used_utc_ns bigint NOT NULL,
+    PRIMARY KEY (lab_id, setup_sha256)
+);
+ALTER TABLE trials ADD COLUMN setup_sha256 text;
+ALTER TABLE trials ADD FOREIGN KEY (lab_id, setup_sha256) REFERENCES setups (lab_id, setup_sha256);
+CREATE VIEW trial_setups AS
+SELECT t.trial_uuid, t.lab_id, t.campaign_name, t.case_name, t.replicate, s.setup_sha256, s.chamber, s.manikin,
+       s.calibration_json::jsonb AS calibration, s.config_toml
+FROM trials t LEFT JOIN setups s ON s.lab_id = t.lab_id AND s.setup_sha256 = t.setup_sha256;
+)sql";
+
+constexpr std::array<const char*, 3> all_migrations{migration_1, migration_2, migration_3};
 
 // Any fixed number: the key of the lock pushers take while migrating.
 constexpr const char* migration_lock_sql = "SELECT pg_advisory_xact_lock(7419001)";

@@ -25,7 +25,8 @@ nlohmann::json to_json(const config::Config& c) {
         instruments[channel] = {{"accuracy", s.accuracy}, {"accuracy_of_reading", s.accuracy_of_reading},
                                 {"distribution", s.distribution}};
     const auto& l = c.safety;
-    return {{"lab", {{"name", c.lab_name}, {"mode", c.mode}, {"database", c.database.string()}}},
+    return {{"lab", {{"name", c.lab_name}, {"mode", c.mode}, {"database", c.database.string()}, {"chamber", c.chamber},
+                     {"manikin", c.manikin}}},
             {"logging", {{"level", c.log_level}}},
             {"safety", {{"max_skin_temp_c", l.max_skin_temp_c}, {"min_skin_temp_c", l.min_skin_temp_c},
                         {"max_heater_temp_c", l.max_heater_temp_c}, {"max_heater_power_w_m2", l.max_heater_power_w_m2},

@@ -142,6 +142,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
     c.source_name = source_name;
     c.file_mode = 0;
     c.source_sha256 = sha256_hex(toml_text);
+    c.source_text = toml_text;
     Reader r(source_name, c);
     r.record_positions(root, "");
     if (const auto* lab = r.table(root, "", "lab")) {
@@ -151,6 +152,19 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*lab, "lab", "database", db);
         c.database = db;
         r.number(*lab, "lab", "idle_log_period_s", c.idle_log_period_s, 0.0, 3600.0, "s");
+        r.text(*lab, "lab", "chamber", c.chamber);
+        r.text(*lab, "lab", "manikin", c.manikin);
+    }
+    // The built-in file names the simulated chamber and manikin; a real lab's file names its own
+    // or says nothing, and then its trials record no instrument rather than the simulated one.
+    if (c.mode == "real") {
+        for (auto [key, value] : {std::pair{"chamber", &c.chamber}, std::pair{"manikin", &c.manikin}}) {
+            if (c.key_where.count(std::string("lab.") + key)) continue;
+            *value = "";
+            c.warnings.push_back(fmt::format("{}: [lab] {} is not set: trials will not record which {} they ran in "
+                                             "(make, model, serial number)",
+                                             source_name, key, key));
+        }
     }
     if (const auto* log = r.table(root, "", "logging"))
         r.text(*log, "logging", "level", c.log_level, {"trace", "debug", "info", "warn", "error"});

@@ -96,6 +96,8 @@ struct ArchiveConfig {
 struct Config {
     std::string lab_name = "simulated lab";
     std::string mode = "simulated";        // simulated | real
+    std::string chamber;                   // [lab] chamber: make, model, serial number (recorded with each trial)
+    std::string manikin;                   // [lab] manikin: likewise
     std::string log_level = "info";
     std::filesystem::path database = "manikind.db";
     double idle_log_period_s = 10.0;       // outside trials, one reading per channel this often (0: off)
@@ -119,6 +121,7 @@ struct Config {
     std::string source_name;               // the file in messages (empty: nothing parsed yet)
     unsigned file_mode = 0;                // permission bits of the file load_config read (0: not from a file)
     std::string source_sha256;             // SHA-256 of the TOML text parsed last: exports' provenance
+    std::string source_text;               // that text (recorded with each trial's set-up)
 };
 
 // The text of config/manikind.toml, embedded at build time (CMake writes it into the build tree).

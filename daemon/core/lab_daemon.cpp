@@ -12,6 +12,7 @@
 #include "analysis/zone_map.hpp"
 #include "daemon/core/database_export.hpp"
 #include "daemon/core/results_parity.hpp"
+#include "daemon/core/setup_record.hpp"
 #include "daemon/core/user_error.hpp"
 
 namespace manikind {
@@ -99,6 +100,8 @@ LabDaemon::LabDaemon(DaemonOptions options)
     // Exports name the configuration their trials ran under by this fingerprint (provenance).
     if (!o_.config.source_sha256.empty())
         event("info", "config", fmt::format("sha256 {} {}", o_.config.source_sha256, o_.config.source_name));
+    // Every trial of this run names its set-up: lab, chamber, manikin, calibration, configuration.
+    setup_id_ = db_.record_setup(setup_of(o_.config), clock_->utc_ns());
 }
 
 LabDaemon::~LabDaemon() {
@@ -611,6 +614,7 @@ void LabDaemon::advance_locked() {
             current_ = queue_.front();
             queue_.pop_front();
             trial_id_ = db_.create_trial(campaign_id_, current_->case_id, current_->replicate);
+            db_.set_trial_setup(trial_id_, setup_id_);
             dropped_samples_ = 0;
             enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
             [[fallthrough]];

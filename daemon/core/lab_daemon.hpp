@@ -108,6 +108,7 @@ public:
     double virtual_time_s() const { return static_cast<double>(clock_->mono_ns()) * 1e-9; }
 
     recorder::Database& db() { return db_; }
+    const config::Config& config() const { return o_.config; }
     // Returns when every sample recorded so far is committed (exports and tests read after it).
     void flush_recorder();
     Acquisition& acquisition() { return *acq_; }
@@ -171,6 +172,7 @@ private:
     std::deque<TrialJob> queue_;
     std::optional<TrialJob> current_;
     std::int64_t trial_id_ = 0;
+    std::int64_t setup_id_ = 0;  // the set-up recorded at start (schema version 7)
     int trials_total_ = 0, trials_done_ = 0;
     Stage stage_ = Stage::idle;
     std::int64_t stage_start_ns_ = 0;

@@ -116,17 +116,34 @@ RegisterMap load_register_map(const std::filesystem::path& path) {
     return parse_register_map(toml_input::read_text_file(path, "a TOML register map"), path.string());
 }
 
-RegisterMap register_map_from_setting(const std::string& setting, const std::string& device,
-                                      const std::filesystem::path& base_dir) {
+namespace {
+struct MapSource {
+    std::string text;
+    std::string name;  // for messages
+};
+
+MapSource register_map_source(const std::string& setting, const std::string& device,
+                              const std::filesystem::path& base_dir) {
     if (setting == "builtin") {
-        if (device == "chamber") return parse_register_map(builtin_chamber_registers_toml(), "config/chamber_registers.toml (built in)");
-        if (device == "datalogger")
-            return parse_register_map(builtin_datalogger_registers_toml(), "config/datalogger_registers.toml (built in)");
+        if (device == "chamber") return {builtin_chamber_registers_toml(), "config/chamber_registers.toml (built in)"};
+        if (device == "datalogger") return {builtin_datalogger_registers_toml(), "config/datalogger_registers.toml (built in)"};
         throw UserError("no built-in register map for " + device);
     }
     std::filesystem::path p = setting;
     if (p.is_relative() && !base_dir.empty()) p = base_dir / p;
-    return load_register_map(p);
+    return {toml_input::read_text_file(p, "a TOML register map"), p.string()};
+}
+}  // namespace
+
+RegisterMap register_map_from_setting(const std::string& setting, const std::string& device,
+                                      const std::filesystem::path& base_dir) {
+    const MapSource source = register_map_source(setting, device, base_dir);
+    return parse_register_map(source.text, source.name);
+}
+
+std::string register_map_text(const std::string& setting, const std::string& device,
+                              const std::filesystem::path& base_dir) {
+    return register_map_source(setting, device, base_dir).text;
 }
 
 }  // namespace manikind

@@ -36,5 +36,8 @@ const char* builtin_datalogger_registers_toml();
 // relative paths resolving from `base_dir`.
 RegisterMap register_map_from_setting(const std::string& setting, const std::string& device,
                                       const std::filesystem::path& base_dir);
+// The TOML text behind the same setting (what a trial's set-up records).
+std::string register_map_text(const std::string& setting, const std::string& device,
+                              const std::filesystem::path& base_dir);
 
 }  // namespace manikind

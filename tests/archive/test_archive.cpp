@@ -483,6 +483,9 @@ TEST_CASE("archive push sends the idle log and lab metadata once and trial_steps
         db.store_result(campaign, R"({"cases": [{"case": 1, "n_replicates": 1}]})", 1'790'006'000 * second_ns);
         db.store_result(campaign, R"({"cases": [{"case": 1, "n_replicates": 2}]})", 1'790'007'000 * second_ns);
         db.store_twin_version("andi", 1, "[zones]\nn = 35\n");
+        const manikind::recorder::Setup setup{"lab three", "Weiss WK3 #58226", "ANDI #12",
+                          R"({"instruments":{"air_temp_c":{"accuracy":0.2}}})", "[lab]\nname = \"lab three\"\n"};
+        db.set_trial_setup(lab.done_trial, db.record_setup(setup, 1'790'000'000 * second_ns));
         add_idle_samples(db, lab.channels, 0, 50);
         idle_sum += idle_value_sum(0, 50);
         done_uuid = db.trial(lab.done_trial).value().uuid;
@@ -501,6 +504,12 @@ TEST_CASE("archive push sends the idle log and lab metadata once and trial_steps
     CHECK(first.results.sent == 2);
     CHECK(first.results.added == 2);
     CHECK(first.twin_versions.added == 1);
+    CHECK(first.setups.added == 1);
+    // The trial names its set-up, and analysts read the calibration as JSON.
+    CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM trial_setups WHERE trial_uuid = '" + done_uuid +
+                                               "' AND chamber = 'Weiss WK3 #58226' AND manikin = 'ANDI #12'"
+                                               " AND (calibration->'instruments'->'air_temp_c'->>'accuracy')::float8 = 0.2"
+                                               " AND length(setup_sha256) = 64") == 1);
     CHECK(first.idle_samples.sent == 50 * 3);
     CHECK(first.idle_samples.added == 50 * 3);
     CHECK_FALSE(first.idle_resent);
@@ -519,6 +528,9 @@ TEST_CASE("archive push sends the idle log and lab metadata once and trial_steps
     CHECK(again.devices.added == 0);
     CHECK(again.results.added == 0);
     CHECK(again.twin_versions.added == 0);
+    CHECK(again.setups.added == 0);
+    CHECK(again.setups.sent == 1);
+    CHECK(again.trials.added == 0);
     CHECK(again.samples.added == 0);
     CHECK(again.events.added == 0);
     CHECK(again.idle_samples.added == 0);

@@ -3,7 +3,11 @@
 #include <fstream>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "daemon/core/config.hpp"
+#include "daemon/core/register_map.hpp"
+#include "daemon/core/setup_record.hpp"
 #include "daemon/core/user_error.hpp"
 
 using namespace manikind;
@@ -52,4 +56,42 @@ TEST_CASE("config: TOML syntax errors and missing files name the file and line",
     CHECK_THROWS_WITH(config::parse_config("[safety\nmax = 1\n", "broken.toml"), Catch::Contains("broken.toml:1:"));
     CHECK_THROWS_AS(config::load_config("/nonexistent/manikind.toml"), UserError);
     CHECK_THROWS_WITH(config::load_config("/nonexistent/manikind.toml"), Catch::Contains("cannot open"));
+}
+
+TEST_CASE("config: [lab] chamber and manikin name the instruments; a real lab that omits them is warned, not given the "
+          "simulated ones",
+          "[config]") {
+    const auto simulated = config::parse_config("[recorder]\ncommit_interval_s = 2\n", "sim.toml");
+    CHECK_THAT(simulated.chamber, Catch::Contains("simulated"));
+    CHECK(simulated.warnings.empty());
+    const auto unnamed = config::parse_config("[lab]\nmode = \"real\"\n", "lab.toml");
+    CHECK(unnamed.chamber.empty());
+    CHECK(unnamed.manikin.empty());
+    REQUIRE(unnamed.warnings.size() == 2);
+    CHECK_THAT(unnamed.warnings[0], Catch::Contains("lab.toml") && Catch::Contains("[lab] chamber is not set"));
+    const auto named = config::parse_config("[lab]\nmode = \"real\"\nchamber = \"Weiss WK3 #58226\"\nmanikin = \"ANDI #12\"\n",
+                                            "lab.toml");
+    CHECK(named.chamber == "Weiss WK3 #58226");
+    CHECK(named.manikin == "ANDI #12");
+    CHECK(named.warnings.empty());
+    CHECK(named.source_text.find("ANDI #12") != std::string::npos);
+}
+
+TEST_CASE("config: a trial's set-up records the Type B specifications (Table S2), the register maps and the text",
+          "[config]") {
+    const auto c = config::parse_config("[lab]\nname = \"room 1.12\"\n[instruments.air_temp_c]\naccuracy = 0.3\n", "lab.toml");
+    const auto setup = setup_of(c);
+    CHECK(setup.lab_name == "room 1.12");
+    CHECK(setup.config_toml == c.source_text);
+    const auto calibration = nlohmann::json::parse(setup.calibration_json);
+    CHECK(calibration["instruments"]["air_temp_c"]["accuracy"] == 0.3);
+    CHECK(calibration["instruments"]["air_rh_pct"]["accuracy"] == 1.4);  // Table S2, from the defaults
+    CHECK(calibration["instruments"]["air_rh_pct"]["accuracy_of_reading"] == 0.01);
+    CHECK(calibration["register_maps"]["datalogger"]["setting"] == "builtin");
+    CHECK(calibration["register_maps"]["datalogger"]["toml"] == std::string(builtin_datalogger_registers_toml()));
+    CHECK(calibration["steady_state"]["max_skin_fluctuation_c"] == 0.05);
+    // The same configuration gives the same set-up (the daemon stores it once).
+    CHECK(setup_of(c).sha256() == setup.sha256());
+    const auto recalibrated = config::parse_config("[lab]\nname = \"room 1.12\"\n[instruments.air_temp_c]\naccuracy = 0.2\n", "lab.toml");
+    CHECK(setup_of(recalibrated).sha256() != setup.sha256());
 }

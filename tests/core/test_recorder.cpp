@@ -261,6 +261,7 @@ TEST_CASE("database: a version 4 file's samples and idle log survive the move to
     const auto fresh = db.create_trial(1, 1, 2);
     CHECK(db.trial(fresh)->uuid.size() == 32);
     CHECK(db.trial(fresh)->uuid != old_uuid);
+    CHECK_FALSE(db.trial(1)->setup_id.has_value());  // version 7: a trial from before has no set-up
     // The analysts' view still reads the renamed table.
     sqlite3* raw = nullptr;
     REQUIRE(sqlite3_open(path.c_str(), &raw) == SQLITE_OK);
@@ -275,6 +276,37 @@ TEST_CASE("database: a version 4 file's samples and idle log survive the move to
     const SampleRow more[] = {{1, 1, 30, 130, 4.0, 0}, {1, 1, 10, 110, 99.0, 0}};
     CHECK(db.insert_samples(more) == 1);
     CHECK(db.sample_count(1) == 5);
+}
+
+TEST_CASE("database: a set-up is stored once per content and named by its SHA-256; trials point at theirs (v7)", "[recorder]") {
+    TempDir dir("setup");
+    auto db = Database::open(dir.path / "trials.db");
+    const auto f = make_fixture(db);
+    CHECK_FALSE(db.trial(f.trial)->setup_id.has_value());  // none until the daemon says
+    const Setup a{"lab 1.12", "Weiss WK3 #58226", "ANDI #12", R"({"instruments":{}})", "[lab]\nname = \"lab 1.12\"\n"};
+    const auto id = db.record_setup(a, 100);
+    CHECK(db.record_setup(a, 200) == id);  // the same content again: the same row, first use kept
+    Setup b = a;
+    b.calibration_json = R"({"instruments":{"air_temp_c":{"accuracy":0.2}}})";  // a recalibrated probe
+    const auto id_b = db.record_setup(b, 300);
+    CHECK(id_b != id);
+    CHECK(a.sha256() != b.sha256());
+    db.set_trial_setup(f.trial, id_b);
+    CHECK(db.trial(f.trial)->setup_id == id_b);
+    const auto row = db.setup(id);
+    REQUIRE(row);
+    CHECK(row->sha256 == a.sha256());
+    CHECK(row->sha256.size() == 64);
+    CHECK(row->first_used_utc_ns == 100);
+    CHECK(row->setup.chamber == "Weiss WK3 #58226");
+    CHECK(row->setup.manikin == "ANDI #12");
+    CHECK(row->setup.config_toml == a.config_toml);
+    CHECK(row->setup.calibration_json == a.calibration_json);
+    CHECK_FALSE(db.setup(id_b + 1).has_value());
+    // Each field counts: a different manikin is a different set-up.
+    Setup c = a;
+    c.manikin = "ANDI #13";
+    CHECK(c.sha256() != a.sha256());
 }
 
 TEST_CASE("database: a sample naming a trial or channel that does not exist fails its whole transaction", "[recorder]") {

@@ -28,6 +28,16 @@ TEST_CASE("a campaign runs through every stage, records, and stores results", "[
     CHECK(trials[0].state == "done");
     CHECK(trials[0].steady_from_mono_ns.has_value());
     CHECK(trials[0].quality_flags == 0);
+    // The trial names the set-up it ran with: chamber, manikin, calibration and configuration.
+    REQUIRE(trials[0].setup_id.has_value());
+    const auto setup = db.setup(*trials[0].setup_id);
+    REQUIRE(setup);
+    CHECK(setup->setup.chamber == f.daemon().config().chamber);
+    CHECK_THAT(setup->setup.manikin, Catch::Contains("35-zone"));
+    CHECK(setup->setup.config_toml == f.daemon().config().source_text);
+    CHECK_THAT(setup->setup.calibration_json, Catch::Contains("\"air_rh_pct\"") && Catch::Contains("ee181"));
+    // Both campaigns of this run share it.
+    CHECK(db.trials(*db.find_campaign("second")).at(0).setup_id == trials[0].setup_id);
     std::vector<std::string> stages;
     for (const auto& e : db.events(trials[0].id))
         if (e.kind == "stage") stages.push_back(e.message);

@@ -16,6 +16,7 @@
 
 #include <fmt/core.h>
 
+#include "daemon/core/sha256.hpp"
 #include "daemon/core/user_error.hpp"
 
 namespace manikind::recorder {
@@ -218,9 +219,26 @@ UPDATE trials SET uuid = lower(hex(randomblob(16))) WHERE uuid IS NULL;
 CREATE UNIQUE INDEX trials_by_uuid ON trials (uuid);
 )sql";
 
+// Version 7: the set-up each trial ran with (docs/recorder.md, "Set-ups"): which lab, chamber and
+// manikin, the instruments' Type B specifications and register maps (probe scaling), and the
+// configuration text, stored once per distinct content and named by its SHA-256.
+constexpr const char* migration_7 = R"sql(
+CREATE TABLE setups (
+    id INTEGER PRIMARY KEY,
+    sha256 TEXT NOT NULL UNIQUE,
+    lab_name TEXT NOT NULL,
+    chamber TEXT NOT NULL,
+    manikin TEXT NOT NULL,
+    calibration_json TEXT NOT NULL,
+    config_toml TEXT NOT NULL,
+    first_used_utc_ns INTEGER NOT NULL
+);
+ALTER TABLE trials ADD COLUMN setup_id INTEGER REFERENCES setups(id);
+)sql";
+
 // Append only: a released migration is never edited, a change is a new entry.
-constexpr std::array<const char*, 6> all_migrations{migration_1, migration_2, migration_3, migration_4, migration_5,
-                                                    migration_6};
+constexpr std::array<const char*, 7> all_migrations{migration_1, migration_2, migration_3, migration_4, migration_5,
+                                                    migration_6, migration_7};
 
 // SQL text of trial_table for the channels stored now: one row per trial and 5-s step of the
 // exports' grid ((t - 5 s, t] after the manikin's start), a column "<device>.<channel>" per
@@ -719,6 +737,47 @@ std::int64_t Database::store_twin_version(const std::string& name, std::int64_t 
     return sqlite3_last_insert_rowid(impl_->db);
 }
 
+std::string Setup::sha256() const {
+    // Fields joined by NUL (absent from TOML, JSON and the names), so no two set-ups share a text.
+    std::string joined;
+    for (const std::string* f : {&lab_name, &chamber, &manikin, &calibration_json, &config_toml}) {
+        joined += *f;
+        joined += '\0';
+    }
+    return sha256_hex(joined);
+}
+
+std::int64_t Database::record_setup(const Setup& setup, std::int64_t utc_ns) {
+    const std::string key = setup.sha256();
+    Query(*impl_,
+          "INSERT INTO setups (sha256, lab_name, chamber, manikin, calibration_json, config_toml, first_used_utc_ns)"
+          " VALUES (?, ?, ?, ?, ?, ?, ?) ON CONFLICT (sha256) DO NOTHING")
+        .bind(key, setup.lab_name, setup.chamber, setup.manikin, setup.calibration_json, setup.config_toml, utc_ns)
+        .run();
+    Query q(*impl_, "SELECT id FROM setups WHERE sha256 = ?");
+    q.bind(key);
+    q.step();
+    return q.integer(0);
+}
+
+void Database::set_trial_setup(std::int64_t trial_id, std::int64_t setup_id) {
+    Query(*impl_, "UPDATE trials SET setup_id = ? WHERE id = ?").bind(setup_id, trial_id).run();
+}
+
+std::optional<SetupRow> Database::setup(std::int64_t setup_id) {
+    Query q(*impl_,
+            "SELECT id, sha256, first_used_utc_ns, lab_name, chamber, manikin, calibration_json, config_toml"
+            " FROM setups WHERE id = ?");
+    q.bind(setup_id);
+    if (!q.step()) return std::nullopt;
+    SetupRow row;
+    row.id = q.integer(0);
+    row.sha256 = q.text(1);
+    row.first_used_utc_ns = q.integer(2);
+    row.setup = {q.text(3), q.text(4), q.text(5), q.text(6), q.text(7)};
+    return row;
+}
+
 std::optional<std::string> Database::twin_version_toml(const std::string& name, std::int64_t version) {
     Query q(*impl_, "SELECT toml FROM twin_versions WHERE name = ? AND version = ?");
     q.bind(name, version);
@@ -752,11 +811,12 @@ std::vector<CaseRow> Database::cases(std::int64_t campaign_id) {
 namespace {
 constexpr const char* trial_columns =
     "SELECT id, campaign_id, case_id, replicate, state, reason, started_utc_ns, ended_utc_ns, steady_from_mono_ns,"
-    " quality_flags, uuid FROM trials ";
+    " quality_flags, uuid, setup_id FROM trials ";
 
 TrialRow read_trial(const Query& q) {
     return {q.integer(0),          q.integer(1),          q.integer(2),          q.integer(3), q.text(4), q.text(5),
-            q.optional_integer(6), q.optional_integer(7), q.optional_integer(8), q.integer(9), q.text(10)};
+            q.optional_integer(6), q.optional_integer(7), q.optional_integer(8), q.integer(9), q.text(10),
+            q.optional_integer(11)};
 }
 }  // namespace
 

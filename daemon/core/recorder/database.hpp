@@ -70,6 +70,24 @@ struct TrialRow {
     std::optional<std::int64_t> steady_from_mono_ns;  // start of the steady-state window
     std::int64_t quality_flags = 0;                   // OR of the flags added so far
     std::string uuid;                                 // 32 hex digits, random, unique (schema version 6)
+    std::optional<std::int64_t> setup_id;             // the set-up it ran with (version 7; none before)
+};
+
+// What a trial ran with (schema version 7): stored once per distinct content.
+struct Setup {
+    std::string lab_name;
+    std::string chamber;           // [lab] chamber: make, model, serial number
+    std::string manikin;           // [lab] manikin
+    std::string calibration_json;  // instruments' Type B specs and the register maps (probe scaling)
+    std::string config_toml;       // the configuration text the daemon started with
+    std::string sha256() const;    // of all five fields: the set-up's name here and in the archive
+};
+
+struct SetupRow {
+    std::int64_t id = 0;
+    std::string sha256;
+    std::int64_t first_used_utc_ns = 0;
+    Setup setup;
 };
 
 struct ChannelRow {
@@ -171,6 +189,10 @@ public:
     std::int64_t store_twin_version(const std::string& name, std::int64_t version, const std::string& toml);
     std::optional<std::string> twin_version_toml(const std::string& name, std::int64_t version);
     std::optional<std::string> latest_twin_version();  // "name vN" of the newest stored, if any
+    // Get-or-create by content (its SHA-256); `utc_ns` is kept only when the set-up is new.
+    std::int64_t record_setup(const Setup& setup, std::int64_t utc_ns);
+    void set_trial_setup(std::int64_t trial_id, std::int64_t setup_id);
+    std::optional<SetupRow> setup(std::int64_t setup_id);
 
     // Queries.
     std::vector<CampaignRow> campaigns();
