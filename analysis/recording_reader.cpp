@@ -331,12 +331,59 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
         if (columns[c].role == Role::time) time_column = c;
 
     double previous_t_s = -std::numeric_limits<double>::infinity();
+    // Checks a parsed number against its column's physical range and the time order, then stores it.
+    auto store_number = [&](std::size_t c, double value, std::string_view cell, std::size_t start) {
+        const std::size_t at_line = line_no;
+        if (const ValueRange& r = *columns[c].range; !std::isnan(value) && (value < r.min || value > r.max))
+            throw InputError(file, at_line, start + 1, columns[c].name,
+                             fmt::format("{} {} is outside the physical range {:g}..{:g} {}", shorten(trim(cell)),
+                                         columns[c].unit, r.min, r.max, columns[c].unit));
+        if (c == time_column) {
+            if (std::isnan(value)) throw InputError(file, at_line, start + 1, "t_s", "the time cell is empty");
+            if (value <= previous_t_s)
+                throw InputError(file, at_line, start + 1, "t_s",
+                                 fmt::format("time goes backwards or repeats: {} s after {} s on an earlier row; "
+                                             "rows must be in increasing time order", value, previous_t_s));
+            previous_t_s = value;
+        }
+        target[c]->push_back(value);
+    };
+    // Room for the rows the file holds, judged from its size and the first data row, so the
+    // columns are not copied as they grow.
+    bool reserved = false;
+    std::error_code size_error;
+    const auto file_bytes = std::filesystem::file_size(path, size_error);
     while (reader.next(line)) {
         ++line_no;
         if (trim(line).empty()) continue;  // a blank line carries no sample
+        if (!reserved && !size_error && !line.empty()) {
+            reserved = true;
+            // A row holds at least a comma per column, which bounds the guess if this row is sparse.
+            const std::size_t rows = std::min(static_cast<std::size_t>(file_bytes / (line.size() + 1)) * 9 / 8 + 16,
+                                              static_cast<std::size_t>(file_bytes / columns.size()) + 1);
+            for (auto* t : target)
+                if (t) t->reserve(rows);
+        }
+        const char* const line_end = line.data() + line.size();
         std::size_t start = 0;
         std::size_t c = 0;
         for (;; ++c) {
+            // The common cell, a plain number followed by ',' or the end of the line, is parsed
+            // in place as the parse floor does; anything else (blank, spaces, '+', inf, a
+            // malformed number, a field past the header's) goes the careful way below.
+            if (c < columns.size() && target[c]) {
+                double value = 0.0;
+                const auto [ptr, ec] = std::from_chars(line.data() + start, line_end, value);
+                if (ec == std::errc() && (ptr == line_end || *ptr == ',') && ptr != line.data() + start &&
+                    !std::isinf(value)) {
+                    if (std::isnan(value)) value = kNaN;  // normalise the sign/payload of a written "nan"
+                    const auto end = static_cast<std::size_t>(ptr - line.data());
+                    store_number(c, value, line.substr(start, end - start), start);
+                    if (ptr == line_end) break;
+                    start = end + 1;
+                    continue;
+                }
+            }
             const std::size_t comma = line.find(',', start);
             if (c >= columns.size())
                 throw InputError(file, line_no, start + 1, "",
@@ -367,19 +414,7 @@ TrialData read_trial_csv(const std::filesystem::path& path, const ZoneMap& map, 
             if (!parse_cell(cell, value))
                 throw InputError(file, line_no, start + 1, columns[c].name,
                                  fmt::format("expected a number, found '{}'", shorten(cell)));
-            if (const ValueRange& r = *columns[c].range; !std::isnan(value) && (value < r.min || value > r.max))
-                throw InputError(file, line_no, start + 1, columns[c].name,
-                                 fmt::format("{} {} is outside the physical range {:g}..{:g} {}", shorten(trim(cell)),
-                                             columns[c].unit, r.min, r.max, columns[c].unit));
-            if (c == time_column) {
-                if (std::isnan(value)) throw InputError(file, line_no, start + 1, "t_s", "the time cell is empty");
-                if (value <= previous_t_s)
-                    throw InputError(file, line_no, start + 1, "t_s",
-                                     fmt::format("time goes backwards or repeats: {} s after {} s on an earlier row; "
-                                                 "rows must be in increasing time order", value, previous_t_s));
-                previous_t_s = value;
-            }
-            target[c]->push_back(value);
+            store_number(c, value, cell, start);
             if (comma == std::string_view::npos) break;
             start = comma + 1;
         }

@@ -339,9 +339,12 @@ TEST_CASE("CSV cells: empty and nan are missing samples, inf is an error, CRLF i
     fs::create_directories(dir.path);
     const auto map = an::read_campaign(recordings("good-2zone")).zone_map;
     const std::string header = "t_s,air_temp_c,air_rh_pct,z01_skin_c,z02_skin_c,z01_flux_w_m2,z02_flux_w_m2\r\n";
-    std::ofstream(dir.path / "ok.csv") << header << "0,39.6,,35,35,nan,2\r\n5,+39.6,38,35,35,1,2\r\n";
+    std::ofstream(dir.path / "ok.csv") << header << "0,39.6,,35,35,nan,2\r\n5,+39.6,38,35,35,1,2\r\n10, 39.7 ,38,35,35,-nan,2\r\n";
     const auto d = an::read_trial_csv(dir.path / "ok.csv", map, "ok.csv");
-    REQUIRE(d.rows() == 2);
+    REQUIRE(d.rows() == 3);
+    CHECK(d.air_temp_c[2] == 39.7);  // spaces around a number
+    CHECK(std::isnan(d.heat_flux_w_m2[0][2]));
+    CHECK_FALSE(std::signbit(d.heat_flux_w_m2[0][2]));  // a written "-nan" is the one NaN
     CHECK(std::isnan(d.air_rh_pct[0]));
     CHECK(std::isnan(d.heat_flux_w_m2[0][0]));
     CHECK(d.air_temp_c[1] == 39.6);
