@@ -113,8 +113,43 @@ void run_compare(const CompareArgs& a) {
         results.push_back({lab, analysis::analyze_campaign(campaign_from_archive(a.conninfo, lab, a.campaign), options)});
     }
     const auto report = analysis::compare_labs(a.campaign, results);
-    if (a.json) std::printf("%s\n", analysis::interlab_to_json(report).dump(2).c_str());
-    else std::printf("%s", analysis::interlab_to_text(report).c_str());
+    // What each lab measured with: its chamber, manikin and calibration set-ups for this campaign
+    // (archive schema v3; an archive no push of this version has reached has none).
+    nlohmann::json setups = nlohmann::json::object();
+    {
+        auto pg = archive::PgConnection::connect(a.conninfo);
+        const bool have = pg.exec("SELECT to_regclass('trial_setups') IS NOT NULL").text(0, 0) == "t";
+        for (const auto& lab : labs) {
+            setups[lab] = nlohmann::json::array();
+            if (!have) continue;
+            auto r = pg.exec("SELECT setup_sha256, chamber, manikin, count(*) FROM trial_setups"
+                             " WHERE lab_id = $1 AND campaign_name = $2 AND setup_sha256 IS NOT NULL"
+                             " GROUP BY setup_sha256, chamber, manikin ORDER BY min(trial_uuid)",
+                             {lab, a.campaign});
+            for (int i = 0; i < r.rows(); ++i)
+                setups[lab].push_back({{"setup_sha256", r.text(i, 0)},
+                                       {"chamber", r.text(i, 1)},
+                                       {"manikin", r.text(i, 2)},
+                                       {"trials", std::stoll(r.text(i, 3))}});
+        }
+    }
+    if (a.json) {
+        auto doc = analysis::interlab_to_json(report);
+        doc["setups"] = setups;
+        std::printf("%s\n", doc.dump(2).c_str());
+        return;
+    }
+    std::printf("%s", analysis::interlab_to_text(report).c_str());
+    std::printf("\nSet-ups (chamber, manikin; calibration and configuration in the archive's trial_setups view):\n");
+    for (const auto& lab : labs) {
+        if (setups[lab].empty()) std::printf("  %s: none recorded (pushed before recorder schema v7)\n", lab.c_str());
+        for (const auto& su : setups[lab])
+            std::printf("  %s: %s; %s (%lld trials, set-up %s)\n", lab.c_str(),
+                        su["chamber"].get<std::string>().empty() ? "chamber not named" : su["chamber"].get<std::string>().c_str(),
+                        su["manikin"].get<std::string>().empty() ? "manikin not named" : su["manikin"].get<std::string>().c_str(),
+                        static_cast<long long>(su["trials"].get<std::int64_t>()),
+                        su["setup_sha256"].get<std::string>().substr(0, 12).c_str());
+    }
 }
 
 }  // namespace
@@ -124,7 +159,7 @@ void add_archive_command(CLI::App& app) {
     cmd->require_subcommand(1);
     auto args = std::make_shared<PushArgs>();
     auto* push = cmd->add_subcommand("push", "Send a daemon database's campaigns, trials, devices, channels, events, "
-                                             "samples, idle log, results and twin versions to the archive; sends "
+                                             "samples, idle log, results, twin versions and set-ups to the archive; sends "
                                              "only what is new, resumes an interrupted push");
     push->add_option("db", args->db, "The daemon's SQLite database (read only; the daemon may be running)")->required();
     push->add_option("--to", args->conninfo, "libpq connection string, e.g. \"host=archive dbname=manikin user=lab3\"")

@@ -91,10 +91,11 @@ TEST_CASE("two labs, one archive: the cross-lab report shows the between-lab spr
     fs::create_directories(dir);
     {
         std::ofstream(dir / "plan.toml") << plan_toml;
-        std::ofstream(dir / "lab-a.toml") << "[simulation]\nseed = 11\nworld_effects = []\n"
+        std::ofstream(dir / "lab-a.toml") << "[lab]\nchamber = \"chamber A\"\n[simulation]\nseed = 11\nworld_effects = []\n"
                                           << "[archive]\npostgresql = \"" << pg.conninfo()
                                           << "\"\nlab_id = \"lab-a\"\ninterval_s = 1\n";
-        std::ofstream(dir / "lab-b.toml") << "[simulation]\nseed = 12\nworld_effects = [\"air_temp_bias:bias_c=2.0\"]\n";
+        std::ofstream(dir / "lab-b.toml") << "[lab]\nchamber = \"chamber B\"\n[simulation]\nseed = 12\n"
+                                          << "world_effects = [\"air_temp_bias:bias_c=2.0\"]\n";
     }
     // The two chambers run at the same time, as two labs do.
     auto lab_a = run_lab(dir, "lab-a");
@@ -127,6 +128,13 @@ TEST_CASE("two labs, one archive: the cross-lab report shows the between-lab spr
     REQUIRE(compared.status == 0);
     const auto report = nlohmann::json::parse(compared.out);
     CHECK(report["labs"] == nlohmann::json::array({"lab-a", "lab-b"}));
+    // Each lab's set-up: one per lab (each daemon ran once), naming its own chamber.
+    REQUIRE(report["setups"]["lab-a"].size() == 1);
+    REQUIRE(report["setups"]["lab-b"].size() == 1);
+    CHECK(report["setups"]["lab-a"][0]["chamber"] == "chamber A");
+    CHECK(report["setups"]["lab-b"][0]["chamber"] == "chamber B");
+    CHECK(report["setups"]["lab-b"][0]["trials"] == 12);
+    CHECK(report["setups"]["lab-a"][0]["setup_sha256"] != report["setups"]["lab-b"][0]["setup_sha256"]);
     REQUIRE(report["cases"].size() == 4);
     // A trial that never settles is left out by the analysis (the simulated manikin sometimes
     // oscillates); a case keeps its estimate while each lab has two usable replicates of it.
