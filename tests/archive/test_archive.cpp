@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdint>
@@ -19,6 +20,7 @@
 #include <catch2/catch.hpp>
 #include <nlohmann/json.hpp>
 
+#include "archive/background.hpp"
 #include "archive/forwarder.hpp"
 #include "archive/pg.hpp"
 #include "archive/pg_schema.hpp"
@@ -579,4 +581,46 @@ TEST_CASE("archive push sends the idle log and lab metadata once and trial_steps
     CHECK(std::stod(step.text(0, 0)) == want.value);
     CHECK(step.int64(0, 1) == want.utc_ns);
     CHECK(step.int64(0, 2) == 3);
+}
+
+TEST_CASE("the daemon's forwarder counts the idle log for stepped-back rows at its first pass and then once per "
+          "idle_check_interval, not at every pass",
+          "[archive]") {
+    SKIP_WITHOUT_POSTGRES();
+    LabAndServer f;
+    const auto idle_count = [&] {
+        return archive_count(f.server.conninfo(), "SELECT count(*) FROM idle_samples WHERE lab_id = 'lab-3'");
+    };
+    const auto add_idle = [&](int from_step, int steps) {
+        auto db = Database::open(f.db_path);
+        add_idle_samples(db, f.lab.channels, from_step, steps);
+    };
+    add_idle(0, 50);
+    manikind::archive::ForwardingOptions fo;
+    fo.database = f.db_path;
+    fo.conninfo = f.server.conninfo();
+    fo.lab_id = "lab-3";
+    fo.interval = std::chrono::hours(1);  // no pass of its own after the first: only the ones asked for
+    const auto quiet = [](const std::string&, const std::string&) {};
+    {
+        fo.idle_check_interval = std::chrono::hours(1);  // the daemon's default
+        manikind::archive::BackgroundForwarder forwarder(fo, quiet);
+        REQUIRE(forwarder.forward_now());
+        CHECK(idle_count() == 50 * 3);
+        // Rows far behind the progress (a clock stepped back 66 min): a pass within the hour does
+        // not count the log, so it does not see them; it still sends new rows at the end.
+        add_idle(-400, 10);
+        add_idle(50, 5);
+        REQUIRE(forwarder.forward_now());
+        CHECK(idle_count() == 55 * 3);
+    }
+    {
+        fo.idle_check_interval = std::chrono::milliseconds(0);  // every pass is "an hour later"
+        manikind::archive::BackgroundForwarder forwarder(fo, quiet);
+        REQUIRE(forwarder.forward_now());
+        CHECK(idle_count() == 65 * 3);  // the stepped-back rows, found by the first pass's count
+        add_idle(-800, 10);
+        REQUIRE(forwarder.forward_now());
+        CHECK(idle_count() == 75 * 3);  // and by a later pass's, once the interval has passed
+    }
 }
