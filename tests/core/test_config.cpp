@@ -95,3 +95,29 @@ TEST_CASE("config: a trial's set-up records the Type B specifications (Table S2)
     const auto recalibrated = config::parse_config("[lab]\nname = \"room 1.12\"\n[instruments.air_temp_c]\naccuracy = 0.2\n", "lab.toml");
     CHECK(setup_of(recalibrated).sha256() != setup.sha256());
 }
+
+TEST_CASE("config: a set-up keeps the configuration text but not the API token or an archive password", "[config]") {
+    const std::string token(64, 'f');
+    const std::string text = "[lab]\nname = \"room 1.12\"\n\n[api]\ntoken = \"" + token +
+                             "\"   # from manikin config token\nmax_clients = 8\n\n[archive]\n"
+                             "postgresql = \"host=archive dbname=manikin password=s3cret\"\nlab_id = \"lab-3\"\n";
+    const auto c = config::parse_config(text, "lab.toml");
+    const auto setup = setup_of(c);
+    CHECK(setup.config_toml.find(token) == std::string::npos);
+    CHECK(setup.config_toml.find("s3cret") == std::string::npos);
+    CHECK_THAT(setup.config_toml, Catch::Contains("token = \"(redacted)\"") && Catch::Contains("max_clients = 8") &&
+                                      Catch::Contains("postgresql = \"(redacted)\"") &&
+                                      Catch::Contains("lab_id = \"lab-3\"") && Catch::Contains("name = \"room 1.12\""));
+    // What is left is still the same configuration, secrets aside.
+    const auto again = config::parse_config(setup.config_toml, "redacted.toml");
+    CHECK(again.api.max_clients == 8);
+    CHECK(again.archive.lab_id == "lab-3");
+    // A conninfo without a password is kept (where the lab forwards is provenance); a URI's
+    // user:password@ is a password.
+    CHECK(redact_secrets("[archive]\npostgresql = \"host=archive dbname=manikin\"\n") ==
+          "[archive]\npostgresql = \"host=archive dbname=manikin\"\n");
+    CHECK_THAT(redact_secrets("[archive]\npostgresql = \"postgresql://lab3:pw@archive/manikin\"\n"),
+               !Catch::Contains("pw@"));
+    CHECK(redact_secrets("not = [toml") == "");
+    CHECK(redact_secrets("[api]\ntoken = \"\"\n") == "[api]\ntoken = \"\"\n");  // empty: the daemon makes one
+}

@@ -7,6 +7,7 @@
 #include "daemon/core/campaign_plan.hpp"
 #include "daemon/core/control_api.hpp"
 #include "daemon/core/database_export.hpp"
+#include "daemon/core/setup_record.hpp"
 #include "daemon_fixture.hpp"
 
 using manikind::test::DaemonFixture;
@@ -34,7 +35,8 @@ TEST_CASE("a campaign runs through every stage, records, and stores results", "[
     REQUIRE(setup);
     CHECK(setup->setup.chamber == f.daemon().config().chamber);
     CHECK_THAT(setup->setup.manikin, Catch::Contains("35-zone"));
-    CHECK(setup->setup.config_toml == f.daemon().config().source_text);
+    CHECK(setup->setup.config_toml == manikind::redact_secrets(f.daemon().config().source_text));
+    CHECK_THAT(setup->setup.config_toml, Catch::Contains("[steady_state]"));
     CHECK_THAT(setup->setup.calibration_json, Catch::Contains("\"air_rh_pct\"") && Catch::Contains("ee181"));
     // Both campaigns of this run share it.
     CHECK(db.trials(*db.find_campaign("second")).at(0).setup_id == trials[0].setup_id);
