@@ -104,7 +104,6 @@ private:
         return s.step() ? s.int64(0) : 0;
     }
 
-
     struct Close {
         void operator()(sqlite3* db) const { sqlite3_close_v2(db); }
     };
@@ -226,15 +225,12 @@ private:
                 count(result_.setups, r.affected());
             }
         }
-        Source::Stmt trials(src_, has_setups
-                                      ? "SELECT t.id, t.uuid, c.name, k.name, t.replicate, t.state, t.reason, t.started_utc_ns,"
-                                        " t.ended_utc_ns, k.conditions_json, s.sha256 FROM trials t"
-                                        " JOIN campaigns c ON c.id = t.campaign_id JOIN cases k ON k.id = t.case_id"
-                                        " LEFT JOIN setups s ON s.id = t.setup_id ORDER BY t.id"
-                                      : "SELECT t.id, t.uuid, c.name, k.name, t.replicate, t.state, t.reason, t.started_utc_ns,"
-                                        " t.ended_utc_ns, k.conditions_json, NULL FROM trials t"
-                                        " JOIN campaigns c ON c.id = t.campaign_id JOIN cases k ON k.id = t.case_id"
-                                        " ORDER BY t.id");
+        const std::string trials_sql = fmt::format(
+            "SELECT t.id, t.uuid, c.name, k.name, t.replicate, t.state, t.reason, t.started_utc_ns, t.ended_utc_ns,"
+            " k.conditions_json, {} FROM trials t JOIN campaigns c ON c.id = t.campaign_id"
+            " JOIN cases k ON k.id = t.case_id {} ORDER BY t.id",
+            has_setups ? "s.sha256" : "NULL", has_setups ? "LEFT JOIN setups s ON s.id = t.setup_id" : "");
+        Source::Stmt trials(src_, trials_sql.c_str());
         while (trials.step()) {
             TrialInfo info{trials.int64(0), trials.text(1), recorder::is_terminal_trial_state(trials.text(5))};
             std::optional<std::int64_t> started, ended;

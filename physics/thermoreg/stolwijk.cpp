@@ -61,7 +61,8 @@ int skin(int segment) { return 4 * segment + 3; }
 
 // The seed formula exp(77.3450 + 0.0057 T - 7235/T) / T^8.2 with the power folded into the
 // exponent: one exp and one log per call (this runs ~10^5 times per simulated hour).
-double psat_pa(double t_k) { return std::exp(77.3450 + 0.0057 * t_k - 7235.0 / t_k - 8.2 * std::log(t_k)); }
+double psat_exponent(double t_k, double ln_t_k) { return 77.3450 + 0.0057 * t_k - 7235.0 / t_k - 8.2 * ln_t_k; }
+double psat_pa(double t_k) { return std::exp(psat_exponent(t_k, std::log(t_k))); }
 double quarter_power(double x) { return std::sqrt(std::sqrt(std::abs(x))); }
 
 // A sum in four interleaved partial sums: one running sum is a chain of dependent additions
@@ -173,7 +174,7 @@ SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
                 psat_scale[i] = psat_scale_exp[i](77.3450 - 7235.0 / t_skin_k[i] - 8.2 * ln_t);
                 p_skin_pa[i] = psat_growth[i] * psat_scale[i];
             } else {
-                p_skin_pa[i] = psat_scale_exp[i](77.3450 + 0.0057 * t_skin_k[i] - 7235.0 / t_skin_k[i] - 8.2 * ln_t);  // psat_pa
+                p_skin_pa[i] = psat_scale_exp[i](psat_exponent(t_skin_k[i], ln_t));  // psat_pa, stepwise
             }
             c_skin[i] = concentration(p_skin_pa[i], t_skin_k[i]);
         }
