@@ -22,7 +22,7 @@ ModbusDriver::ModbusDriver(ModbusOptions options, const Clock& clock, SampleSink
         regs.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type)});
         polled.push_back(i);
     }
-    blocks_ = mb::plan_read_blocks(regs);
+    blocks_ = mb::plan_read_blocks(regs, mb::kMaxReadRegisters, options_.max_gap_registers);
     for (auto& b : blocks_)
         for (auto& i : b.points) i = polled[i];  // indices into options_.points
     status_.name = options_.device_name;
@@ -158,6 +158,11 @@ bool ModbusDriver::read_block(const mb::ReadBlock& b, std::vector<std::uint16_t>
 }
 
 void ModbusDriver::poll() {
+    // Outside the I/O lock: a sink may call back into write() (safety actions, setpoints).
+    for (const auto& s : read_all()) sink_(s);
+}
+
+std::vector<Sample> ModbusDriver::read_all() {
     std::vector<Sample> out;
     {
         std::lock_guard lk(io_lock_);
@@ -174,22 +179,37 @@ void ModbusDriver::poll() {
             int err = 0;
             if (!read_block(b, words, err)) {
                 if (err == EMBXILADD && b.points.size() > 1) {
-                    // The device has a hole in this range: read these points one by one from now on.
+                    // The device refuses this range. A block bridged across unused registers is
+                    // split into its contiguous runs (the device may lack the registers between);
+                    // a contiguous one is read point by point (it allows one register a request).
+                    std::vector<mb::PointRegisters> regs;
+                    for (const std::size_t i : b.points) {
+                        const auto& p = options_.points[i];
+                        regs.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type)});
+                    }
+                    auto smaller = mb::plan_read_blocks(regs, mb::kMaxReadRegisters, 0);
+                    const bool bridged = smaller.size() > 1;
+                    if (bridged) {
+                        for (auto& s : smaller)
+                            for (auto& i : s.points) i = b.points[i];  // back to indices into options_.points
+                    } else {
+                        smaller.clear();
+                        for (const std::size_t i : b.points) {
+                            const auto& p = options_.points[i];
+                            smaller.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type), {i}});
+                        }
+                    }
                     {
                         std::lock_guard sl(status_lock_);
                         ++status_.exceptions;
                         status_.last_error = fmt::format("registers {}..{} (unit {}) refused as one request (illegal data "
-                                                         "address); reading them one at a time",
-                                                         b.start, b.start + b.count - 1, b.unit_id);
-                    }
-                    std::vector<mb::ReadBlock> singles;
-                    for (const std::size_t i : b.points) {
-                        const auto& p = options_.points[i];
-                        singles.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type), {i}});
+                                                         "address); reading {} from now on",
+                                                         b.start, b.start + b.count - 1, b.unit_id,
+                                                         bridged ? "their contiguous runs" : "them one at a time");
                     }
                     blocks_.erase(blocks_.begin() + static_cast<std::ptrdiff_t>(bi));
-                    blocks_.insert(blocks_.begin() + static_cast<std::ptrdiff_t>(bi), singles.begin(), singles.end());
-                    --bi;  // read the first single now
+                    blocks_.insert(blocks_.begin() + static_cast<std::ptrdiff_t>(bi), smaller.begin(), smaller.end());
+                    --bi;  // read the first of them now
                     continue;
                 }
                 const auto& first = options_.points[b.points.front()];
@@ -231,8 +251,7 @@ void ModbusDriver::poll() {
             status_.stale = false;
         }
     }
-    // Outside the I/O lock: a sink may call back into write() (safety actions, setpoints).
-    for (const auto& s : out) sink_(s);
+    return out;
 }
 
 void ModbusDriver::start_worker() {

@@ -41,6 +41,7 @@ struct ModbusOptions {
     int baud = 19200;
     double response_timeout_s = 0.5;
     double poll_period_s = 1.0;                    // worker thread, real time
+    int max_gap_registers = 0;                     // unused registers one request may span (0: contiguous only)
     std::vector<ModbusPoint> points;
 };
 
@@ -57,6 +58,9 @@ public:
 
     // One read of every polled point. Safe to call from any thread (serialised internally).
     void poll();
+    // The same read, its samples returned instead of handed to the sink (the caller delivers
+    // them, e.g. on the thread that owns the sink's lock).
+    std::vector<Sample> read_all();
     // Real-time mode: a worker thread that polls every poll_period_s until stop().
     void start_worker();
 

@@ -212,6 +212,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
                 r.text(*t, path, "serial", m->serial);
                 r.number(*t, path, "baud", m->baud, 1200, 921600, "baud");
                 r.text(*t, path, "register_map", m->register_map);
+                r.number(*t, path, "max_gap_registers", m->max_gap_registers, 0, 124, "registers");
             }
         if (const auto* t = r.table(*d, "devices", "windsonic")) {
             r.text(*t, "devices.windsonic", "path", dc.windsonic_path);

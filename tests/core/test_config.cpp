@@ -24,6 +24,7 @@ TEST_CASE("config: the built-in default is config/manikind.toml and parses witho
     REQUIRE(c.instruments.count("air_rh_pct") == 1);
     CHECK(c.instruments.at("air_rh_pct").accuracy == 1.4);   // Table S2: EE181 ±(1.4 + 0.01 RH) %
     CHECK(c.instruments.at("air_rh_pct").accuracy_of_reading == 0.01);
+    CHECK(c.devices.datalogger.max_gap_registers == 16);
 }
 
 TEST_CASE("config: a wrong type names file, line, column and key", "[config]") {
@@ -40,6 +41,11 @@ TEST_CASE("config: out-of-range and inconsistent limits are refused", "[config]"
                       Catch::Contains("min_*"));
     CHECK_THROWS_WITH(config::parse_config("[lab]\nmode = \"virtual\"\n", "x.toml"),
                       Catch::Contains("x.toml:2:") && Catch::Contains("lab.mode") && Catch::Contains("real, simulated"));
+    // A Modbus request spans at most 125 registers, so a hole wider than 124 can never be bridged.
+    CHECK_THROWS_WITH(config::parse_config("[devices.datalogger]\nmax_gap_registers = 200\n", "x.toml"),
+                      Catch::Contains("x.toml:2:") && Catch::Contains("devices.datalogger.max_gap_registers") &&
+                          Catch::Contains("outside 0..124"));
+    CHECK(config::parse_config("[devices.chamber]\nmax_gap_registers = 0\n", "x.toml").devices.chamber.max_gap_registers == 0);
 }
 
 TEST_CASE("config: unknown keys are warnings with their line, known values still apply", "[config]") {

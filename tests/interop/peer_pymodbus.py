@@ -13,7 +13,8 @@ import tempfile
 import threading
 
 try:
-    from pymodbus.datastore import ModbusSequentialDataBlock, ModbusServerContext, ModbusSlaveContext
+    from pymodbus.datastore import (ModbusSequentialDataBlock, ModbusServerContext, ModbusSlaveContext,
+                                    ModbusSparseDataBlock)
     from pymodbus.server import StartTcpServer, ServerStop
 except ImportError as e:
     print(f"SKIP: pymodbus is not importable ({e}); scripts/setup.sh installs python3-pymodbus and python3-serial-asyncio")
@@ -43,7 +44,10 @@ class OneRegisterAtATime(ModbusSequentialDataBlock):
 single = ModbusSlaveContext(hr=OneRegisterAtATime(0, [0] * 40), zero_mode=True)
 single.setValues(3, 10, [123])
 single.setValues(3, 11, [-45 & 0xFFFF])
-context = ModbusServerContext(slaves={1: temp, 2: rh, 3: single}, single=False)
+# A device with only registers 10, 11 and 20: pymodbus' sparse block answers ILLEGAL DATA ADDRESS
+# to any read that touches 12..19, so a read bridged across them must fall back to runs.
+sparse = ModbusSlaveContext(hr=ModbusSparseDataBlock({10: 201, 11: 202, 20: 203}), zero_mode=True)
+context = ModbusServerContext(slaves={1: temp, 2: rh, 3: single, 4: sparse}, single=False)
 server = threading.Thread(target=StartTcpServer, kwargs={"context": context, "address": ("127.0.0.1", port)}, daemon=True)
 server.start()
 # Wait until it accepts connections (a connect attempt, not a sleep).
@@ -110,6 +114,26 @@ check(vals["a_c"]["quality"] == "good" and abs(vals["a_c"]["value"] - 12.3) < 1e
 check(vals["b_c"]["quality"] == "good" and abs(vals["b_c"]["value"] + 4.5) < 1e-9, f"register 11 read alone: -4.5 (got {vals['b_c']})")
 check(r["status"]["exceptions"] == 1, f"the refused two-register request counted once (got {r['status']})")
 os.unlink(single_map)
+
+# Registers 10, 11 and 20 of the sparse device: with --max-gap 16 one request spans 10..20, the
+# device refuses the unused 12..19, and the driver reads the runs 10-11 and 20 instead (two
+# requests, not three singles); with --max-gap 0 it never asks for the hole.
+with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as f:
+    f.write('family = "test"\n[units]\nsparse = 4\n' + ''.join(
+        f'[[registers]]\nname = "r{a}_c"\nunit_id = "sparse"\naddress = {a}\ntype = "int16"\nscale = 0.1\naccess = "read"\n'
+        for a in (10, 11, 20)))
+    sparse_map = f.name
+for gap, exceptions, frames in (("16", 1, 2), ("0", 0, 2)):
+    r = probe("--max-gap", gap, map_file=sparse_map)
+    vals = {s["channel"]: s for s in r["samples"]}
+    check(all(vals[f"r{a}_c"]["quality"] == "good" and abs(vals[f"r{a}_c"]["value"] - v) < 1e-9
+              for a, v in ((10, 20.1), (11, 20.2), (20, 20.3))),
+          f"--max-gap {gap}: registers 10, 11 and 20 read as 20.1, 20.2, 20.3 (got {r['samples']})")
+    check(r["status"]["exceptions"] == exceptions and r["status"]["frames"] == frames,
+          f"--max-gap {gap}: {exceptions} refused request(s), {frames} answered (got {r['status']})")
+    if gap == "16":
+        check("contiguous runs" in r["status"]["last_error"], f"the fallback is named (got {r['status']['last_error']!r})")
+os.unlink(sparse_map)
 
 # The server goes away: connection refused is a comm error, not a crash.
 ServerStop()
