@@ -65,6 +65,8 @@ public:
 
 private:
     void start_read();
+    void take(const can_frame& frame, std::size_t bytes);
+    bool drain_waiting();
     bool write_frame(const can_frame& frame);
     void capture(const can_frame& frame);
     void emit(const std::string& channel, double value, Quality q, std::int64_t mono, std::int64_t utc);

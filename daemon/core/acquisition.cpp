@@ -101,6 +101,7 @@ void Acquisition::build_drivers(const config::Config& config, const drivers::Clo
         o.baud = static_cast<int>(m.baud);
         o.response_timeout_s = d.modbus_timeout_s;
         o.poll_period_s = d.poll_period_s;
+        o.max_gap_registers = static_cast<int>(m.max_gap_registers);
         o.points = modbus_points(register_map_from_setting(m.register_map, name, config.source_dir));
         return std::make_unique<drivers::ModbusDriver>(std::move(o), clock, sink_);
     };
@@ -145,6 +146,30 @@ void Acquisition::step(double dt_s) {
     const auto mf0 = manikin_->frames_received();
     lab_->step(dt_s);
     manual_clock_->advance_s(dt_s);
+    // Modbus first, so that its round trips overlap the bus reads below: the datalogger on its
+    // worker, the chamber here. Both read the lab as this step left it (lab_->step is done and
+    // nothing below changes the world), so the result is the lockstep's, only sooner. The
+    // datalogger's samples reach the sink from this thread, which holds the daemon's lock.
+    const double now_s = manual_clock_->elapsed_s();
+    const bool poll_due = now_s + 1e-9 >= next_poll_s_;
+    if (poll_due) {
+        next_poll_s_ = now_s + poll_period_s_;
+        if (!datalogger_poll_)
+            datalogger_poll_ = std::make_unique<StepWorker>([this] { datalogger_samples_ = datalogger_->read_all(); });
+        datalogger_poll_->start();
+    }
+    // Whatever leaves this step early (a sink that throws), the datalogger's read is over first.
+    struct AwaitPoll {
+        StepWorker* worker;
+        ~AwaitPoll() {
+            if (!worker) return;
+            try {
+                worker->wait();
+            } catch (...) {  // already leaving with another error; the read's own is lost
+            }
+        }
+    } await_poll{poll_due ? datalogger_poll_.get() : nullptr};
+    if (poll_due) chamber_->poll();
     const auto ws_expected = windsonic_->status().connected ? lab_->serial_bytes_last_step("windsonic") : 0;
     const auto cs_expected = csat3b_->status().connected ? lab_->serial_bytes_last_step("csat3b") : 0;
     const auto mf_expected = lab_->can_frames_last_step();
@@ -162,11 +187,10 @@ void Acquisition::step(double dt_s) {
     }
     if (io_.stopped()) io_.restart();
     io_.poll();  // completions already queued (errors, writes)
-    const double now_s = manual_clock_->elapsed_s();
-    if (now_s + 1e-9 >= next_poll_s_) {
-        next_poll_s_ = now_s + poll_period_s_;
-        chamber_->poll();
-        datalogger_->poll();
+    if (poll_due) {
+        await_poll.worker = nullptr;
+        datalogger_poll_->wait();
+        for (const auto& s : datalogger_samples_) sink_(s);
     }
     checks(manual_clock_->mono_ns());
 }

@@ -18,6 +18,7 @@
 
 #include "daemon/core/config.hpp"
 #include "daemon/core/register_map.hpp"
+#include "daemon/core/step_worker.hpp"
 #include "drivers/anemometers.hpp"
 #include "drivers/clock.hpp"
 #include "drivers/manikin_can_driver.hpp"
@@ -79,6 +80,9 @@ private:
     std::atomic<bool> stop_{false};
     std::thread io_thread_, pacer_thread_;
     double lockstep_stalls_ = 0;
+    // Virtual clock: the datalogger's poll on its own thread, overlapping the rest of the step.
+    std::unique_ptr<StepWorker> datalogger_poll_;
+    std::vector<drivers::Sample> datalogger_samples_;
     std::string manikin_open_error_;   // real mode: why can0 could not be opened
 };
 

@@ -6,6 +6,7 @@
 #include <map>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include "daemon/core/acquisition.hpp"
 
@@ -13,6 +14,7 @@ namespace manikind::test {
 
 struct Collected {
     drivers::Sample last;
+    std::vector<double> values;  // every value, in arrival order
     std::size_t count = 0, good = 0;
     std::map<drivers::Quality, std::size_t> by_quality;
     std::size_t n(drivers::Quality q) const {
@@ -71,6 +73,7 @@ private:
         std::lock_guard lk(lock_);
         auto& c = samples_[s.device + "/" + s.channel];
         c.last = s;
+        c.values.push_back(s.value);
         ++c.count;
         ++c.by_quality[s.quality];
         if (s.quality == drivers::Quality::good) ++c.good;
