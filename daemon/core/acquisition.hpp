@@ -3,8 +3,9 @@
 // shared io_context (serial, CAN) plus worker threads for Modbus in real time. In simulated
 // mode it also owns the simulated lab and connects the drivers to its virtual devices over the
 // real transports. Two ways to run:
-//   step(dt)          virtual clock: the lab advances dt, every driver reads what was sent (the
-//                     lockstep waits on real I/O events, never sleeps), Modbus is polled.
+//   step(dt)          virtual clock: the lab advances dt, Modbus is polled (the datalogger on a
+//                     step worker, beside the chamber), every driver reads what was sent (the
+//                     lockstep waits on real I/O events, never sleeps).
 //   start_realtime()  wall clock: io thread + Modbus workers; the simulated lab (if any) is
 //                     stepped by a pacing thread at `speed` x real time.
 #include <atomic>
