@@ -110,6 +110,7 @@ bool ManikinCanDriver::drain_waiting() {
     std::array<iovec, batch> iov;
     std::array<mmsghdr, batch> msgs;
     for (;;) {
+        if (!stream_) return false;  // a sink stopped the driver while it took the frames before
         for (unsigned i = 0; i < batch; ++i) {
             iov[i] = {&frames[i], sizeof(can_frame)};
             msgs[i] = {};
