@@ -12,6 +12,14 @@ namespace mr = protocol::modbus_registers;
 
 namespace mb = protocol::modbus_blocks;
 
+namespace {
+
+mb::PointRegisters point_registers(const ModbusPoint& p) {
+    return {p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type)};
+}
+
+}  // namespace
+
 ModbusDriver::ModbusDriver(ModbusOptions options, const Clock& clock, SampleSink sink)
     : options_(std::move(options)), clock_(clock), sink_(std::move(sink)) {
     std::vector<mb::PointRegisters> regs;
@@ -19,7 +27,7 @@ ModbusDriver::ModbusDriver(ModbusOptions options, const Clock& clock, SampleSink
     for (std::size_t i = 0; i < options_.points.size(); ++i) {
         const auto& p = options_.points[i];
         if (!p.poll) continue;
-        regs.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type)});
+        regs.push_back(point_registers(p));
         polled.push_back(i);
     }
     blocks_ = mb::plan_read_blocks(regs, mb::kMaxReadRegisters, options_.max_gap_registers);
@@ -183,22 +191,12 @@ std::vector<Sample> ModbusDriver::read_all() {
                     // split into its contiguous runs (the device may lack the registers between);
                     // a contiguous one is read point by point (it allows one register a request).
                     std::vector<mb::PointRegisters> regs;
-                    for (const std::size_t i : b.points) {
-                        const auto& p = options_.points[i];
-                        regs.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type)});
-                    }
+                    for (const std::size_t i : b.points) regs.push_back(point_registers(options_.points[i]));
                     auto smaller = mb::plan_read_blocks(regs, mb::kMaxReadRegisters, 0);
                     const bool bridged = smaller.size() > 1;
-                    if (bridged) {
-                        for (auto& s : smaller)
-                            for (auto& i : s.points) i = b.points[i];  // back to indices into options_.points
-                    } else {
-                        smaller.clear();
-                        for (const std::size_t i : b.points) {
-                            const auto& p = options_.points[i];
-                            smaller.push_back({p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type), {i}});
-                        }
-                    }
+                    if (!bridged) smaller = mb::plan_read_blocks(regs, 0, 0);  // at most 0 registers: one point a request
+                    for (auto& s : smaller)
+                        for (auto& i : s.points) i = b.points[i];  // back to indices into options_.points
                     {
                         std::lock_guard sl(status_lock_);
                         ++status_.exceptions;

@@ -31,7 +31,8 @@ struct ReadBlock {
 // Fewest requests covering every point: same unit and function, each register after the
 // previous point's last within `max_gap` registers (0: contiguous or overlapping only, since a
 // device may answer "illegal data address" for a hole), at most `max_registers` per request.
-// Blocks come ordered by unit, function, then address.
+// Blocks come ordered by unit, function, then address. `max_registers` 0 gives every point its
+// own request, whatever it spans (a device that allows one value a request).
 std::vector<ReadBlock> plan_read_blocks(std::span<const PointRegisters> points, int max_registers = kMaxReadRegisters,
                                         int max_gap = 0);
 

@@ -44,8 +44,8 @@ struct ModbusDeviceConfig {
     double baud = 19200;
     std::string register_map = "builtin";
     // Read across a hole of up to this many unused registers rather than send another request
-    // (docs/daemon.md, "Modbus polling"). A device that refuses a range with a hole ("illegal data
-    // address") is then read point by point; 0 reads contiguous runs only.
+    // (docs/devices.md, "Modbus block reads"). A device that refuses a range with a hole ("illegal
+    // data address") is then read in its contiguous runs; 0 reads contiguous runs only.
     double max_gap_registers = 16;
 };
 

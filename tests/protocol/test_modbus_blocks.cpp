@@ -47,4 +47,11 @@ TEST_CASE("units, functions, two-register types and the 125-register limit split
     CHECK(one[0].count == 1);
     CHECK(one[0].points.size() == 2);
     CHECK(plan_read_blocks(std::vector<PointRegisters>{}).empty());
+    // max_registers 0: one request per point, a float32 too, in address order (the driver's
+    // fallback for a device that refuses multi-register reads).
+    const auto singles = plan_read_blocks(pts, 0, 0);
+    REQUIRE(singles.size() == 4);
+    CHECK((singles[0].start == 10 && singles[0].count == 2 && singles[0].points == std::vector<std::size_t>{0}));
+    CHECK((singles[1].start == 12 && singles[1].count == 1 && singles[1].points == std::vector<std::size_t>{1}));
+    CHECK(plan_read_blocks(same, 0, 0).size() == 2);
 }
