@@ -389,7 +389,7 @@ private:
         pg_.exec("CREATE TEMP TABLE IF NOT EXISTS sample_staging (device text, channel text, mono_ns bigint,"
                  " utc_ns bigint, value double precision, quality smallint) ON COMMIT DELETE ROWS");
         Source::Stmt read(src_, "SELECT mono_ns, channel_id, utc_ns, value, quality FROM samples"
-                                " WHERE trial_id = ?1 AND (mono_ns, channel_id) > (?2, ?3)"
+                                " WHERE id >= (?1 << 36) AND id < ((?1 + 1) << 36) AND (mono_ns, channel_id) > (?2, ?3)"
                                 " ORDER BY mono_ns, channel_id LIMIT ?4");
         const auto chunk_rows = static_cast<std::int64_t>(std::max<std::size_t>(options_.chunk_rows, 1));
         for (const auto& trial : trials_) {

@@ -178,8 +178,9 @@ int main(int argc, char** argv) {
                 // Not status_json(): it measures the steady window and every device, each step.
                 const std::string stage = daemon.stage_line();
                 if (stage != last_stage) {
-                    std::printf("t=%.0f s %s committed=%llu\n", daemon.virtual_time_s(), stage.c_str(),
-                                static_cast<unsigned long long>(daemon.committed_rows()));
+                    std::printf("t=%.0f s %s committed=%llu accepted=%llu\n", daemon.virtual_time_s(), stage.c_str(),
+                                static_cast<unsigned long long>(daemon.committed_rows()),
+                                static_cast<unsigned long long>(daemon.accepted_rows()));
                     std::fflush(stdout);
                     last_stage = stage;
                 }

@@ -108,7 +108,12 @@ struct Config {
     // [recorder] durability: "process" survives a killed daemon (SQLite synchronous = NORMAL);
     // "power" also a power cut (FULL: every commit synced to the disk). docs/recorder.md.
     std::string recorder_durability = "process";
-    double recorder_commit_interval_s = 1.0;  // [recorder] commit_interval_s: the longest a row waits for its commit
+    // [recorder] commit_interval_s: the longest a row waits for its commit. 30 s: near WAL's floor
+    // of 2x in bytes written per byte stored; the crash ring keeps a killed daemon from losing them.
+    double recorder_commit_interval_s = 30.0;
+    // [recorder] crash_ring_dir: shared memory holding the samples not yet committed, so a killed
+    // daemon loses none (daemon/core/recorder/crash_ring.hpp); "" runs without.
+    std::string recorder_crash_ring_dir = "/dev/shm";
     SafetyLimits safety;
     SteadyStateRule steady_state;
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)

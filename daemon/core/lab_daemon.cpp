@@ -81,6 +81,7 @@ LabDaemon::LabDaemon(DaemonOptions options)
     recorder_options.durability = durability_of(o_.config);
     recorder_options.max_batch_delay =
         std::chrono::milliseconds(std::llround(o_.config.recorder_commit_interval_s * 1000.0));
+    recorder_options.crash_ring_dir = o_.config.recorder_crash_ring_dir;
     recorder_ = std::make_unique<recorder::Recorder>(db_path_, recorder_options);
     skin_range_.resize(analysis::andi35_zone_map().size());
     auto sink = [this](const drivers::Sample& s) { on_sample(s); };
@@ -851,7 +852,9 @@ nlohmann::json LabDaemon::status_json() {
                      {"dropped_queue_full", rs.dropped + dropped_samples_},
                      {"duplicates", rs.duplicates},
                      {"lost_after_retries", rs.lost},
-                     {"queue_rows", rs.queue_depth}};
+                     {"queue_rows", rs.queue_depth},
+                     {"recovered_from_crash_ring", rs.recovered},
+                     {"crash_ring", rs.crash_ring}};
     j["storage"] = {{"full", storage_full_},
                     {"error", storage_error_},
                     {"deferred_writes", deferred_writes_.size()},

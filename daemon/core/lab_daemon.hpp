@@ -105,6 +105,7 @@ public:
     // "acquiring trial 3", "idle". For a loop that reports each change.
     std::string stage_line();
     std::uint64_t committed_rows() const { return recorder_->stats().committed; }
+    std::uint64_t accepted_rows() const { return recorder_->stats().accepted; }
     double virtual_time_s() const { return static_cast<double>(clock_->mono_ns()) * 1e-9; }
 
     recorder::Database& db() { return db_; }

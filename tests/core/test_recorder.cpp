@@ -21,6 +21,7 @@
 #include <fmt/core.h>
 
 #include "daemon/core/config.hpp"
+#include "daemon/core/recorder/crash_ring.hpp"
 #include "daemon/core/recorder/database.hpp"
 #include "daemon/core/recorder/recorder.hpp"
 #include "daemon/core/user_error.hpp"
@@ -98,7 +99,8 @@ TEST_CASE("database: [recorder] durability picks SQLite's sync level, from the c
     CHECK(manikind::config::default_config().recorder_durability == "process");
     CHECK_THROWS_WITH(manikind::config::parse_config("[recorder]\ndurability = \"fsync\"\n", "test.toml"),
                       Catch::Contains("test.toml:2") && Catch::Contains("durability"));
-    CHECK(manikind::config::default_config().recorder_commit_interval_s == 1.0);
+    CHECK(manikind::config::default_config().recorder_commit_interval_s == 30.0);
+    CHECK(manikind::config::default_config().recorder_crash_ring_dir == "/dev/shm");
     CHECK(manikind::config::parse_config("[recorder]\ncommit_interval_s = 5\n", "test.toml").recorder_commit_interval_s == 5.0);
     CHECK_THROWS_WITH(manikind::config::parse_config("[recorder]\ncommit_interval_s = 0.01\n", "test.toml"),
                       Catch::Contains("test.toml:2") && Catch::Contains("commit_interval_s"));
@@ -443,6 +445,111 @@ TEST_CASE("recorder: a batch that keeps failing is retried, then counted as lost
     CHECK(stats.accepted == stats.committed + stats.lost);
 }
 
+TEST_CASE("recorder: kill -9 loses no accepted sample: the next Recorder stores what the crash ring kept", "[recorder][crash_ring]") {
+    TempDir dir("ring");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path);
+        f = make_fixture(db);
+    }  // closed before fork()
+    RecorderOptions options;
+    options.crash_ring_dir = dir.path;
+    options.max_batch_delay = std::chrono::minutes(10);  // nothing commits unless flushed
+    int fds[2];
+    REQUIRE(::pipe(fds) == 0);
+    const pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+        ::close(fds[0]);
+        try {
+            Recorder recorder(path, options);
+            for (std::int64_t i = 1; i <= 1500; ++i) {
+                recorder.push({f.trial, i % 2 ? f.channel_a : f.channel_b, i * 1000, i * 1000, static_cast<double>(i), 0});
+                if (i == 500) recorder.flush();
+            }
+            const std::uint64_t accepted = recorder.stats().accepted;
+            if (::write(fds[1], &accepted, sizeof accepted) != static_cast<ssize_t>(sizeof accepted)) ::_exit(1);
+            for (;;) ::pause();  // killed here, 1000 samples not committed
+        } catch (...) {
+            ::_exit(1);
+        }
+    }
+    ::close(fds[1]);
+    std::uint64_t accepted = 0;
+    const bool reported = ::read(fds[0], &accepted, sizeof accepted) == static_cast<ssize_t>(sizeof accepted);
+    ::kill(child, SIGKILL);
+    ::waitpid(child, nullptr, 0);
+    ::close(fds[0]);
+    REQUIRE(reported);
+    CHECK(accepted == 1500);
+    CHECK(Database::open(path).sample_count(f.trial) == 500);  // what the killed process committed
+    {
+        Recorder next(path, options);
+        CHECK(next.stats().recovered == 1000);
+        CHECK_FALSE(next.stats().crash_ring.empty());
+    }
+    auto db = Database::open(path);
+    CHECK(db.sample_count(f.trial) == 1500);
+    const auto a = db.samples(f.trial, f.channel_a);
+    REQUIRE(a.size() == 750);
+    for (std::size_t k = 0; k < a.size(); ++k) CHECK(a[k].value == static_cast<double>(2 * k + 1));
+    // A clean stop leaves no ring behind, and a third Recorder has nothing to recover.
+    CHECK(std::none_of(fs::directory_iterator(dir.path), fs::directory_iterator(),
+                       [](const fs::directory_entry& e) { return e.path().extension() == ".ring"; }));
+    Recorder third(path, options);
+    CHECK(third.stats().recovered == 0);
+}
+
+TEST_CASE("crash ring: readings stored before the crash are not stored twice, nor rows whose trial is gone", "[recorder][crash_ring]") {
+    TempDir dir("ring-twice");
+    const auto path = dir.path / "trials.db";
+    auto db = Database::open(path);
+    const auto f = make_fixture(db);
+    std::vector<SampleRow> rows;
+    for (std::int64_t i = 1; i <= 15; ++i) rows.push_back({f.trial, f.channel_a, i * 10, i * 10, static_cast<double>(i), 0});
+    db.insert_samples(std::span<const SampleRow>(rows.data(), 10));
+    {
+        // A writer that died after committing 1..10 but before trimming its ring from 6 on.
+        std::string why_not;
+        auto ring = CrashRing::open(dir.path, path, 64, why_not);
+        REQUIRE(ring);
+        for (std::size_t k = 5; k < 15; ++k) ring->append(rows[k]);
+        ring->append({f.trial + 40, f.channel_a, 999, 999, 1.0, 0});  // a trial this file does not have
+    }
+    RecorderOptions options;
+    options.crash_ring_dir = dir.path;
+    {
+        Recorder next(path, options);
+        CHECK(next.stats().recovered == 5);
+        // While it holds the ring, a second Recorder on the same file runs without one.
+        Recorder second(path, options);
+        CHECK(second.stats().crash_ring.empty());
+        CHECK_FALSE(next.stats().crash_ring.empty());
+    }
+    CHECK(db.sample_count(f.trial) == 15);
+    const auto back = db.samples(f.trial, f.channel_a);
+    REQUIRE(back.size() == 15);
+    CHECK(back.back().value == 15.0);
+}
+
+TEST_CASE("crash ring: a directory that cannot hold it leaves the Recorder working without one", "[recorder][crash_ring]") {
+    TempDir dir("ring-none");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path);
+        f = make_fixture(db);
+    }
+    RecorderOptions options;
+    options.crash_ring_dir = dir.path / "no-such-dir";
+    Recorder recorder(path, options);
+    CHECK(recorder.stats().crash_ring.empty());
+    CHECK(recorder.push({f.trial, f.channel_a, 1, 1, 1.0, 0}));
+    CHECK(recorder.flush());
+    CHECK(recorder.stats().committed == 1);
+}
+
 TEST_CASE("recorder: an unopenable path throws from the constructor", "[recorder]") {
     TempDir dir("unopenable");
     CHECK_THROWS_WITH(Recorder(dir.path / "missing" / "trials.db"), Catch::Contains("missing"));
@@ -466,7 +573,9 @@ TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound
         ::close(fds[0]);
         int status = 0;
         try {
-            Recorder recorder(path);
+            RecorderOptions options;
+            options.crash_ring_dir = dir.path;  // left behind by the kill: not in /dev/shm
+            Recorder recorder(path, options);
             for (std::int64_t i = 1;; ++i) {
                 recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
                 if (i % 1000 == 0) {
@@ -538,6 +647,7 @@ TEST_CASE("recorder: the files copied at random instants while writing, as a pow
             auto db = Database::open(path, manikind::recorder::Durability::power);
             manikind::recorder::RecorderOptions options;
             options.durability = manikind::recorder::Durability::power;
+            options.crash_ring_dir = dir.path;
             Recorder recorder(path, options);
             for (std::int64_t i = 1;; ++i) {
                 recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});

@@ -23,6 +23,12 @@
 
 namespace manikind::recorder {
 
+// A trial's samples are the rowid range [trial_id << 36, (trial_id + 1) << 36) of `samples`
+// (schema version 8): 2^36 rows a trial, 2^27 trials.
+constexpr int trial_id_shift = 36;
+constexpr std::int64_t trial_id_begin(std::int64_t trial_id) { return trial_id << trial_id_shift; }
+constexpr std::int64_t trial_id_end(std::int64_t trial_id) { return (trial_id + 1) << trial_id_shift; }
+
 // A write failed for want of space (SQLITE_FULL, or ENOSPC under any other code). Nothing of the
 // failed transaction is stored; everything committed before it still is.
 class StorageFull : public UserError {
@@ -176,6 +182,7 @@ public:
     // A row whose (trial_id, channel_id, mono_ns) is already stored is skipped, keeping the
     // first; returns how many were skipped. A trial or channel id that does not exist fails
     // the whole transaction (foreign keys), so ids must come from create_trial/channel_id.
+    // A trial's rows take the ids [trial_id_begin, trial_id_end) in the order they are stored.
     std::size_t insert_samples(std::span<const SampleRow> rows);
     // For a connection that only inserts samples (the Recorder's): SQLite's foreign-key checks
     // off for good, since insert_samples checks trial and channel ids itself. Other statements on
@@ -201,8 +208,8 @@ public:
     std::optional<TrialRow> trial(std::int64_t trial_id);
     std::vector<ChannelRow> channels();                         // by device name, channel name
     std::vector<SampleRow> samples(std::int64_t trial_id, std::int64_t channel_id);  // by mono_ns
-    // Every sample of a trial in key order (mono_ns, then channel_id), one pass over the trial's
-    // key range: the way to read many channels, since samples is keyed time-major (version 5).
+    // Every sample of a trial in time order (mono_ns, then channel_id), one pass over the
+    // trial's id range: the way to read many channels.
     void for_each_trial_sample(std::int64_t trial_id, const std::function<void(const SampleRow&)>& visit);
     std::int64_t sample_count(std::int64_t trial_id);
     // The idle log (rows pushed with trial_id 0): one channel's readings since a wall time.

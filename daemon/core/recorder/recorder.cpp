@@ -26,6 +26,7 @@ Recorder::Recorder(std::filesystem::path db_path, RecorderOptions options)
         try {
             db.emplace(Database::open(path_, options_.durability));
             db->check_sample_keys_here();  // this connection only inserts samples
+            open_crash_ring(*db);
         } catch (...) {
             opened.set_exception(std::current_exception());
             return;
@@ -48,6 +49,50 @@ Recorder::~Recorder() {
     }
     wake_writer_.notify_one();
     writer_.join();
+    // Everything stored: nothing for a successor to recover, so leave no file behind.
+    if (ring_ && ring_->pending().empty()) {
+        std::error_code ec;
+        std::filesystem::remove(ring_->path(), ec);
+    }
+}
+
+void Recorder::open_crash_ring(Database& db) {
+    if (options_.crash_ring_dir.empty()) return;
+    std::string why_not;
+    // Rows wait in the queue or in the batch being written, each at most queue_capacity.
+    ring_ = CrashRing::open(options_.crash_ring_dir, path_, 2 * options_.queue_capacity, why_not);
+    if (!ring_) {
+        spdlog::warn("recorder: no crash ring ({}); samples not yet committed are lost if the daemon dies", why_not);
+        return;
+    }
+    stats_.crash_ring = ring_->path().string();
+    const auto left = ring_->pending();
+    if (left.empty()) return;
+    // A predecessor died with these uncommitted. Stored before any new row; a reading already
+    // stored (it died between its commit and trimming the ring) is skipped as a duplicate, and
+    // rows whose trial or channel is gone are reported, not kept for ever.
+    const std::size_t chunk = std::max<std::size_t>(1, options_.max_batch_rows);
+    std::size_t stored = 0, unusable = 0;
+    for (std::size_t at = 0; at < left.size(); at += chunk) {
+        const std::span<const SampleRow> rows(left.data() + at, std::min(chunk, left.size() - at));
+        try {
+            stored += rows.size() - db.insert_samples(rows);
+        } catch (const std::exception&) {
+            // One bad row fails its transaction: store the chunk row by row (a rare path).
+            for (const auto& row : rows) {
+                try {
+                    stored += 1 - db.insert_samples(std::span<const SampleRow>(&row, 1));
+                } catch (const std::exception& e) {
+                    if (unusable++ == 0) spdlog::error("recorder: a sample from the crash ring cannot be stored: {}", e.what());
+                }
+            }
+        }
+    }
+    ring_->clear();
+    stats_.recovered = stored;
+    spdlog::warn("recorder: stored {} samples that a stopped daemon had not committed ({} already stored, {} unusable), "
+                 "from {}",
+                 stored, left.size() - stored - unusable, unusable, ring_->path().string());
 }
 
 bool Recorder::push(const SampleRow& row) noexcept {
@@ -59,6 +104,7 @@ bool Recorder::push(const SampleRow& row) noexcept {
             return false;
         }
         queue_.push_back(row);  // within the reserved capacity: no allocation
+        if (ring_) ring_->append(row);
         ++stats_.accepted;
         ++stats_.queue_depth;
         depth = queue_.size();
@@ -192,6 +238,7 @@ void Recorder::write_loop(Database& db) {
         attempts = 0;
         done += n;
         resolved_ += n;
+        if (ring_) ring_->resolved(n);
         stats_.queue_depth -= n;
         progress_.notify_all();
     }

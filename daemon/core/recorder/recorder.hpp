@@ -9,9 +9,12 @@
 #include <cstdint>
 #include <filesystem>
 #include <mutex>
+#include <optional>
+#include <string>
 #include <thread>
 #include <vector>
 
+#include "daemon/core/recorder/crash_ring.hpp"
 #include "daemon/core/recorder/database.hpp"
 
 namespace manikind::recorder {
@@ -19,10 +22,11 @@ namespace manikind::recorder {
 struct RecorderOptions {
     std::size_t queue_capacity = 1 << 16;  // rows waiting to be taken by the writer
     std::size_t max_batch_rows = 4096;     // rows per transaction
-    // A row waits at most this long (plus one commit) before its transaction starts, which
-    // bounds what a crash of this process can lose. Each commit rewrites at least the page it
-    // appends to, so shorter means more bytes written per row ([recorder] commit_interval_s;
-    // docs/recorder.md, "Write amplification").
+    // A row waits at most this long (plus one commit) before its transaction starts: what a
+    // power cut can lose, and what a killed process can lose when there is no crash ring. Each
+    // commit rewrites at least the page it appends to, so shorter means more bytes written per
+    // row ([recorder] commit_interval_s; docs/recorder.md, "Write amplification"). The
+    // daemon's default is 30 s; this class's stays 1 s for callers without a ring.
     std::chrono::milliseconds max_batch_delay{1000};
     int max_commit_attempts = 5;  // then the batch is discarded (counted in lost) and logged
     // A full disk is not counted against max_commit_attempts: the rows wait in memory (new ones
@@ -30,6 +34,10 @@ struct RecorderOptions {
     // flush(), until space returns. At shutdown the usual attempts apply, then the rows are lost.
     std::chrono::milliseconds full_disk_retry{1000};
     Durability durability = Durability::process;  // [recorder] durability
+    // Where the crash ring lives (crash_ring.hpp): a copy of every sample not yet committed, in
+    // shared memory, stored by the next Recorder if this process dies. Empty: no ring, and a
+    // crash loses what is not committed ([recorder] crash_ring_dir).
+    std::filesystem::path crash_ring_dir = "/dev/shm";
 };
 
 struct RecorderStats {
@@ -45,6 +53,8 @@ struct RecorderStats {
     bool storage_full = false;         // the latest commit failed for want of space
     std::string storage_error;         // its message (file, what, SQLite's words)
     std::uint64_t full_disk_commits = 0;  // commits that failed for want of space
+    std::uint64_t recovered = 0;       // samples a crashed predecessor left in the crash ring, stored at start
+    std::string crash_ring;            // the ring's file; empty when running without one
 };
 
 class Recorder {
@@ -66,6 +76,7 @@ public:
     RecorderStats stats() const;
 
 private:
+    void open_crash_ring(Database& db);  // and store what a predecessor left in it
     void run(Database& db);
     void write_loop(Database& db);
 
@@ -83,6 +94,7 @@ private:
     int flush_waiters_ = 0;
     bool stop_ = false;
     bool writer_gone_ = false;
+    std::optional<CrashRing> ring_;        // appended by push(), trimmed as rows resolve (under mutex_)
     std::thread writer_;
 };
 
