@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <random>
 #include <chrono>
@@ -273,11 +274,65 @@ TEST_CASE("database: a version 4 file's samples and idle log survive the move to
     CHECK(sqlite3_column_int(q, 0) == 4);
     CHECK(sqlite3_column_double(q, 1) == 6.0);
     sqlite3_finalize(q);
+    // Version 8 numbered the trial's rows in time order within its id range.
+    REQUIRE(sqlite3_prepare_v2(raw, "SELECT id - (1 << 36), mono_ns, channel_id FROM samples ORDER BY id", -1, &q, nullptr) == SQLITE_OK);
+    std::vector<std::array<std::int64_t, 3>> ids;
+    while (sqlite3_step(q) == SQLITE_ROW)
+        ids.push_back({sqlite3_column_int64(q, 0), sqlite3_column_int64(q, 1), sqlite3_column_int64(q, 2)});
+    sqlite3_finalize(q);
+    CHECK(ids == std::vector<std::array<std::int64_t, 3>>{{0, 10, 1}, {1, 10, 2}, {2, 20, 1}, {3, 20, 2}});
     sqlite3_close(raw);
     // A second write and a duplicate behave as before.
     const SampleRow more[] = {{1, 1, 30, 130, 4.0, 0}, {1, 1, 10, 110, 99.0, 0}};
     CHECK(db.insert_samples(more) == 1);
     CHECK(db.sample_count(1) == 5);
+}
+
+TEST_CASE("database: each trial's samples are one id range, numbered as stored, and a query by trial reads only it (v8)", "[recorder]") {
+    TempDir dir("ranges");
+    const auto path = dir.path / "trials.db";
+    auto db = Database::open(path);
+    const auto f = make_fixture(db);
+    const auto other = db.create_trial(f.campaign, f.case_id, 2);
+    // Two trials written turn about, a re-sent reading and an out-of-order one among them.
+    for (std::int64_t k = 0; k < 3; ++k) {
+        const SampleRow rows[] = {{f.trial, f.channel_a, 100 + k, 0, 1.0, 0}, {other, f.channel_a, 100 + k, 0, 2.0, 0}};
+        CHECK(db.insert_samples(rows) == 0);
+    }
+    const SampleRow late[] = {{f.trial, f.channel_a, 50, 0, 3.0, 0},    // earlier than the newest: new
+                              {f.trial, f.channel_a, 101, 0, 9.0, 0},   // re-sent: kept once
+                              {other, f.channel_b, 100, 0, 4.0, 0}};    // a channel's first reading
+    CHECK(db.insert_samples(late) == 1);
+    CHECK(db.sample_count(f.trial) == 4);
+    CHECK(db.sample_count(other) == 4);
+    std::vector<std::int64_t> order;
+    db.for_each_trial_sample(f.trial, [&](const SampleRow& r) { order.push_back(r.mono_ns); });
+    CHECK(order == std::vector<std::int64_t>{50, 100, 101, 102});
+    CHECK(db.samples(f.trial, f.channel_a).at(2).value == 1.0);  // the first reading at 101
+    sqlite3* raw = nullptr;
+    REQUIRE(sqlite3_open(path.c_str(), &raw) == SQLITE_OK);
+    const auto first_and_last = [&](std::int64_t trial) {
+        sqlite3_stmt* q = nullptr;
+        sqlite3_prepare_v2(raw, "SELECT min(id), max(id) FROM samples WHERE trial_id = ?", -1, &q, nullptr);
+        sqlite3_bind_int64(q, 1, trial);
+        sqlite3_step(q);
+        std::pair<std::int64_t, std::int64_t> out{sqlite3_column_int64(q, 0), sqlite3_column_int64(q, 1)};
+        sqlite3_finalize(q);
+        return out;
+    };
+    CHECK(first_and_last(f.trial) == std::pair{trial_id_begin(f.trial), trial_id_begin(f.trial) + 3});
+    CHECK(first_and_last(other) == std::pair{trial_id_begin(other), trial_id_begin(other) + 3});
+    // The analysts' view reads one trial by its range, not the whole table.
+    sqlite3_stmt* plan = nullptr;
+    REQUIRE(sqlite3_prepare_v2(raw, "EXPLAIN QUERY PLAN SELECT count(*) FROM sample_values WHERE trial_id = 1", -1, &plan,
+                               nullptr) == SQLITE_OK);
+    std::string details;
+    while (sqlite3_step(plan) == SQLITE_ROW) details += std::string(reinterpret_cast<const char*>(sqlite3_column_text(plan, 3))) + "\n";
+    sqlite3_finalize(plan);
+    sqlite3_close(raw);
+    INFO(details);
+    CHECK(details.find("SEARCH s USING INTEGER PRIMARY KEY (rowid>? AND rowid<?)") != std::string::npos);
+    CHECK(details.find("SCAN s") == std::string::npos);
 }
 
 TEST_CASE("database: a set-up is stored once per content and named by its SHA-256; trials point at theirs (v7)", "[recorder]") {
