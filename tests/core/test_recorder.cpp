@@ -76,6 +76,13 @@ Fixture make_fixture(Database& db) {
     return f;
 }
 
+// A file with the fixture's rows, its connection closed again (before a fork(), or so that
+// the Recorder under test is the only writer).
+Fixture fixture_file(const fs::path& path) {
+    auto db = Database::open(path);
+    return make_fixture(db);
+}
+
 }  // namespace
 
 TEST_CASE("database: a fresh file is at the latest schema, in WAL mode and sound", "[recorder]") {
@@ -388,11 +395,7 @@ TEST_CASE("database: a sample naming a trial or channel that does not exist fail
 TEST_CASE("recorder: 100 000 rows from a producer thread are all committed in order", "[recorder]") {
     TempDir dir("bulk");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path);
-        f = make_fixture(db);
-    }
+    const Fixture f = fixture_file(path);
     const int rows = 100'000;
     RecorderOptions options;
     options.queue_capacity = 1 << 17;  // room for everything: this test is about order, not drops
@@ -426,11 +429,7 @@ TEST_CASE("recorder: 100 000 rows from a producer thread are all committed in or
 TEST_CASE("recorder: a full queue drops and counts rows instead of waiting", "[recorder]") {
     TempDir dir("drop");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path);
-        f = make_fixture(db);
-    }
+    const Fixture f = fixture_file(path);
     RecorderOptions options;
     options.queue_capacity = 16;
     Recorder recorder(path, options);
@@ -451,11 +450,7 @@ TEST_CASE("recorder: a full queue drops and counts rows instead of waiting", "[r
 TEST_CASE("recorder: a re-sent reading is stored once and counted", "[recorder]") {
     TempDir dir("duplicate");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path);
-        f = make_fixture(db);
-    }
+    const Fixture f = fixture_file(path);
     {
         Recorder recorder(path);
         for (int i = 0; i < 3; ++i) CHECK(recorder.push({f.trial, f.channel_a, 1000, 1000, 1.5, 0}));
@@ -473,11 +468,7 @@ TEST_CASE("recorder: a re-sent reading is stored once and counted", "[recorder]"
 TEST_CASE("recorder: a batch that keeps failing is retried, then counted as lost", "[recorder]") {
     TempDir dir("failing");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path);
-        f = make_fixture(db);
-    }
+    const Fixture f = fixture_file(path);
     // A poison value makes every attempt at its transaction fail, as a full disk would.
     raw_exec(path, "CREATE TRIGGER poison BEFORE INSERT ON samples WHEN NEW.value = 666"
                    " BEGIN SELECT RAISE(ABORT, 'poisoned sample'); END");
@@ -503,11 +494,7 @@ TEST_CASE("recorder: a batch that keeps failing is retried, then counted as lost
 TEST_CASE("recorder: kill -9 loses no accepted sample: the next Recorder stores what the crash ring kept", "[recorder][crash_ring]") {
     TempDir dir("ring");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path);
-        f = make_fixture(db);
-    }  // closed before fork()
+    const Fixture f = fixture_file(path);  // closed before fork()
     RecorderOptions options;
     options.crash_ring_dir = dir.path;
     options.max_batch_delay = std::chrono::minutes(10);  // nothing commits unless flushed
@@ -591,11 +578,7 @@ TEST_CASE("crash ring: readings stored before the crash are not stored twice, no
 TEST_CASE("crash ring: a directory that cannot hold it leaves the Recorder working without one", "[recorder][crash_ring]") {
     TempDir dir("ring-none");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path);
-        f = make_fixture(db);
-    }
+    const Fixture f = fixture_file(path);
     RecorderOptions options;
     options.crash_ring_dir = dir.path / "no-such-dir";
     Recorder recorder(path, options);
