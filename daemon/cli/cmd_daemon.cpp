@@ -157,6 +157,11 @@ void print_status(const nlohmann::json& s) {
     std::printf("recorder: %llu samples committed, %llu not stored (%llu queue full, %llu re-sent duplicates, %llu lost)\n",
                 r["committed"].get<unsigned long long>(), r["dropped"].get<unsigned long long>(),
                 r.value("dropped_queue_full", 0ULL), r.value("duplicates", 0ULL), r.value("lost_after_retries", 0ULL));
+    // Where uncommitted samples wait (docs/recorder.md, "Durability"), and what a crash left there.
+    const std::string ring = r.value("crash_ring", std::string());
+    std::printf("          %llu waiting for their commit, %s; %llu recovered at start from a crashed daemon\n",
+                r.value("queue_rows", 0ULL), ring.empty() ? "NOT kept safe from a crash (no crash ring)" : ("kept in " + ring).c_str(),
+                r.value("recovered_from_crash_ring", 0ULL));
 }
 
 }  // namespace

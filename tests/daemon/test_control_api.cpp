@@ -84,6 +84,9 @@ TEST_CASE("control server: Unix socket is 0660 and answers newline-delimited JSO
     const auto reply = manikind::call_daemon(o.socket_path, {{"cmd", "status"}});
     CHECK(reply["ok"] == true);
     CHECK(reply["status"]["mode"] == "simulated");
+    // Uncommitted samples wait in the crash ring, in shared memory by default (docs/recorder.md).
+    CHECK(reply["status"]["recorder"]["crash_ring"].get<std::string>().rfind("/dev/shm/manikind-recorder-", 0) == 0);
+    CHECK(reply["status"]["recorder"]["recovered_from_crash_ring"] == 0);
     CHECK(manikind::call_daemon(o.socket_path, {{"cmd", "shutdown"}, {"token", "t"}})["ok"] == true);
     CHECK(server.shutdown_requested());
 }
