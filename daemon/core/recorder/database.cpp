@@ -6,6 +6,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -970,12 +971,22 @@ std::vector<SampleRow> Database::samples(std::int64_t trial_id, std::int64_t cha
 }
 
 void Database::for_each_trial_sample(std::int64_t trial_id, const std::function<void(const SampleRow&)>& visit) {
-    Query q(*impl_,
-            "SELECT mono_ns, channel_id, utc_ns, value, quality FROM samples WHERE id >= ?1 AND id < ?2"
-            " ORDER BY mono_ns, channel_id");
-    q.bind(trial_id_begin(trial_id), trial_id_end(trial_id));
-    while (q.step())
-        visit({trial_id, q.integer(1), q.integer(0), q.integer(2), q.real(3), static_cast<std::uint8_t>(q.integer(4))});
+    // Read in stored order and sorted here, not by ORDER BY: SQLite's sorter spills a trial
+    // (180 000 rows) to temporary files beyond its 2 MB cache, which made the demo 20 % slower.
+    // Stored order is already time order per device, so the sort mostly orders channels
+    // within an instant. Memory: one trial.
+    std::vector<SampleRow> rows;
+    {
+        Query q(*impl_, "SELECT mono_ns, channel_id, utc_ns, value, quality FROM samples WHERE id >= ?1 AND id < ?2");
+        q.bind(trial_id_begin(trial_id), trial_id_end(trial_id));
+        while (q.step())
+            rows.push_back({trial_id, q.integer(1), q.integer(0), q.integer(2), q.real(3), static_cast<std::uint8_t>(q.integer(4))});
+    }
+    const auto by_time = [](const SampleRow& a, const SampleRow& b) {
+        return a.mono_ns != b.mono_ns ? a.mono_ns < b.mono_ns : a.channel_id < b.channel_id;
+    };
+    if (!std::is_sorted(rows.begin(), rows.end(), by_time)) std::sort(rows.begin(), rows.end(), by_time);
+    for (const auto& row : rows) visit(row);
 }
 
 std::vector<SampleRow> Database::idle_samples(std::int64_t channel_id, std::int64_t since_utc_ns) {
