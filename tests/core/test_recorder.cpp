@@ -316,6 +316,13 @@ TEST_CASE("database: each trial's samples are one id range, numbered as stored, 
     db.for_each_trial_sample(f.trial, [&](const SampleRow& r) { order.push_back(r.mono_ns); });
     CHECK(order == std::vector<std::int64_t>{50, 100, 101, 102});
     CHECK(db.samples(f.trial, f.channel_a).at(2).value == 1.0);  // the first reading at 101
+    // A batch sent again (the crash ring's case): what is stored comes out in one scan a trial.
+    std::vector<SampleRow> again = {{f.trial, f.channel_a, 102, 0, 1.0, 0}, {f.trial, f.channel_a, 103, 0, 1.0, 0},
+                                    {other, f.channel_b, 100, 0, 4.0, 0}, {0, f.channel_a, 5, 5, 1.0, 0}};
+    CHECK(db.remove_already_stored(again) == 2);
+    REQUIRE(again.size() == 2);
+    CHECK(again[0].mono_ns == 103);
+    CHECK(again[1].trial_id == 0);  // the idle log's key does its own
     sqlite3* raw = nullptr;
     REQUIRE(sqlite3_open(path.c_str(), &raw) == SQLITE_OK);
     const auto first_and_last = [&](std::int64_t trial) {

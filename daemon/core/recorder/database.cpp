@@ -708,6 +708,33 @@ void Database::check_sample_keys_here() {
     impl_->exec("PRAGMA foreign_keys = OFF", "leaving the samples' foreign keys to insert_samples");
 }
 
+std::size_t Database::remove_already_stored(std::vector<SampleRow>& rows) {
+    std::unordered_map<std::int64_t, std::int64_t> earliest_by_trial;
+    for (const auto& r : rows)
+        if (r.trial_id != 0) {
+            auto [it, fresh] = earliest_by_trial.try_emplace(r.trial_id, r.mono_ns);
+            if (!fresh) it->second = std::min(it->second, r.mono_ns);
+        }
+    struct Key {
+        std::int64_t trial, channel, mono_ns;
+        bool operator==(const Key&) const = default;
+    };
+    struct KeyHash {
+        std::size_t operator()(const Key& k) const noexcept {
+            return std::hash<std::int64_t>{}(k.mono_ns * 1'000'003 + k.channel * 7919 + k.trial);
+        }
+    };
+    std::unordered_set<Key, KeyHash> stored;
+    for (const auto& [trial, earliest] : earliest_by_trial) {
+        Query q(*impl_, "SELECT channel_id, mono_ns FROM samples WHERE id >= ?1 AND id < ?2 AND mono_ns >= ?3");
+        q.bind(trial_id_begin(trial), trial_id_end(trial), earliest);
+        while (q.step()) stored.insert({trial, q.integer(0), q.integer(1)});
+    }
+    const auto before = rows.size();
+    std::erase_if(rows, [&](const SampleRow& r) { return r.trial_id != 0 && stored.count({r.trial_id, r.channel_id, r.mono_ns}); });
+    return before - rows.size();
+}
+
 namespace {
 
 // The tail of a trial's rows (Impl::TrialTail), current as stored.

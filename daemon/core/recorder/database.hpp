@@ -184,6 +184,10 @@ public:
     // the whole transaction (foreign keys), so ids must come from create_trial/channel_id.
     // A trial's rows take the ids [trial_id_begin, trial_id_end) in the order they are stored.
     std::size_t insert_samples(std::span<const SampleRow> rows);
+    // Removes from `rows` the trial samples already stored (same trial, channel and mono_ns),
+    // with one scan per trial instead of insert_samples' lookup per out-of-order row; returns
+    // how many. For re-sending a batch that may have been stored (the crash ring).
+    std::size_t remove_already_stored(std::vector<SampleRow>& rows);
     // For a connection that only inserts samples (the Recorder's): SQLite's foreign-key checks
     // off for good, since insert_samples checks trial and channel ids itself. Other statements on
     // this connection would go unchecked, so nothing else may use it.

@@ -66,8 +66,11 @@ void Recorder::open_crash_ring(Database& db) {
         return;
     }
     stats_.crash_ring = ring_->path().string();
-    const auto left = ring_->pending();
+    auto left = ring_->pending();
     if (left.empty()) return;
+    const std::size_t found = left.size();
+    // Readings committed just before the crash, before the ring was trimmed: one scan a trial.
+    std::size_t already = db.remove_already_stored(left);
     // A predecessor died with these uncommitted. Stored before any new row; a reading already
     // stored (it died between its commit and trimming the ring) is skipped as a duplicate, and
     // rows whose trial or channel is gone are reported, not kept for ever.
@@ -76,12 +79,16 @@ void Recorder::open_crash_ring(Database& db) {
     for (std::size_t at = 0; at < left.size(); at += chunk) {
         const std::span<const SampleRow> rows(left.data() + at, std::min(chunk, left.size() - at));
         try {
-            stored += rows.size() - db.insert_samples(rows);
+            const std::size_t skipped = db.insert_samples(rows);
+            stored += rows.size() - skipped;
+            already += skipped;
         } catch (const std::exception&) {
             // One bad row fails its transaction: store the chunk row by row (a rare path).
             for (const auto& row : rows) {
                 try {
-                    stored += 1 - db.insert_samples(std::span<const SampleRow>(&row, 1));
+                    const std::size_t skipped = db.insert_samples(std::span<const SampleRow>(&row, 1));
+                    stored += 1 - skipped;
+                    already += skipped;
                 } catch (const std::exception& e) {
                     if (unusable++ == 0) spdlog::error("recorder: a sample from the crash ring cannot be stored: {}", e.what());
                 }
@@ -90,9 +97,9 @@ void Recorder::open_crash_ring(Database& db) {
     }
     ring_->clear();
     stats_.recovered = stored;
-    spdlog::warn("recorder: stored {} samples that a stopped daemon had not committed ({} already stored, {} unusable), "
-                 "from {}",
-                 stored, left.size() - stored - unusable, unusable, ring_->path().string());
+    spdlog::warn("recorder: stored {} of {} samples that a stopped daemon had not committed ({} already stored, {} "
+                 "unusable), from {}",
+                 stored, found, already, unusable, ring_->path().string());
 }
 
 bool Recorder::push(const SampleRow& row) noexcept {
