@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
+#include <future>
 #include <limits>
 #include <ostream>
 #include <set>
@@ -173,11 +175,27 @@ CampaignResult analyze_campaign(const Campaign& campaign, const AnalysisOptions&
 CampaignResult analyze_campaign_streaming(const std::filesystem::path& folder, const ReadOptions& read,
                                           const AnalysisOptions& o) {
     const Campaign metadata = read_campaign_metadata(folder, read);
+    const std::size_t n = metadata.trials.size();
     std::vector<TrialResult> results;
-    results.reserve(metadata.trials.size());
-    for (const auto& t : metadata.trials) {
-        // Scoped: the samples are freed before the next trial is read.
-        const Trial trial{t.info, read_trial_data(folder, metadata, t.info)};
+    results.reserve(n);
+    // The parse is most of the work, so two trials are parsed at once, each on its own thread,
+    // while the one before them is summarised here: at most three trials are in memory. A bad
+    // file still fails at its own trial, after the trials before it, as one thread would (the
+    // error waits in its future until its turn).
+    const auto read_one = [&](std::size_t i) { return read_trial_data(folder, metadata, metadata.trials[i].info); };
+    constexpr std::size_t in_flight = 2;
+    std::deque<std::future<TrialData>> reading;
+    std::size_t launched = 0;
+    const auto launch = [&] {
+        while (launched < n && reading.size() < in_flight) reading.push_back(std::async(std::launch::async, read_one, launched++));
+    };
+    launch();
+    for (std::size_t i = 0; i < n; ++i) {
+        TrialData data = reading.front().get();
+        reading.pop_front();
+        launch();
+        // Scoped: the samples are freed before a later trial is read into their place.
+        const Trial trial{metadata.trials[i].info, std::move(data)};
         results.push_back(summarize_trial(trial, metadata.zone_map, o));
     }
     return aggregate_trials(metadata, results, o);

@@ -1,6 +1,7 @@
-// analyze_campaign_streaming (one trial in memory at a time) against the in-memory
+// analyze_campaign_streaming (a few trials in memory at a time, two parsed at once) against the in-memory
 // analyze_campaign(read_campaign(folder)): the same result to the last bit, the same errors.
 #include <algorithm>
+#include <fstream>
 #include <functional>
 #include <sstream>
 #include <stdexcept>
@@ -131,4 +132,26 @@ TEST_CASE("write_json of a campaign without cases equals dump") {
 TEST_CASE("aggregate_trials refuses results that do not match the trials") {
     const auto metadata = an::read_campaign_metadata(recordings("good-2zone"));
     CHECK_THROWS_AS(an::aggregate_trials(metadata, {}), std::invalid_argument);
+}
+
+TEST_CASE("streaming analysis: of two bad trials read at once, the first in campaign order is the error, as one thread "
+          "reads them") {
+    an::SyntheticTrialOptions base;
+    base.duration_s = 3600.0;
+    const auto campaign = an::make_synthetic_campaign(2, 3, base);
+    manikind::test::TempDir dir;
+    an::write_campaign(dir.path, campaign);
+    // Trials 3 and 4 are parsed at the same time; the later one is the shorter file to parse, so
+    // its error is usually found first.
+    {
+        std::ofstream later(dir.path / campaign.trials[4].info.file, std::ios::trunc);
+        later << "t_s\n";
+    }
+    {
+        std::ofstream earlier(dir.path / campaign.trials[3].info.file, std::ios::app);
+        earlier << "oops\n";
+    }
+    const std::string expected = error_text([&] { (void)an::read_campaign(dir.path); });
+    CHECK(expected.find(campaign.trials[3].info.file) != std::string::npos);
+    for (int run = 0; run < 20; ++run) CHECK(error_text([&] { (void)an::analyze_campaign_streaming(dir.path); }) == expected);
 }
