@@ -8,13 +8,15 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <random>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
+#include <optional>
+#include <random>
 #include <span>
 #include <string>
 #include <thread>
@@ -82,6 +84,59 @@ Fixture fixture_file(const fs::path& path) {
     auto db = Database::open(path);
     return make_fixture(db);
 }
+
+// A recording child process: `body(report)` runs in it, `report(n)` sends a count to the
+// parent (false once the parent has gone), and the child never returns into Catch (a throw
+// exits 1). The parent reads the counts with next() and kills the child when it likes.
+class RecordingChild {
+public:
+    using Report = std::function<bool(std::uint64_t)>;
+    explicit RecordingChild(const std::function<void(const Report&)>& body) {
+        int fds[2];
+        REQUIRE(::pipe(fds) == 0);
+        pid_ = ::fork();
+        REQUIRE(pid_ >= 0);
+        if (pid_ == 0) {
+            ::close(fds[0]);
+            int status = 0;
+            try {
+                body([&](std::uint64_t n) { return ::write(fds[1], &n, sizeof n) == static_cast<ssize_t>(sizeof n); });
+            } catch (...) {
+                status = 1;
+            }
+            ::_exit(status);
+        }
+        ::close(fds[1]);
+        read_fd_ = fds[0];
+    }
+    RecordingChild(const RecordingChild&) = delete;
+    RecordingChild& operator=(const RecordingChild&) = delete;
+    ~RecordingChild() {
+        kill();
+        ::close(read_fd_);
+    }
+    std::optional<std::uint64_t> next() {
+        std::uint64_t n = 0;
+        if (::read(read_fd_, &n, sizeof n) != static_cast<ssize_t>(sizeof n)) return std::nullopt;
+        return n;
+    }
+    pid_t pid() const { return pid_; }
+    // SIGKILL and reap (once); the wait status.
+    int kill() {
+        if (!reaped_) {
+            ::kill(pid_, SIGKILL);
+            ::waitpid(pid_, &status_, 0);
+            reaped_ = true;
+        }
+        return status_;
+    }
+
+private:
+    pid_t pid_ = -1;
+    int read_fd_ = -1;
+    int status_ = 0;
+    bool reaped_ = false;
+};
 
 }  // namespace
 
@@ -505,33 +560,21 @@ TEST_CASE("recorder: kill -9 loses no accepted sample: the next Recorder stores 
     RecorderOptions options;
     options.crash_ring_dir = dir.path;
     options.max_batch_delay = std::chrono::minutes(10);  // nothing commits unless flushed
-    int fds[2];
-    REQUIRE(::pipe(fds) == 0);
-    const pid_t child = ::fork();
-    REQUIRE(child >= 0);
-    if (child == 0) {
-        ::close(fds[0]);
-        try {
+    {
+        RecordingChild child([&](const RecordingChild::Report& report) {
             Recorder recorder(path, options);
             for (std::int64_t i = 1; i <= 1500; ++i) {
                 recorder.push({f.trial, i % 2 ? f.channel_a : f.channel_b, i * 1000, i * 1000, static_cast<double>(i), 0});
                 if (i == 500) recorder.flush();
             }
-            const std::uint64_t accepted = recorder.stats().accepted;
-            if (::write(fds[1], &accepted, sizeof accepted) != static_cast<ssize_t>(sizeof accepted)) ::_exit(1);
+            if (!report(recorder.stats().accepted)) return;
             for (;;) ::pause();  // killed here, 1000 samples not committed
-        } catch (...) {
-            ::_exit(1);
-        }
+        });
+        const auto accepted = child.next();
+        child.kill();
+        REQUIRE(accepted);
+        CHECK(*accepted == 1500);
     }
-    ::close(fds[1]);
-    std::uint64_t accepted = 0;
-    const bool reported = ::read(fds[0], &accepted, sizeof accepted) == static_cast<ssize_t>(sizeof accepted);
-    ::kill(child, SIGKILL);
-    ::waitpid(child, nullptr, 0);
-    ::close(fds[0]);
-    REQUIRE(reported);
-    CHECK(accepted == 1500);
     CHECK(Database::open(path).sample_count(f.trial) == 500);  // what the killed process committed
     {
         Recorder next(path, options);
@@ -610,44 +653,28 @@ TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound
         db.set_trial_state(f.trial, "acquiring", "", 1);
     }  // closed before fork(): an SQLite connection must not cross into a child
 
-    int fds[2];
-    REQUIRE(::pipe(fds) == 0);
-    const pid_t child = ::fork();
-    REQUIRE(child >= 0);
-    if (child == 0) {
-        ::close(fds[0]);
-        int status = 0;
-        try {
-            RecorderOptions options;
-            options.crash_ring_dir = dir.path;  // left behind by the kill: not in /dev/shm
-            Recorder recorder(path, options);
-            for (std::int64_t i = 1;; ++i) {
-                recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
-                if (i % 1000 == 0) {
-                    recorder.flush();
-                    const std::uint64_t committed = recorder.stats().committed;
-                    if (::write(fds[1], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
-                }
+    RecordingChild child([&](const RecordingChild::Report& report) {
+        RecorderOptions options;
+        options.crash_ring_dir = dir.path;  // left behind by the kill: not in /dev/shm
+        Recorder recorder(path, options);
+        for (std::int64_t i = 1;; ++i) {
+            recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
+            if (i % 1000 == 0) {
+                recorder.flush();
+                if (!report(recorder.stats().committed)) return;
             }
-        } catch (...) {
-            status = 1;
         }
-        ::_exit(status);  // never return into Catch in the child
-    }
-    ::close(fds[1]);
+    });
     const int wanted_reports = 20;
     int reports = 0;
     std::uint64_t last_committed = 0;
     while (reports < wanted_reports) {
-        std::uint64_t committed = 0;
-        if (::read(fds[0], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
-        last_committed = committed;
+        const auto committed = child.next();
+        if (!committed) break;
+        last_committed = *committed;
         ++reports;
     }
-    ::kill(child, SIGKILL);  // while it is pushing the next thousand rows
-    int status = 0;
-    ::waitpid(child, &status, 0);
-    ::close(fds[0]);
+    const int status = child.kill();  // while it is pushing the next thousand rows
     REQUIRE(reports == wanted_reports);
     CHECK(WIFSIGNALED(status));
     CHECK(last_committed == wanted_reports * 1000);
@@ -680,36 +707,23 @@ TEST_CASE("recorder: the files copied at random instants while writing, as a pow
         f = make_fixture(db);
     }  // closed before fork()
 
-    int fds[2];
-    REQUIRE(::pipe(fds) == 0);
-    const pid_t child = ::fork();
-    REQUIRE(child >= 0);
-    if (child == 0) {
-        ::close(fds[0]);
-        int status = 0;
-        try {
-            // The daemon's two connections: the Recorder's for samples, one for trial states and events.
-            auto db = Database::open(path, manikind::recorder::Durability::power);
-            manikind::recorder::RecorderOptions options;
-            options.durability = manikind::recorder::Durability::power;
-            options.crash_ring_dir = dir.path;
-            Recorder recorder(path, options);
-            for (std::int64_t i = 1;; ++i) {
-                recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
-                if (i % 500 == 0) {
-                    recorder.flush();
-                    db.set_trial_state(f.trial, (i / 500) % 2 ? "acquiring" : "chamber_settling", "", i);
-                    db.add_event(f.trial, i * 1000, i * 1000, "info", "stage", std::to_string(i));
-                    const std::uint64_t committed = recorder.stats().committed;
-                    if (::write(fds[1], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
-                }
+    RecordingChild child([&](const RecordingChild::Report& report) {
+        // The daemon's two connections: the Recorder's for samples, one for trial states and events.
+        auto db = Database::open(path, manikind::recorder::Durability::power);
+        manikind::recorder::RecorderOptions options;
+        options.durability = manikind::recorder::Durability::power;
+        options.crash_ring_dir = dir.path;
+        Recorder recorder(path, options);
+        for (std::int64_t i = 1;; ++i) {
+            recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
+            if (i % 500 == 0) {
+                recorder.flush();
+                db.set_trial_state(f.trial, (i / 500) % 2 ? "acquiring" : "chamber_settling", "", i);
+                db.add_event(f.trial, i * 1000, i * 1000, "info", "stage", std::to_string(i));
+                if (!report(recorder.stats().committed)) return;
             }
-        } catch (...) {
-            status = 1;
         }
-        ::_exit(status);
-    }
-    ::close(fds[1]);
+    });
     // At 12 of the first 60 reports (which ones: a fixed pseudo-random draw), freeze the writer
     // wherever it is (mid-commit or not), copy the database and its WAL but not the -shm index
     // (rebuilt after a reboot), and let it go on.
@@ -717,25 +731,24 @@ TEST_CASE("recorder: the files copied at random instants while writing, as a pow
     std::vector<int> stop_at;
     for (int k = 0; k < 12; ++k) stop_at.push_back(5 * k + static_cast<int>(draw() % 5));
     std::vector<std::pair<fs::path, std::uint64_t>> copies;  // copy folder, rows committed before it
-    std::uint64_t committed = 0;
     for (int report = 0; report < 60; ++report) {
-        if (::read(fds[0], &committed, sizeof committed) != static_cast<ssize_t>(sizeof committed)) break;
+        const auto reported = child.next();
+        if (!reported) break;
+        const std::uint64_t committed = *reported;
         if (std::find(stop_at.begin(), stop_at.end(), report) == stop_at.end()) continue;
         // Let the writer run into its next batch, then freeze it at that instant.
         for (int spin = 0; spin < 1000 + report * 997 % 20000; ++spin) std::atomic_signal_fence(std::memory_order_seq_cst);
-        ::kill(child, SIGSTOP);
+        ::kill(child.pid(), SIGSTOP);
         int stopped = 0;
-        ::waitpid(child, &stopped, WUNTRACED);
+        ::waitpid(child.pid(), &stopped, WUNTRACED);
         const fs::path copy = dir.path / ("copy-" + std::to_string(report));
         fs::create_directories(copy);
         fs::copy_file(path, copy / "trials.db");
         if (fs::exists(path.string() + "-wal")) fs::copy_file(path.string() + "-wal", copy / "trials.db-wal");
         copies.emplace_back(copy, committed);
-        ::kill(child, SIGCONT);
+        ::kill(child.pid(), SIGCONT);
     }
-    ::kill(child, SIGKILL);
-    ::waitpid(child, nullptr, 0);
-    ::close(fds[0]);
+    child.kill();
     REQUIRE(copies.size() == stop_at.size());
 
     for (const auto& [copy, committed_before] : copies) {
