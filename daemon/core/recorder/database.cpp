@@ -16,6 +16,7 @@
 #include <utility>
 
 #include <fmt/core.h>
+#include <spdlog/spdlog.h>
 
 #include "daemon/core/sha256.hpp"
 #include "daemon/core/user_error.hpp"
@@ -494,6 +495,11 @@ void migrate(Database::Impl& impl) {
             tx.commit();
             return;
         }
+        // A step that copies the samples (versions 5 and 8) takes about a second per million
+        // rows: say so, or a daemon upgrading weeks of recordings looks hung at start.
+        if (version > 0)
+            spdlog::warn("{}: upgrading the database schema from version {} to {} (a large file takes a while)",
+                         impl.path.string(), version, version + 1);
         impl.exec(all_migrations[static_cast<std::size_t>(version)],
                   fmt::format("migrating the schema from version {} to {}", version, version + 1));
         impl.exec(fmt::format("PRAGMA user_version = {}", version + 1).c_str(), "setting the schema version");
