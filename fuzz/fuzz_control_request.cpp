@@ -28,6 +28,9 @@ manikind::LabDaemon& idle_daemon() {
         config.database = dir / "fuzz.db";
         config.simulation.runtime_dir = (dir / "sim").string();
         config.log_level = "error";
+        // Never destroyed, so its recorder never removes its crash ring: keep the ring in this
+        // run's own directory, not in /dev/shm where it would outlive the run.
+        config.recorder_crash_ring_dir = dir.string();
         return new manikind::LabDaemon(manikind::DaemonOptions{config, true, 1.0});
     }();
     return *daemon;
