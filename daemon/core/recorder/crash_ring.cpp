@@ -93,16 +93,15 @@ std::optional<CrashRing> CrashRing::open(const std::filesystem::path& dir, const
     bool reuse = false;
     if (static_cast<std::size_t>(ring_stat.st_size) >= sizeof(Header)) {
         Header old{};
-        if (::pread(ring.fd_, &old, sizeof(Header), 0) == static_cast<ssize_t>(sizeof(Header)) &&
-            std::memcmp(old.magic, ring_magic, sizeof ring_magic) == 0 && old.capacity == ring.capacity_ &&
-            old.record_bytes == sizeof(Record) && old.db_device == static_cast<std::uint64_t>(db_stat.st_dev) &&
-            old.db_inode == static_cast<std::uint64_t>(db_stat.st_ino) &&
-            static_cast<std::size_t>(ring_stat.st_size) == ring.map_bytes_)
+        // A ring this code wrote for this database file; its capacity may differ (another queue size).
+        const bool ours = ::pread(ring.fd_, &old, sizeof(Header), 0) == static_cast<ssize_t>(sizeof(Header)) &&
+                          std::memcmp(old.magic, ring_magic, sizeof ring_magic) == 0 && old.record_bytes == sizeof(Record) &&
+                          old.db_device == static_cast<std::uint64_t>(db_stat.st_dev) &&
+                          old.db_inode == static_cast<std::uint64_t>(db_stat.st_ino) &&
+                          static_cast<std::size_t>(ring_stat.st_size) == sizeof(Header) + old.capacity * sizeof(Record);
+        if (ours && old.capacity == ring.capacity_)
             reuse = true;
-        else if (std::memcmp(old.magic, ring_magic, sizeof ring_magic) == 0 && old.db_device == static_cast<std::uint64_t>(db_stat.st_dev) &&
-                 old.db_inode == static_cast<std::uint64_t>(db_stat.st_ino) && old.record_bytes == sizeof(Record) &&
-                 old.tail.load() <= old.head.load() && old.head.load() - old.tail.load() <= old.capacity &&
-                 static_cast<std::size_t>(ring_stat.st_size) == sizeof(Header) + old.capacity * sizeof(Record)) {
+        else if (ours && old.tail.load() <= old.head.load() && old.head.load() - old.tail.load() <= old.capacity) {
             // Another queue size: read what is pending at the old size, then resize.
             for (std::uint64_t seq = old.tail.load(); seq < old.head.load(); ++seq) {
                 Record r{};
