@@ -48,14 +48,17 @@ struct LineFit {
 
 LineFit fit_line(const std::vector<double>& t_s, const std::vector<double>& v, std::size_t first) {
     LineFit f;
-    double mean_t = 0.0, mean_v = 0.0;
+    // Plain sums, divided once: a running mean's division per sample is a chain of dependent
+    // divisions, and it was 7 % of `manikin analyze`. A trial's sums are far from overflow.
+    double sum_t = 0.0, sum_v = 0.0;
     for (std::size_t i = first; i < t_s.size(); ++i) {
         if (!std::isfinite(v[i])) continue;
         f.n += 1.0;
-        mean_t += (t_s[i] - mean_t) / f.n;  // running means: exact enough and no overflow
-        mean_v += (v[i] - mean_v) / f.n;
+        sum_t += t_s[i];
+        sum_v += v[i];
     }
     if (f.n < 3.0) return f;
+    const double mean_t = sum_t / f.n, mean_v = sum_v / f.n;
     double stt = 0.0, stv = 0.0;
     for (std::size_t i = first; i < t_s.size(); ++i) {
         if (!std::isfinite(v[i])) continue;

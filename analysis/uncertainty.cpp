@@ -54,7 +54,11 @@ double coverage_factor(double nu_eff, double confidence) {
         return boost::math::quantile(boost::math::complement(boost::math::normal_distribution<double>(), tail));
     }
     if (!(nu_eff > 0.0)) throw std::invalid_argument("coverage_factor: degrees of freedom must be positive");
-    return boost::math::quantile(boost::math::complement(boost::math::students_t_distribution<double>(nu_eff), tail));
+    // In double throughout: Boost's default promotes to long double (x87), and these quantiles
+    // were the costliest part of summarising a campaign; k needs 4 digits, double gives 15.
+    using DoublePolicy = boost::math::policies::policy<boost::math::policies::promote_double<false>>;
+    return boost::math::quantile(
+        boost::math::complement(boost::math::students_t_distribution<double, DoublePolicy>(nu_eff), tail));
 }
 
 double type_b_dof(double relative_uncertainty_of_u) {

@@ -46,6 +46,9 @@ std::vector<fs::path> trial_files(const fs::path& folder) {
 // The floor: whole file into one buffer, then from_chars over every cell. Files k, k + step, ...
 std::size_t floor_parse_files(const std::vector<fs::path>& files, std::size_t k, std::size_t step, double& checksum) {
     std::size_t cells = 0;
+    // A local sum, stored once: the threads' checksums sit in one cache line, and a store per
+    // cell made the two-thread floor slower than one thread (false sharing; 56 ms against 44).
+    double sum = 0.0;
     std::vector<char> buf;
     for (std::size_t i = k; i < files.size(); i += step) {
         const fs::path& path = files[i];
@@ -59,11 +62,12 @@ std::size_t floor_parse_files(const std::vector<fs::path>& files, std::size_t k,
         while (p < end) {
             double v = 0.0;
             const auto r = std::from_chars(p, end, v);
-            checksum += v;
+            sum += v;
             ++cells;
             p = r.ptr + 1;  // past ',' or '\n'
         }
     }
+    checksum += sum;
     return cells;
 }
 
