@@ -46,9 +46,9 @@ rec::SampleRow make_row(const Ids& ids, std::int64_t i) {
 }
 
 // A fresh file with the schema, one trial and `channels` channels; the connection is closed again.
-Ids prepare(const fs::path& path, int channels = zones) {
-    fs::remove(path);
-    auto db = rec::Database::open(path);
+Ids prepare(const fs::path& path, int channels = zones, rec::Journal journal = rec::Journal::wal) {
+    for (const char* suffix : {"", "-wal", "-shm", "-journal"}) fs::remove(path.string() + suffix);
+    auto db = rec::Database::open(path, rec::Durability::process, journal);
     Ids ids;
     const auto campaign = db.create_campaign("bench", "{}");
     ids.trial = db.create_trial(campaign, db.add_case(campaign, "case", "{}", 0), 1);
@@ -59,7 +59,7 @@ Ids prepare(const fs::path& path, int channels = zones) {
 
 std::uintmax_t file_bytes(const fs::path& path) {
     std::uintmax_t bytes = 0;
-    for (const char* suffix : {"", "-wal", "-shm"}) {
+    for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
         std::error_code ec;
         const auto n = fs::file_size(path.string() + suffix, ec);
         if (!ec) bytes += n;
@@ -81,14 +81,18 @@ void check(int rc, sqlite3* db, const char* what) {
 constexpr const char* plain_table_sql =
     "CREATE TABLE plain_samples (trial_id INTEGER, channel_id INTEGER, mono_ns INTEGER, utc_ns INTEGER, value REAL, quality INTEGER)";
 
-sqlite3* open_floor(const fs::path& path, bool plain, Ids& ids, sqlite3_stmt*& insert) {
+sqlite3* open_floor(const fs::path& path, bool plain, Ids& ids, sqlite3_stmt*& insert, rec::Journal journal = rec::Journal::wal) {
     sqlite3* db = nullptr;
     if (plain) {
-        for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(path.string() + suffix);
+        for (const char* suffix : {"", "-wal", "-shm", "-journal"}) fs::remove(path.string() + suffix);
         ids = Ids{1, {}};
         for (int z = 1; z <= 157; ++z) ids.channels.push_back(z);
         check(sqlite3_open(path.c_str(), &db), db, "open");
-        check(sqlite3_exec(db, "PRAGMA journal_mode = WAL; PRAGMA synchronous = NORMAL", nullptr, nullptr, nullptr), db, "pragmas");
+        check(sqlite3_exec(db,
+                           journal == rec::Journal::wal ? "PRAGMA journal_mode = WAL; PRAGMA synchronous = NORMAL"
+                                                        : "PRAGMA journal_mode = TRUNCATE; PRAGMA synchronous = NORMAL",
+                           nullptr, nullptr, nullptr),
+              db, "pragmas");
         check(sqlite3_exec(db, plain_table_sql, nullptr, nullptr, nullptr), db, "create");
     } else {
         ids = prepare(path);
@@ -213,12 +217,13 @@ struct Amplification {
 
 // The Recorder at the lab's rate, with its crash ring (the default): flush() stands in for the
 // commit timer, so the bench does not wait 75 min.
-Amplification recorder_amplification(const fs::path& path, double commit_interval_s) {
-    const Ids ids = prepare(path, lab_channels);
+Amplification recorder_amplification(const fs::path& path, double commit_interval_s, rec::Journal journal) {
+    const Ids ids = prepare(path, lab_channels, journal);
     Amplification a;
     const std::int64_t before = written_bytes();
     {
         rec::RecorderOptions options;
+        options.journal = journal;
         options.max_batch_delay = std::chrono::minutes(10);  // commits only at flush()
         rec::Recorder recorder(path, options);
         a.rows = feed_lab_trial(ids, commit_interval_s, [&](const rec::SampleRow& r) { recorder.push(r); },
@@ -230,10 +235,10 @@ Amplification recorder_amplification(const fs::path& path, double commit_interva
 }
 
 // The floor: raw C SQLite appending the same rows to the plain table, same commits.
-Amplification plain_amplification(const fs::path& path, double commit_interval_s) {
+Amplification plain_amplification(const fs::path& path, double commit_interval_s, rec::Journal journal) {
     Ids ids;
     sqlite3_stmt* insert = nullptr;
-    sqlite3* db = open_floor(path, true, ids, insert);
+    sqlite3* db = open_floor(path, true, ids, insert, journal);
     Amplification a;
     const std::int64_t before = written_bytes();
     bool open = false;
@@ -308,23 +313,29 @@ int main() {
                 static_cast<double>(schema_bytes) * 1e6 / static_cast<double>(total_rows) / 1e6,
                 static_cast<double>(recorder_bytes) * 1e6 / static_cast<double>(total_rows) / 1e6);
 
-    std::printf("\nwrite amplification at the lab's rate (%d channels every %.0f s, one %.0f-min trial, WAL):\n"
+    std::printf("\nwrite amplification at the lab's rate (%d channels every %.0f s, one %.0f-min trial):\n"
                 "bytes passed to write() by the process per byte of the closed database (median of 3)\n",
                 lab_channels, lab_channel_period_s, lab_trial_s / 60.0);
-    std::printf("  commit every   recorder (our schema)         floor: raw C, plain table\n");
-    for (const double interval_s : {1.0, 5.0, 30.0, 60.0}) {
-        std::vector<double> ours, floor;
-        Amplification last_ours, last_floor;
-        for (int i = 0; i < 3; ++i) {
-            last_ours = recorder_amplification(dir / "amp-recorder.db", interval_s);
-            last_floor = plain_amplification(dir / "amp-plain.db", interval_s);
-            ours.push_back(last_ours.ratio());
-            floor.push_back(last_floor.ratio());
+    std::printf("                 [recorder] journal = \"wal\" (default)        journal = \"rollback\"\n");
+    std::printf("  commit every   recorder   floor: raw C, plain table      recorder   floor: raw C, plain table\n");
+    for (const double interval_s : {1.0, 5.0, 10.0, 30.0, 60.0}) {
+        std::printf("  %5.1f s", interval_s);
+        for (const rec::Journal journal : {rec::Journal::wal, rec::Journal::rollback}) {
+            std::vector<double> ours, floor;
+            Amplification last_ours, last_floor;
+            for (int i = 0; i < 3; ++i) {
+                last_ours = recorder_amplification(dir / "amp-recorder.db", interval_s, journal);
+                last_floor = plain_amplification(dir / "amp-plain.db", interval_s, journal);
+                ours.push_back(last_ours.ratio());
+                floor.push_back(last_floor.ratio());
+            }
+            std::printf("       %6.2fx   %6.2fx (%.1f / %.1f MB stored)", median(ours), median(floor), last_ours.stored_mb,
+                        last_floor.stored_mb);
         }
-        std::printf("  %5.1f s        %6.2fx  (%.1f MB stored)        %6.2fx  (%.1f MB stored)\n", interval_s, median(ours),
-                    last_ours.stored_mb, median(floor), last_floor.stored_mb);
+        std::printf("\n");
     }
-    std::printf("  (WAL mode writes every page twice, to the WAL and at the checkpoint: 2x is its floor)\n");
+    std::printf("  (WAL writes every page twice, to the WAL and at the checkpoint: 2x is its floor. A rollback\n"
+                "   journal writes new pages once but saves each changed page first, so short commits cost more)\n");
     std::printf("  (the recorder's crash ring keeps each uncommitted row in shared memory, 48 bytes a row:\n"
                 "   stores to a mapping, not write(), and no disk behind them)\n");
     fs::remove_all(dir);

@@ -261,6 +261,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*rec, "recorder", "durability", c.recorder_durability, {"process", "power"});
         r.number(*rec, "recorder", "commit_interval_s", c.recorder_commit_interval_s, 0.05, 60.0, "s");
         r.text(*rec, "recorder", "crash_ring_dir", c.recorder_crash_ring_dir);
+        r.text(*rec, "recorder", "journal", c.recorder_journal, {"wal", "rollback"});
     }
     if (const auto* a = r.table(root, "", "archive")) {
         r.text(*a, "archive", "postgresql", c.archive.postgresql);

@@ -111,6 +111,10 @@ struct Config {
     // [recorder] commit_interval_s: the longest a row waits for its commit. 30 s: near WAL's floor
     // of 2x in bytes written per byte stored; the crash ring keeps a killed daemon from losing them.
     double recorder_commit_interval_s = 30.0;
+    // [recorder] journal: "wal" (readers and the recorder never wait for each other) or
+    // "rollback" (fewer bytes written at commit intervals of 30 s and more; a commit waits for
+    // running reads). docs/recorder.md, "Journal".
+    std::string recorder_journal = "wal";
     // [recorder] crash_ring_dir: shared memory holding the samples not yet committed, so a killed
     // daemon loses none (daemon/core/recorder/crash_ring.hpp); "" runs without.
     std::string recorder_crash_ring_dir = "/dev/shm";

@@ -61,6 +61,10 @@ namespace {
 recorder::Durability durability_of(const config::Config& c) {
     return c.recorder_durability == "power" ? recorder::Durability::power : recorder::Durability::process;
 }
+
+recorder::Journal journal_of(const config::Config& c) {
+    return c.recorder_journal == "rollback" ? recorder::Journal::rollback : recorder::Journal::wal;
+}
 }  // namespace
 
 LabDaemon::LabDaemon(DaemonOptions options)
@@ -68,7 +72,7 @@ LabDaemon::LabDaemon(DaemonOptions options)
       db_path_(o_.config.database.is_relative() && !o_.config.source_dir.empty() ? o_.config.source_dir / o_.config.database
                                                                                  : o_.config.database),
       db_lock_(InstanceLock::acquire(db_path_, "database")),
-      db_(recorder::Database::open(db_path_, durability_of(o_.config))) {
+      db_(recorder::Database::open(db_path_, durability_of(o_.config), journal_of(o_.config))) {
     last_tick_steady_ns_ = steady_now_ns();
     const int interrupted = db_.mark_interrupted_trials(system_clock_.utc_ns());
     const int campaigns_interrupted = db_.mark_interrupted_campaigns();
@@ -79,6 +83,7 @@ LabDaemon::LabDaemon(DaemonOptions options)
                                   interrupted, campaigns_interrupted));
     recorder::RecorderOptions recorder_options;
     recorder_options.durability = durability_of(o_.config);
+    recorder_options.journal = journal_of(o_.config);
     recorder_options.max_batch_delay =
         std::chrono::milliseconds(std::llround(o_.config.recorder_commit_interval_s * 1000.0));
     recorder_options.crash_ring_dir = o_.config.recorder_crash_ring_dir;
@@ -854,7 +859,8 @@ nlohmann::json LabDaemon::status_json() {
                      {"lost_after_retries", rs.lost},
                      {"queue_rows", rs.queue_depth},
                      {"recovered_from_crash_ring", rs.recovered},
-                     {"crash_ring", rs.crash_ring}};
+                     {"crash_ring", rs.crash_ring},
+                     {"journal", rs.journal}};
     j["storage"] = {{"full", storage_full_},
                     {"error", storage_error_},
                     {"deferred_writes", deferred_writes_.size()},

@@ -17,11 +17,14 @@
 #include <limits>
 #include <optional>
 #include <random>
+#include <sstream>
 #include <span>
 #include <string>
 #include <thread>
 
 #include <fmt/core.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include "daemon/core/config.hpp"
 #include "daemon/core/recorder/crash_ring.hpp"
@@ -169,6 +172,61 @@ TEST_CASE("database: [recorder] durability picks SQLite's sync level, from the c
                       Catch::Contains("test.toml:2") && Catch::Contains("commit_interval_s"));
 }
 
+// The file's own record of its journal: header bytes 18 and 19 are 2 in WAL mode, 1 otherwise.
+int header_journal_byte(const fs::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::array<char, 20> header{};
+    in.read(header.data(), header.size());
+    return in ? header[18] : -1;
+}
+
+TEST_CASE("database: [recorder] journal = rollback puts the file in rollback mode, and a reader never switches it back",
+          "[recorder][journal]") {
+    TempDir dir("journal");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path, Durability::process, Journal::rollback);
+        CHECK(db.journal_mode() == "truncate");
+        f = make_fixture(db);
+        db.insert_samples(std::vector<SampleRow>{{f.trial, f.channel_a, 1000, 1000, 1.0, 0}});
+        CHECK_FALSE(fs::exists(path.string() + "-wal"));
+    }
+    CHECK(header_journal_byte(path) == 1);
+    {
+        // A reader (manikin export, campaigns, the console) keeps the daemon's choice, here
+        // while the daemon's connection is open: an idle one could not stop a switch to WAL.
+        auto daemon = Database::open(path, Durability::process, Journal::rollback);
+        auto reader = Database::open(path);
+        CHECK(reader.journal_mode() == "truncate");
+        CHECK(reader.sample_count(f.trial) == 1);
+        daemon.insert_samples(std::vector<SampleRow>{{f.trial, f.channel_a, 2000, 2000, 2.0, 0}});
+        CHECK(reader.sample_count(f.trial) == 2);
+    }
+    CHECK(header_journal_byte(path) == 1);
+    // Back to WAL when asked, and a WAL file stays WAL for a reader.
+    CHECK(Database::open(path, Durability::process, Journal::wal).journal_mode() == "wal");
+    CHECK(header_journal_byte(path) == 2);
+    CHECK(Database::open(path).journal_mode() == "wal");
+    {
+        // Leaving WAL needs the file to itself: with another connection open it stays WAL, at once.
+        auto other = Database::open(path);
+        const auto t0 = std::chrono::steady_clock::now();
+        auto db = Database::open(path, Durability::process, Journal::rollback);
+        CHECK(db.journal_mode() == "wal");
+        CHECK(std::chrono::steady_clock::now() - t0 < std::chrono::seconds(4));  // not the 5-s busy timeout
+        CHECK(db.sample_count(f.trial) == 2);
+    }
+    CHECK(Database::open(path, Durability::process, Journal::rollback).journal_mode() == "truncate");
+    // A new file is WAL unless told.
+    CHECK(Database::open(dir.path / "new.db").journal_mode() == "wal");
+
+    CHECK(config::default_config().recorder_journal == "wal");
+    CHECK(config::parse_config("[recorder]\njournal = \"rollback\"\n", "test.toml").recorder_journal == "rollback");
+    CHECK_THROWS_WITH(config::parse_config("[recorder]\njournal = \"delete\"\n", "test.toml"),
+                      Catch::Contains("test.toml:2") && Catch::Contains("journal") && Catch::Contains("rollback"));
+}
+
 TEST_CASE("database: a version 1 file is upgraded and a newer one is refused", "[recorder]") {
     TempDir dir("migrate");
     const auto v1 = dir.path / "v1.db";
@@ -283,6 +341,29 @@ TEST_CASE("database: campaigns, cases, trials, channels, events and results roun
     CHECK(back[1].quality == 3);
     CHECK(db.sample_count(f.trial) == 2);
     CHECK(db.integrity_check() == "ok");
+}
+
+TEST_CASE("database: upgrading an existing file is logged step by step, creating a new one is not", "[recorder]") {
+    TempDir dir("upgrade-log");
+    std::ostringstream log;
+    const auto previous = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("capture", std::make_shared<spdlog::sinks::ostream_sink_mt>(log)));
+    const auto restore = [&] { spdlog::set_default_logger(previous); };
+    try {
+        Database::open(dir.path / "new.db");
+        const std::string created = log.str();
+        std::string v4;
+        for (int i = 0; i < 4; ++i) v4 += Database::migrations()[static_cast<std::size_t>(i)];
+        raw_exec(dir.path / "v4.db", v4 + "PRAGMA user_version = 4;");
+        Database::open(dir.path / "v4.db");
+        restore();
+        CHECK(created.find("upgrading") == std::string::npos);
+        CHECK_THAT(log.str(), Catch::Contains("v4.db: upgrading the database schema from version 4 to 5"));
+        CHECK_THAT(log.str(), Catch::Contains("from version 7 to 8"));
+    } catch (...) {
+        restore();
+        throw;
+    }
 }
 
 TEST_CASE("database: a version 4 file's samples and idle log survive the move to the time-major key (v5), and its trials get UUIDs (v6)", "[recorder]") {
@@ -644,11 +725,13 @@ TEST_CASE("recorder: an unopenable path throws from the constructor", "[recorder
 }
 
 TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound file", "[recorder]") {
+    const Journal journal = GENERATE(Journal::wal, Journal::rollback);
+    INFO((journal == Journal::wal ? "WAL" : "rollback journal"));
     TempDir dir("crash");
     const auto path = dir.path / "trials.db";
     Fixture f;
     {
-        auto db = Database::open(path);
+        auto db = Database::open(path, Durability::process, journal);
         f = make_fixture(db);
         db.set_trial_state(f.trial, "acquiring", "", 1);
     }  // closed before fork(): an SQLite connection must not cross into a child
@@ -656,6 +739,7 @@ TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound
     RecordingChild child([&](const RecordingChild::Report& report) {
         RecorderOptions options;
         options.crash_ring_dir = dir.path;  // left behind by the kill: not in /dev/shm
+        options.journal = journal;
         Recorder recorder(path, options);
         for (std::int64_t i = 1;; ++i) {
             recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
@@ -699,19 +783,22 @@ TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound
 TEST_CASE("recorder: the files copied at random instants while writing, as a power cut leaves them, open sound and "
           "consistent (durability = power)",
           "[recorder][durability]") {
+    const Journal journal = GENERATE(Journal::wal, Journal::rollback);
+    INFO((journal == Journal::wal ? "WAL" : "rollback journal"));
     TempDir dir("powercut");
     const auto path = dir.path / "trials.db";
     Fixture f;
     {
-        auto db = Database::open(path, manikind::recorder::Durability::power);
+        auto db = Database::open(path, manikind::recorder::Durability::power, journal);
         f = make_fixture(db);
     }  // closed before fork()
 
     RecordingChild child([&](const RecordingChild::Report& report) {
         // The daemon's two connections: the Recorder's for samples, one for trial states and events.
-        auto db = Database::open(path, manikind::recorder::Durability::power);
+        auto db = Database::open(path, manikind::recorder::Durability::power, journal);
         manikind::recorder::RecorderOptions options;
         options.durability = manikind::recorder::Durability::power;
+        options.journal = journal;
         options.crash_ring_dir = dir.path;
         Recorder recorder(path, options);
         for (std::int64_t i = 1;; ++i) {
@@ -725,8 +812,8 @@ TEST_CASE("recorder: the files copied at random instants while writing, as a pow
         }
     });
     // At 12 of the first 60 reports (which ones: a fixed pseudo-random draw), freeze the writer
-    // wherever it is (mid-commit or not), copy the database and its WAL but not the -shm index
-    // (rebuilt after a reboot), and let it go on.
+    // wherever it is (mid-commit or not), copy the database and its WAL or rollback journal but
+    // not the -shm index (rebuilt after a reboot), and let it go on.
     std::mt19937 draw(20261124);
     std::vector<int> stop_at;
     for (int k = 0; k < 12; ++k) stop_at.push_back(5 * k + static_cast<int>(draw() % 5));
@@ -744,7 +831,8 @@ TEST_CASE("recorder: the files copied at random instants while writing, as a pow
         const fs::path copy = dir.path / ("copy-" + std::to_string(report));
         fs::create_directories(copy);
         fs::copy_file(path, copy / "trials.db");
-        if (fs::exists(path.string() + "-wal")) fs::copy_file(path.string() + "-wal", copy / "trials.db-wal");
+        for (const char* suffix : {"-wal", "-journal"})
+            if (fs::exists(path.string() + suffix)) fs::copy_file(path.string() + suffix, copy / ("trials.db" + std::string(suffix)));
         copies.emplace_back(copy, committed);
         ::kill(child.pid(), SIGCONT);
     }

@@ -76,6 +76,30 @@ TEST_CASE("a campaign runs through every stage, records, and stores results", "[
     CHECK(units["csat3b/sonic_temp_c"] == "°C");
 }
 
+TEST_CASE("a campaign recorded with [recorder] journal = rollback: the file stays in rollback mode, and nothing is lost",
+          "[daemon][journal]") {
+    DaemonFixture f([](manikind::config::Config& c) { c.recorder_journal = "rollback"; });
+    CHECK(f.daemon().status_json()["recorder"]["journal"] == "truncate");
+    REQUIRE(f.daemon().start_campaign(quick_plan("rollback")).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    CHECK(db.journal_mode() == "truncate");
+    const auto trials = db.trials(*db.find_campaign("rollback"));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+    // Every reading the recorder accepted is stored: the trial-end export and the results read
+    // between its commits, and each commit waited for them rather than failing.
+    const auto status = f.daemon().status_json()["recorder"];
+    CHECK(status["committed"] == status["accepted"]);
+    CHECK(status["lost_after_retries"] == 0);
+    const auto campaign = manikind::campaign_from_database(db, "rollback");
+    REQUIRE(campaign.trials.size() == 1);
+    CHECK(campaign.trials[0].data.rows() >= 35 * 60 / 5);
+    CHECK(std::isfinite(f.daemon().results_json("rollback")["cases"][0]["whole_body"]["q_w_m2"].get<double>()));
+    CHECK(db.integrity_check() == "ok");
+    CHECK_FALSE(std::filesystem::exists(f.daemon().config().database.string() + "-wal"));
+}
+
 TEST_CASE("a device dropping out for 60 s mid-trial: the others go on, the gap is recorded, the trial flagged",
           "[daemon]") {
     DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"windsonic:silent@3300-3360"}; });

@@ -87,6 +87,7 @@ TEST_CASE("control server: Unix socket is 0660 and answers newline-delimited JSO
     // Uncommitted samples wait in the crash ring, in shared memory by default (docs/recorder.md).
     CHECK(reply["status"]["recorder"]["crash_ring"].get<std::string>().rfind("/dev/shm/manikind-recorder-", 0) == 0);
     CHECK(reply["status"]["recorder"]["recovered_from_crash_ring"] == 0);
+    CHECK(reply["status"]["recorder"]["journal"] == "wal");  // [recorder] journal's default
     CHECK(manikind::call_daemon(o.socket_path, {{"cmd", "shutdown"}, {"token", "t"}})["ok"] == true);
     CHECK(server.shutdown_requested());
 }

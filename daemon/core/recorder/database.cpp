@@ -484,9 +484,11 @@ void migrate(Database::Impl& impl) {
     const int latest = static_cast<int>(all_migrations.size());
     // One transaction per step, re-reading the version inside it, so two processes opening a
     // new file at once cannot both apply a step, and a crash leaves the last completed version.
+    std::optional<bool> existing;  // whether the file held a schema when opened: only then is a step worth a warning
     for (;;) {
         Transaction tx(impl);
         const int version = user_version(impl);
+        if (!existing) existing = version > 0;
         if (version > latest)
             throw UserError(fmt::format("{}: database schema version {} is newer than this program knows (latest {}); "
                                         "use a newer manikind or another file",
@@ -497,7 +499,7 @@ void migrate(Database::Impl& impl) {
         }
         // A step that copies the samples (versions 5 and 8) takes about a second per million
         // rows: say so, or a daemon upgrading weeks of recordings looks hung at start.
-        if (version > 0)
+        if (*existing)
             spdlog::warn("{}: upgrading the database schema from version {} to {} (a large file takes a while)",
                          impl.path.string(), version, version + 1);
         impl.exec(all_migrations[static_cast<std::size_t>(version)],
@@ -517,19 +519,55 @@ Database::~Database() = default;
 std::span<const char* const> Database::migrations() { return all_migrations; }
 int Database::latest_schema_version() { return static_cast<int>(all_migrations.size()); }
 
-Database Database::open(const std::filesystem::path& path, Durability durability) {
+Database Database::open(const std::filesystem::path& path, Durability durability, std::optional<Journal> journal) {
     auto impl = std::make_unique<Impl>();
     impl->path = path;
     // Created 0640 (or tighter, by the umask): recordings are the lab's, not every local user's. SQLite
     // gives the -wal and -shm files the database file's mode.
-    if (const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0640); fd >= 0) ::close(fd);
+    bool new_file = false;
+    if (const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0640); fd >= 0) {
+        ::close(fd);
+        new_file = true;
+    } else {
+        std::error_code ec;
+        new_file = std::filesystem::file_size(path, ec) == 0 && !ec;
+    }
     if (sqlite3_open_v2(path.c_str(), &impl->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX,
                         nullptr) != SQLITE_OK)
         impl->fail("cannot open the database");
     sqlite3_extended_result_codes(impl->db, 1);
     // busy_timeout first: the other pragmas and the migrations may wait for another connection.
     impl->exec("PRAGMA busy_timeout = 5000", "setting busy_timeout");
-    {
+    // Only WAL is recorded in the file; a rollback file reads as SQLite's default, "delete".
+    const bool file_in_wal = [&] {
+        Query q(*impl, "PRAGMA journal_mode");
+        q.step();
+        return q.text(0) == "wal";
+    }();
+    const Journal wanted = journal ? *journal : (new_file || file_in_wal ? Journal::wal : Journal::rollback);
+    if (wanted == Journal::rollback) {
+        // TRUNCATE rather than DELETE: the -journal file is emptied after each commit, not
+        // created and unlinked again. Leaving WAL needs the file to itself: another program
+        // holding it rarely lets go within a busy timeout, so this is tried once, at once.
+        std::string mode, why;
+        if (file_in_wal) sqlite3_busy_timeout(impl->db, 0);
+        try {
+            Query q(*impl, "PRAGMA journal_mode = TRUNCATE");
+            q.step();
+            mode = q.text(0);
+        } catch (const std::exception& e) {
+            why = e.what();
+        }
+        sqlite3_busy_timeout(impl->db, 5000);
+        if (mode != "truncate") {
+            spdlog::warn("{}: stays in WAL journal mode, not rollback as configured: {}", path.string(),
+                         why.empty() ? "SQLite kept '" + mode + "'" : why);
+            Query q(*impl, "PRAGMA journal_mode");
+            q.step();
+            if (q.text(0) != "wal")
+                throw UserError(fmt::format("{}: in neither WAL nor rollback journal mode ('{}')", path.string(), q.text(0)));
+        }
+    } else {
         Query q(*impl, "PRAGMA journal_mode = WAL");
         q.step();
         // The durability argument in docs/recorder.md holds only in WAL mode (a network

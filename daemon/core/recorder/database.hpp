@@ -129,11 +129,22 @@ bool is_terminal_trial_state(std::string_view state);
 // power cut or kernel crash too (synchronous = FULL: the WAL is synced at every commit).
 enum class Durability { process, power };
 
+// How SQLite keeps a transaction atomic (docs/recorder.md, "Journal"): `wal`, a write-ahead
+// log that readers never wait for and that never waits for readers, every page written twice
+// (log, then checkpoint); `rollback`, the old content of each changed page saved to a
+// -journal file first, new pages written once (1.6x the bytes stored at 30-s commits against
+// WAL's 2.3x), but a commit waits for running reads and a read for a running commit.
+enum class Journal { wal, rollback };
+
 class Database {
 public:
-    // Opens (creating if absent) and migrates to the latest schema. Throws UserError if the
-    // file is not a database, cannot be put in WAL mode, or has a schema newer than this program.
-    static Database open(const std::filesystem::path& path, Durability durability = Durability::process);
+    // Opens (creating if absent) and migrates to the latest schema. `journal`: the mode to put
+    // the file in; none keeps the file's own (WAL for a new file), so that a reader never
+    // switches a lab's database out of the mode its daemon chose. A file another connection
+    // holds cannot leave WAL: it stays in WAL, with a warning. Throws UserError if the file is
+    // not a database, cannot be put in WAL mode, or has a schema newer than this program.
+    static Database open(const std::filesystem::path& path, Durability durability = Durability::process,
+                         std::optional<Journal> journal = std::nullopt);
 
     Database(Database&&) noexcept;
     Database& operator=(Database&&) noexcept;
@@ -148,7 +159,7 @@ public:
 
     const std::filesystem::path& path() const;
     int schema_version();
-    std::string journal_mode();
+    std::string journal_mode();  // "wal", or "truncate" for Journal::rollback
     int synchronous();  // SQLite's PRAGMA synchronous: 1 NORMAL (Durability::process), 2 FULL (power)
     std::string integrity_check();  // "ok" when fine, else SQLite's findings one per line
 

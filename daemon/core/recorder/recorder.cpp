@@ -24,8 +24,9 @@ Recorder::Recorder(std::filesystem::path db_path, RecorderOptions options)
     writer_ = std::thread([this, opened = std::move(opened)]() mutable {
         std::optional<Database> db;
         try {
-            db.emplace(Database::open(path_, options_.durability));
+            db.emplace(Database::open(path_, options_.durability, options_.journal));
             db->check_sample_keys_here();  // this connection only inserts samples
+            stats_.journal = db->journal_mode();  // before the constructor returns: no reader yet
             open_crash_ring(*db);
         } catch (...) {
             opened.set_exception(std::current_exception());

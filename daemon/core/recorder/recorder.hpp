@@ -34,6 +34,8 @@ struct RecorderOptions {
     // flush(), until space returns. At shutdown the usual attempts apply, then the rows are lost.
     std::chrono::milliseconds full_disk_retry{1000};
     Durability durability = Durability::process;  // [recorder] durability
+    // [recorder] journal: the mode the Recorder puts the file in; none keeps the file's own.
+    std::optional<Journal> journal;
     // Where the crash ring lives (crash_ring.hpp): a copy of every sample not yet committed, in
     // shared memory, stored by the next Recorder if this process dies. Empty: no ring, and a
     // crash loses what is not committed ([recorder] crash_ring_dir).
@@ -55,6 +57,7 @@ struct RecorderStats {
     std::uint64_t full_disk_commits = 0;  // commits that failed for want of space
     std::uint64_t recovered = 0;       // samples a crashed predecessor left in the crash ring, stored at start
     std::string crash_ring;            // the ring's file; empty when running without one
+    std::string journal;               // SQLite's journal mode on the file: "wal" or "truncate" (rollback)
 };
 
 class Recorder {
