@@ -100,7 +100,7 @@ int main() {
         const double cpu = cpu_seconds() - cpu0;
         const double wall = seconds_since(t0);
         acq.stop();
-        fmt::print("real-time mode (1x) for {:.1f} s: {} samples, CPU {:.3f} s = {:.2f} % of one core (target < 2 %)\n",
+        fmt::print("real-time mode (1x) for {:.1f} s: {} samples, CPU {:.3f} s = {:.2f} % of one core (issue 18: < 1 %)\n",
                    wall, samples.load() - s0, cpu, 100.0 * cpu / wall);
         std::filesystem::remove_all(cfg.simulation.runtime_dir);
     }
