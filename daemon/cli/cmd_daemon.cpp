@@ -162,6 +162,9 @@ void print_status(const nlohmann::json& s) {
     std::printf("          %llu waiting for their commit, %s; %llu recovered at start from a crashed daemon\n",
                 r.value("queue_rows", 0ULL), ring.empty() ? "NOT kept safe from a crash (no crash ring)" : ("kept in " + ring).c_str(),
                 r.value("recovered_from_crash_ring", 0ULL));
+    if (r.value("locked", false))
+        std::printf("          COMMITS WAITING: another program holds the database's lock (%llu attempts so far)\n",
+                    r.value("locked_commits", 0ULL));
     if (const std::string journal = r.value("journal", std::string()); !journal.empty())
         std::printf("          journal: %s\n", journal == "wal" ? "WAL (readers never wait)"
                                                                  : "rollback (a commit waits for running reads)");

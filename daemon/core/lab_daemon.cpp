@@ -860,7 +860,9 @@ nlohmann::json LabDaemon::status_json() {
                      {"queue_rows", rs.queue_depth},
                      {"recovered_from_crash_ring", rs.recovered},
                      {"crash_ring", rs.crash_ring},
-                     {"journal", rs.journal}};
+                     {"journal", rs.journal},
+                     {"locked", rs.locked},
+                     {"locked_commits", rs.locked_commits}};
     j["storage"] = {{"full", storage_full_},
                     {"error", storage_error_},
                     {"deferred_writes", deferred_writes_.size()},

@@ -634,6 +634,52 @@ TEST_CASE("recorder: a batch that keeps failing is retried, then counted as lost
     CHECK(stats.accepted == stats.committed + stats.lost);
 }
 
+TEST_CASE("recorder: a database locked by another program keeps the rows waiting, never lost, until it lets go",
+          "[recorder][journal]") {
+    const Journal journal = GENERATE(Journal::wal, Journal::rollback);
+    INFO((journal == Journal::wal ? "WAL: a write transaction elsewhere" : "rollback: a read transaction left open"));
+    TempDir dir("locked");
+    const auto path = dir.path / "trials.db";
+    Fixture f;
+    {
+        auto db = Database::open(path, Durability::process, journal);
+        f = make_fixture(db);
+    }
+    RecorderOptions options;
+    options.journal = journal;
+    options.lock_timeout = std::chrono::milliseconds(20);
+    options.max_commit_attempts = 2;  // a failure of another kind would lose the rows after two
+    options.crash_ring_dir = dir.path;
+    Recorder recorder(path, options);
+    // Another program: in WAL mode only a writer blocks the recorder; in rollback mode a reader
+    // whose transaction has read something holds its lock until it ends.
+    sqlite3* other = nullptr;
+    REQUIRE(sqlite3_open(path.c_str(), &other) == SQLITE_OK);
+    const auto exec = [&](const char* sql) { REQUIRE(sqlite3_exec(other, sql, nullptr, nullptr, nullptr) == SQLITE_OK); };
+    if (journal == Journal::wal) {
+        exec("BEGIN IMMEDIATE");
+    } else {
+        exec("BEGIN");
+        exec("SELECT count(*) FROM samples");
+    }
+    for (int i = 1; i <= 100; ++i) recorder.push({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
+    for (int attempt = 0; attempt < 4; ++attempt) CHECK_FALSE(recorder.flush());  // twice the attempts allowed
+    auto stats = recorder.stats();
+    CHECK(stats.locked);
+    CHECK(stats.locked_commits >= 4);
+    CHECK(stats.lost == 0);
+    CHECK(stats.committed == 0);
+    CHECK(stats.queue_depth == 100);
+    exec("COMMIT");
+    sqlite3_close(other);
+    CHECK(recorder.flush());
+    stats = recorder.stats();
+    CHECK_FALSE(stats.locked);
+    CHECK(stats.committed == 100);
+    CHECK(stats.lost == 0);
+    CHECK(Database::open(path).sample_count(f.trial) == 100);
+}
+
 TEST_CASE("recorder: kill -9 loses no accepted sample: the next Recorder stores what the crash ring kept", "[recorder][crash_ring]") {
     TempDir dir("ring");
     const auto path = dir.path / "trials.db";

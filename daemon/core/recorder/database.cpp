@@ -366,6 +366,8 @@ struct Database::Impl {
     [[noreturn]] void fail(std::string_view what) const {
         if (db && ((sqlite3_errcode(db) & 0xff) == SQLITE_FULL || sqlite3_system_errno(db) == ENOSPC))
             throw StorageFull(fmt::format("{}: {}: {}", path.string(), what, sqlite3_errmsg(db)));
+        if (db && ((sqlite3_errcode(db) & 0xff) == SQLITE_BUSY || (sqlite3_errcode(db) & 0xff) == SQLITE_LOCKED))
+            throw StorageBusy(fmt::format("{}: {}: {}", path.string(), what, sqlite3_errmsg(db)));
         throw UserError(fmt::format("{}: {}: {}", path.string(), what, db ? sqlite3_errmsg(db) : "out of memory"));
     }
 
@@ -594,6 +596,10 @@ Database Database::open(const std::filesystem::path& path, Durability durability
 const std::filesystem::path& Database::path() const { return impl_->path; }
 
 int Database::schema_version() { return user_version(*impl_); }
+
+void Database::set_busy_timeout(std::chrono::milliseconds timeout) {
+    sqlite3_busy_timeout(impl_->db, static_cast<int>(timeout.count()));
+}
 
 std::string Database::journal_mode() {
     Query q(*impl_, "PRAGMA journal_mode");

@@ -8,6 +8,7 @@
 //
 // Every SQLite failure throws manikind::UserError naming the file and SQLite's message; a
 // full disk throws StorageFull (a UserError), which the recorder and the daemon survive.
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -34,6 +35,14 @@ constexpr std::int64_t trial_id_end(std::int64_t trial_id) { return (trial_id + 
 class StorageFull : public UserError {
 public:
     explicit StorageFull(const std::string& message) : UserError(message, "disk_full") {}
+};
+
+// A write waited out the busy timeout for a lock another connection holds (SQLITE_BUSY or
+// SQLITE_LOCKED): a write transaction elsewhere, or in rollback-journal mode a read transaction
+// left open. Nothing of the failed transaction is stored; it can be tried again.
+class StorageBusy : public UserError {
+public:
+    explicit StorageBusy(const std::string& message) : UserError(message, "database_locked") {}
 };
 
 // Sample quality codes stored in samples.quality.
@@ -160,6 +169,8 @@ public:
     const std::filesystem::path& path() const;
     int schema_version();
     std::string journal_mode();  // "wal", or "truncate" for Journal::rollback
+    // How long a statement waits for another connection's lock before StorageBusy (5 s from open).
+    void set_busy_timeout(std::chrono::milliseconds timeout);
     int synchronous();  // SQLite's PRAGMA synchronous: 1 NORMAL (Durability::process), 2 FULL (power)
     std::string integrity_check();  // "ok" when fine, else SQLite's findings one per line
 

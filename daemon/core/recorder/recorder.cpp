@@ -27,6 +27,7 @@ Recorder::Recorder(std::filesystem::path db_path, RecorderOptions options)
             db.emplace(Database::open(path_, options_.durability, options_.journal));
             db->check_sample_keys_here();  // this connection only inserts samples
             stats_.journal = db->journal_mode();  // before the constructor returns: no reader yet
+            db->set_busy_timeout(options_.lock_timeout);
             open_crash_ring(*db);
         } catch (...) {
             opened.set_exception(std::current_exception());
@@ -129,9 +130,11 @@ bool Recorder::flush() {
     const std::uint64_t attempts_before = commit_attempts_;
     ++flush_waiters_;
     wake_writer_.notify_one();
-    // A full disk: one more attempt is enough to know (waiting for space could take hours).
+    // A full disk or a lock held elsewhere: one more attempt is enough to know (waiting for
+    // space, or for an analyst to close a transaction, could take hours).
     progress_.wait(lock, [&] {
-        return resolved_ >= target || writer_gone_ || (stats_.storage_full && commit_attempts_ > attempts_before);
+        return resolved_ >= target || writer_gone_ ||
+               ((stats_.storage_full || stats_.locked) && commit_attempts_ > attempts_before);
     });
     --flush_waiters_;
     return resolved_ >= target;
@@ -187,30 +190,39 @@ void Recorder::write_loop(Database& db) {
         const auto t0 = Clock::now();
         bool committed = false;
         std::size_t duplicates = 0;
-        std::optional<std::string> full;  // the disk is full: say so, and wait for space
+        std::optional<std::string> full;    // the disk is full: say so, and wait for space
+        std::optional<std::string> locked;  // another connection holds the lock: likewise, for it
         try {
             duplicates = db.insert_samples(std::span<const SampleRow>(batch.data() + done, n));
             committed = true;
         } catch (const StorageFull& e) {
             full = e.what();
+        } catch (const StorageBusy& e) {
+            locked = e.what();
         } catch (const std::exception& e) {
             spdlog::error("recorder: commit of {} rows failed (attempt {} of {}): {}", n, attempts + 1,
                           options_.max_commit_attempts, e.what());
         }
         const double commit_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        bool was_full = false, stopping = false;
+        bool was_full = false, was_locked = false, stopping = false;
         {
             std::lock_guard peek(mutex_);
             was_full = stats_.storage_full;
+            was_locked = stats_.locked;
             stopping = stop_;
         }
         if (full && !was_full) spdlog::error("recorder: disk full, {} rows kept in memory until space returns: {}", n, *full);
         if (committed && was_full) spdlog::warn("recorder: space is back, recording resumed");
-        if (full && stopping) {
+        if (locked && !was_locked)
+            spdlog::error("recorder: the database is locked by another connection (a write, or with journal = rollback a "
+                          "read transaction left open); {} rows kept in memory until it lets go: {}", n, *locked);
+        if (committed && was_locked) spdlog::warn("recorder: the lock was released, recording resumed");
+        const std::optional<std::string>& waiting = full ? full : locked;
+        if (waiting && stopping) {
             spdlog::error("recorder: commit of {} rows failed at shutdown (attempt {} of {}): {}", n, attempts + 1,
-                          options_.max_commit_attempts, *full);
+                          options_.max_commit_attempts, *waiting);
         }
-        if (!committed && (!full || stopping)) ++attempts;
+        if (!committed && (!waiting || stopping)) ++attempts;
         const bool give_up = !committed && attempts >= options_.max_commit_attempts;
         // Logged before taking the lock: a slow stderr must not hold up push().
         if (duplicates > 0) spdlog::warn("recorder: {} rows skipped, already stored (re-sent readings?)", duplicates);
@@ -223,6 +235,8 @@ void Recorder::write_loop(Database& db) {
             stats_.storage_error = *full;
             ++stats_.full_disk_commits;
         }
+        stats_.locked = locked.has_value();
+        if (locked) ++stats_.locked_commits;
         if (committed) {
             stats_.committed += n - duplicates;
             stats_.duplicates += duplicates;
@@ -235,7 +249,7 @@ void Recorder::write_loop(Database& db) {
                 // while the disk is full), since a full disk or a lock held elsewhere rarely
                 // clears in microseconds.
                 progress_.notify_all();  // a flush() waiting on a full disk has its answer
-                if (full)
+                if (waiting)
                     wake_writer_.wait_for(lock, options_.full_disk_retry, [&] { return stop_ || flush_waiters_ > 0; });
                 else
                     wake_writer_.wait_for(lock, options_.max_batch_delay, [&] { return stop_; });

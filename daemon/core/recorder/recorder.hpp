@@ -33,6 +33,10 @@ struct RecorderOptions {
     // are dropped once the queue is full) and the commit is tried again this often, and at each
     // flush(), until space returns. At shutdown the usual attempts apply, then the rows are lost.
     std::chrono::milliseconds full_disk_retry{1000};
+    // A lock held by another connection (StorageBusy: a write transaction elsewhere, or with
+    // journal = rollback a read transaction left open) is treated like a full disk: the rows wait
+    // in memory, not counted against max_commit_attempts, and each commit waits this long for it.
+    std::chrono::milliseconds lock_timeout{5000};
     Durability durability = Durability::process;  // [recorder] durability
     // [recorder] journal: the mode the Recorder puts the file in; none keeps the file's own.
     std::optional<Journal> journal;
@@ -55,6 +59,8 @@ struct RecorderStats {
     bool storage_full = false;         // the latest commit failed for want of space
     std::string storage_error;         // its message (file, what, SQLite's words)
     std::uint64_t full_disk_commits = 0;  // commits that failed for want of space
+    bool locked = false;               // the latest commit found the database locked by another connection
+    std::uint64_t locked_commits = 0;  // commits that failed so
     std::uint64_t recovered = 0;       // samples a crashed predecessor left in the crash ring, stored at start
     std::string crash_ring;            // the ring's file; empty when running without one
     std::string journal;               // SQLite's journal mode on the file: "wal" or "truncate" (rollback)
@@ -74,7 +80,8 @@ public:
     // dropped + 1) when the queue is full.
     bool push(const SampleRow& row) noexcept;
     // Returns true when every row accepted before the call is committed (or lost after retries);
-    // false, after one more attempt, while the disk is full (the rows stay queued).
+    // false, after one more attempt, while the disk is full or the database locked elsewhere
+    // (the rows stay queued).
     bool flush();
     RecorderStats stats() const;
 
