@@ -82,11 +82,16 @@ Fixture make_fixture(Database& db) {
 }
 
 // A file with the fixture's rows, its connection closed again (before a fork(), or so that
-// the Recorder under test is the only writer).
-Fixture fixture_file(const fs::path& path) {
-    auto db = Database::open(path);
-    return make_fixture(db);
+// the Recorder under test is the only writer), in `journal` mode, its one trial `trial_state`.
+Fixture fixture_file(const fs::path& path, Journal journal = Journal::wal, Durability durability = Durability::process,
+                     const std::string& trial_state = "pending") {
+    auto db = Database::open(path, durability, journal);
+    const Fixture f = make_fixture(db);
+    if (trial_state != "pending") db.set_trial_state(f.trial, trial_state, "", 1);
+    return f;
 }
+
+const char* journal_name(Journal journal) { return journal == Journal::wal ? "WAL" : "rollback journal"; }
 
 // A recording child process: `body(report)` runs in it, `report(n)` sends a count to the
 // parent (false once the parent has gone), and the child never returns into Catch (a throw
@@ -637,14 +642,10 @@ TEST_CASE("recorder: a batch that keeps failing is retried, then counted as lost
 TEST_CASE("recorder: a database locked by another program keeps the rows waiting, never lost, until it lets go",
           "[recorder][journal]") {
     const Journal journal = GENERATE(Journal::wal, Journal::rollback);
-    INFO((journal == Journal::wal ? "WAL: a write transaction elsewhere" : "rollback: a read transaction left open"));
+    INFO(journal_name(journal));
     TempDir dir("locked");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path, Durability::process, journal);
-        f = make_fixture(db);
-    }
+    const Fixture f = fixture_file(path, journal);
     RecorderOptions options;
     options.journal = journal;
     options.lock_timeout = std::chrono::milliseconds(20);
@@ -772,15 +773,11 @@ TEST_CASE("recorder: an unopenable path throws from the constructor", "[recorder
 
 TEST_CASE("recorder: a SIGKILL mid-recording keeps every flushed row and a sound file", "[recorder]") {
     const Journal journal = GENERATE(Journal::wal, Journal::rollback);
-    INFO((journal == Journal::wal ? "WAL" : "rollback journal"));
+    INFO(journal_name(journal));
     TempDir dir("crash");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path, Durability::process, journal);
-        f = make_fixture(db);
-        db.set_trial_state(f.trial, "acquiring", "", 1);
-    }  // closed before fork(): an SQLite connection must not cross into a child
+    // Closed before fork(): an SQLite connection must not cross into a child.
+    const Fixture f = fixture_file(path, journal, Durability::process, "acquiring");
 
     RecordingChild child([&](const RecordingChild::Report& report) {
         RecorderOptions options;
@@ -830,14 +827,10 @@ TEST_CASE("recorder: the files copied at random instants while writing, as a pow
           "consistent (durability = power)",
           "[recorder][durability]") {
     const Journal journal = GENERATE(Journal::wal, Journal::rollback);
-    INFO((journal == Journal::wal ? "WAL" : "rollback journal"));
+    INFO(journal_name(journal));
     TempDir dir("powercut");
     const auto path = dir.path / "trials.db";
-    Fixture f;
-    {
-        auto db = Database::open(path, manikind::recorder::Durability::power, journal);
-        f = make_fixture(db);
-    }  // closed before fork()
+    const Fixture f = fixture_file(path, journal, Durability::power);  // closed before fork()
 
     RecordingChild child([&](const RecordingChild::Report& report) {
         // The daemon's two connections: the Recorder's for samples, one for trial states and events.
