@@ -22,9 +22,4 @@ void add_archive_command(CLI::App& app);     // cmd_archive.cpp: `manikin archiv
 // The whole `manikin` app: global options and every subcommand above.
 void add_all_commands(CLI::App& app);
 
-// What `manikin <argv>` needs: the global options and only the group that defines the named
-// subcommand, or the whole tree when none is named or the name is unknown. Building every
-// command's options was about 3 ms of the 7 ms a short command spends starting.
-void add_commands_for(CLI::App& app, int argc, const char* const* argv);
-
 }  // namespace manikind::cli

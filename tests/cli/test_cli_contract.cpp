@@ -79,41 +79,6 @@ TEST_CASE("cli contract: every runnable subcommand takes --json", "[cli][contrac
     CHECK(missing.empty());
 }
 
-TEST_CASE("cli contract: `manikin <name>` builds the same subcommand as the whole tree", "[cli][contract]") {
-    // main.cpp builds only the named subcommand's group; a name missing from app.cpp's table
-    // would fall back to the whole tree (slow, not wrong), a wrong group would lose the command.
-    CLI::App full;
-    manikind::cli::add_all_commands(full);
-    const auto top = subcommands_of(full);
-    REQUIRE(top.size() >= 20);
-    for (auto* sub : top) {
-        const std::string name = sub->get_name();
-        std::vector<std::pair<std::string, CLI::App*>> want;
-        runnable_commands(*sub, name, want);
-        CLI::App part;
-        const char* argv[] = {"manikin", "-v", name.c_str(), "--json"};
-        manikind::cli::add_commands_for(part, 4, argv);
-        INFO("subcommand " << name);
-        CHECK(subcommands_of(part).size() < top.size());  // a part, not the whole tree
-        CLI::App* mine = nullptr;
-        for (auto* candidate : subcommands_of(part))
-            if (candidate->get_name() == name) mine = candidate;
-        REQUIRE(mine != nullptr);
-        std::vector<std::pair<std::string, CLI::App*>> got;
-        runnable_commands(*mine, name, got);
-        REQUIRE(got.size() == want.size());
-        for (std::size_t k = 0; k < got.size(); ++k) {
-            CHECK(got[k].first == want[k].first);
-            CHECK(got[k].second->get_options().size() == want[k].second->get_options().size());
-        }
-        CHECK(part.get_option_no_throw("--verbose") != nullptr);
-    }
-    CLI::App unknown;
-    const char* argv[] = {"manikin", "analyse"};  // a typo gets the whole tree, for CLI11's message
-    manikind::cli::add_commands_for(unknown, 2, argv);
-    CHECK(subcommands_of(unknown).size() == top.size());
-}
-
 TEST_CASE("cli contract: input and usage errors under --json are one error object, exit 2", "[cli][contract]") {
     const auto dir = fresh_dir("input");
     SECTION("a campaign folder that does not exist") {
