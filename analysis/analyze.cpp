@@ -106,6 +106,26 @@ ConditionEstimate condition(const std::string& channel, const std::vector<const 
     return c;
 }
 
+// consume(i, produce(i)) for i = 0 .. n - 1 in order, each produce(i) on a thread of its own,
+// up to `ahead` of them running while consume works: at most ahead + 1 results alive. An
+// exception from produce(i) reaches the caller at i's turn, after every earlier consume.
+template <typename Produce, typename Consume>
+void in_order_ahead(std::size_t n, std::size_t ahead, const Produce& produce, const Consume& consume) {
+    using Result = decltype(produce(std::size_t{0}));
+    std::deque<std::future<Result>> running;
+    std::size_t launched = 0;
+    const auto launch = [&] {
+        while (launched < n && running.size() < ahead) running.push_back(std::async(std::launch::async, produce, launched++));
+    };
+    launch();
+    for (std::size_t i = 0; i < n; ++i) {
+        Result result = running.front().get();
+        running.pop_front();
+        launch();
+        consume(i, std::move(result));
+    }
+}
+
 }  // namespace
 
 TrialResult summarize_trial(const Trial& trial, const ZoneMap& map, const AnalysisOptions& o) {
@@ -182,22 +202,13 @@ CampaignResult analyze_campaign_streaming(const std::filesystem::path& folder, c
     // while the one before them is summarised here: at most three trials are in memory. A bad
     // file still fails at its own trial, after the trials before it, as one thread would (the
     // error waits in its future until its turn).
-    const auto read_one = [&](std::size_t i) { return read_trial_data(folder, metadata, metadata.trials[i].info); };
-    constexpr std::size_t in_flight = 2;
-    std::deque<std::future<TrialData>> reading;
-    std::size_t launched = 0;
-    const auto launch = [&] {
-        while (launched < n && reading.size() < in_flight) reading.push_back(std::async(std::launch::async, read_one, launched++));
-    };
-    launch();
-    for (std::size_t i = 0; i < n; ++i) {
-        TrialData data = reading.front().get();
-        reading.pop_front();
-        launch();
-        // Scoped: the samples are freed before a later trial is read into their place.
-        const Trial trial{metadata.trials[i].info, std::move(data)};
-        results.push_back(summarize_trial(trial, metadata.zone_map, o));
-    }
+    in_order_ahead(
+        n, 2, [&](std::size_t i) { return read_trial_data(folder, metadata, metadata.trials[i].info); },
+        [&](std::size_t i, TrialData data) {
+            // Scoped: the samples are freed before a later trial is read into their place.
+            const Trial trial{metadata.trials[i].info, std::move(data)};
+            results.push_back(summarize_trial(trial, metadata.zone_map, o));
+        });
     return aggregate_trials(metadata, results, o);
 }
 
@@ -481,17 +492,11 @@ void write_json(std::ostream& out, const CampaignResult& r, int indent, const js
         out << "[\n";
         // The cases are formatted two at a time on their own threads, in order, while this one
         // writes: at most three cases' JSON in memory, whatever the campaign's size.
-        const auto format = [&, cases](std::size_t i) { return nested_dump(case_json((*cases)[i]), indent, 2); };
-        std::deque<std::future<std::string>> formatting;
-        const std::size_t in_flight = 2;
-        for (std::size_t i = 0; i < std::min(in_flight, cases->size()); ++i)
-            formatting.push_back(std::async(std::launch::async, format, i));
-        for (std::size_t i = 0; i < cases->size(); ++i) {
-            const std::string text = formatting.front().get();
-            formatting.pop_front();
-            if (i + in_flight < cases->size()) formatting.push_back(std::async(std::launch::async, format, i + in_flight));
-            out << pad << pad << text << (i + 1 < cases->size() ? ",\n" : "\n");
-        }
+        in_order_ahead(
+            cases->size(), 2, [&, cases](std::size_t i) { return nested_dump(case_json((*cases)[i]), indent, 2); },
+            [&, cases](std::size_t i, const std::string& text) {
+                out << pad << pad << text << (i + 1 < cases->size() ? ",\n" : "\n");
+            });
         out << pad << "]";
     }
     out << "\n}";

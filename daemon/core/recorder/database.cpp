@@ -482,6 +482,12 @@ int user_version(Database::Impl& impl) {
     return static_cast<int>(q.integer(0));
 }
 
+std::string journal_mode_of(Database::Impl& impl) {
+    Query q(impl, "PRAGMA journal_mode");
+    q.step();
+    return q.text(0);
+}
+
 void migrate(Database::Impl& impl) {
     const int latest = static_cast<int>(all_migrations.size());
     // One transaction per step, re-reading the version inside it, so two processes opening a
@@ -541,11 +547,7 @@ Database Database::open(const std::filesystem::path& path, Durability durability
     // busy_timeout first: the other pragmas and the migrations may wait for another connection.
     impl->exec("PRAGMA busy_timeout = 5000", "setting busy_timeout");
     // Only WAL is recorded in the file; a rollback file reads as SQLite's default, "delete".
-    const bool file_in_wal = [&] {
-        Query q(*impl, "PRAGMA journal_mode");
-        q.step();
-        return q.text(0) == "wal";
-    }();
+    const bool file_in_wal = journal_mode_of(*impl) == "wal";
     const Journal wanted = journal ? *journal : (new_file || file_in_wal ? Journal::wal : Journal::rollback);
     if (wanted == Journal::rollback) {
         // TRUNCATE rather than DELETE: the -journal file is emptied after each commit, not
@@ -564,10 +566,8 @@ Database Database::open(const std::filesystem::path& path, Durability durability
         if (mode != "truncate") {
             spdlog::warn("{}: stays in WAL journal mode, not rollback as configured: {}", path.string(),
                          why.empty() ? "SQLite kept '" + mode + "'" : why);
-            Query q(*impl, "PRAGMA journal_mode");
-            q.step();
-            if (q.text(0) != "wal")
-                throw UserError(fmt::format("{}: in neither WAL nor rollback journal mode ('{}')", path.string(), q.text(0)));
+            if (const auto now = journal_mode_of(*impl); now != "wal")
+                throw UserError(fmt::format("{}: in neither WAL nor rollback journal mode ('{}')", path.string(), now));
         }
     } else {
         Query q(*impl, "PRAGMA journal_mode = WAL");
@@ -601,11 +601,7 @@ void Database::set_busy_timeout(std::chrono::milliseconds timeout) {
     sqlite3_busy_timeout(impl_->db, static_cast<int>(timeout.count()));
 }
 
-std::string Database::journal_mode() {
-    Query q(*impl_, "PRAGMA journal_mode");
-    q.step();
-    return q.text(0);
-}
+std::string Database::journal_mode() { return journal_mode_of(*impl_); }
 
 int Database::synchronous() {
     Query q(*impl_, "PRAGMA synchronous");
