@@ -17,13 +17,13 @@
 
 #include "archive/pg.hpp"
 #include "archive/pg_schema.hpp"
-#include "daemon/core/recorder/database.hpp"
-#include "daemon/core/user_error.hpp"
+#include "store/database.hpp"
+#include "base/user_error.hpp"
 
 namespace manikind::archive {
 namespace {
 
-// The recorder's schema version that gave trials their UUID (daemon/core/recorder/database.cpp).
+// The recorder's schema version that gave trials their UUID (store/database.cpp).
 constexpr int first_sqlite_version_with_uuid = 6;
 
 // The SQLite side, read-only through the C API: the recorder's Database would migrate (write) on open.

@@ -5,7 +5,7 @@
 
 #include <fmt/core.h>
 
-#include "daemon/core/user_error.hpp"
+#include "base/user_error.hpp"
 
 namespace manikind::archive {
 namespace {

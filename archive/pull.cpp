@@ -17,7 +17,7 @@
 #include <fmt/core.h>
 
 #include "archive/pg.hpp"
-#include "daemon/core/user_error.hpp"
+#include "base/user_error.hpp"
 
 namespace manikind::archive {
 namespace {

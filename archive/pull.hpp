@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <string>
 
-#include "daemon/core/recorder/database.hpp"
+#include "store/database.hpp"
 
 namespace manikind::archive {
 

@@ -30,8 +30,8 @@
 #include "archive/forwarder.hpp"
 #include "archive/pg.hpp"
 #include "archive/pg_schema.hpp"
-#include "daemon/core/recorder/database.hpp"
-#include "daemon/core/recorder/recorder.hpp"
+#include "store/database.hpp"
+#include "store/recorder.hpp"
 #include "tests/archive/pg_server.hpp"
 
 namespace rec = manikind::recorder;

@@ -21,9 +21,9 @@
 #include <string>
 #include <vector>
 
-#include "daemon/core/control_api.hpp"
-#include "daemon/core/lab_daemon.hpp"
-#include "daemon/core/web_server.hpp"
+#include "daemon/control_api.hpp"
+#include "daemon/lab_daemon.hpp"
+#include "daemon/web_server.hpp"
 
 namespace fs = std::filesystem;
 using namespace manikind;

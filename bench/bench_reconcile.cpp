@@ -17,7 +17,7 @@
 #include "analysis/reconcile/evidence.hpp"
 #include "analysis/reconcile/from_analysis.hpp"
 #include "analysis/reconcile/reconcile.hpp"
-#include "daemon/core/simulated_campaign.hpp"
+#include "cli/simulated_campaign.hpp"
 
 using namespace manikind;
 namespace rc = analysis::reconcile;

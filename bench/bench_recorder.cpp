@@ -18,8 +18,8 @@
 
 #include <fmt/core.h>
 
-#include "daemon/core/recorder/database.hpp"
-#include "daemon/core/recorder/recorder.hpp"
+#include "store/database.hpp"
+#include "store/recorder.hpp"
 
 namespace rec = manikind::recorder;
 namespace fs = std::filesystem;

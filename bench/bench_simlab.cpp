@@ -13,7 +13,7 @@
 
 #include <fmt/core.h>
 
-#include "daemon/core/acquisition.hpp"
+#include "daemon/acquisition.hpp"
 
 namespace {
 

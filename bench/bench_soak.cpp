@@ -21,7 +21,7 @@
 #include <fmt/core.h>
 #include <spdlog/spdlog.h>
 
-#include "daemon/core/lab_daemon.hpp"
+#include "daemon/lab_daemon.hpp"
 
 namespace fs = std::filesystem;
 

@@ -27,12 +27,12 @@
 #include <spdlog/spdlog.h>
 
 #include "archive/background.hpp"
-#include "daemon/core/config.hpp"
-#include "daemon/core/control_api.hpp"
-#include "daemon/core/lab_daemon.hpp"
-#include "daemon/core/logging.hpp"
-#include "daemon/core/user_error.hpp"
-#include "daemon/core/web_server.hpp"
+#include "daemon/config.hpp"
+#include "daemon/control_api.hpp"
+#include "daemon/lab_daemon.hpp"
+#include "daemon/logging.hpp"
+#include "base/user_error.hpp"
+#include "daemon/web_server.hpp"
 
 namespace {
 

@@ -1,11 +1,11 @@
-// libFuzzer target for campaign files (daemon/core/campaign_plan.hpp): the input as the TOML
+// libFuzzer target for campaign files (daemon/campaign_plan.hpp): the input as the TOML
 // text of a plan, then the check against the shipped safety limits the daemon makes before it
 // starts one. Only UserError may escape.
 #include <cstdint>
 #include <string>
 
-#include "daemon/core/campaign_plan.hpp"
-#include "daemon/core/user_error.hpp"
+#include "daemon/campaign_plan.hpp"
+#include "base/user_error.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     static const auto limits = manikind::config::default_config().safety;

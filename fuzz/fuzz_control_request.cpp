@@ -1,4 +1,4 @@
-// libFuzzer target for one control-API message (daemon/core/control_api.hpp): the input as a
+// libFuzzer target for one control-API message (daemon/control_api.hpp): the input as a
 // request line to handle_request, on an idle daemon of the simulated lab that is never run.
 // Every reply must be a JSON object with "ok"; nothing may escape (errors are replies).
 #include <unistd.h>
@@ -9,8 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "daemon/core/control_api.hpp"
-#include "daemon/core/lab_daemon.hpp"
+#include "daemon/control_api.hpp"
+#include "daemon/lab_daemon.hpp"
 #include "fuzz/fuzz_check.hpp"
 
 namespace fs = std::filesystem;

@@ -14,7 +14,7 @@
 #include <catch2/catch.hpp>
 
 #include "archive/pg.hpp"
-#include "daemon/core/recorder/database.hpp"
+#include "store/database.hpp"
 
 namespace manikind::test {
 

@@ -25,9 +25,9 @@
 #include "archive/pg.hpp"
 #include "archive/pg_schema.hpp"
 #include "archive/pull.hpp"
-#include "daemon/core/database_export.hpp"
-#include "daemon/core/recorder/database.hpp"
-#include "daemon/core/user_error.hpp"
+#include "store/database_export.hpp"
+#include "store/database.hpp"
+#include "base/user_error.hpp"
 #include "tests/archive/archive_checks.hpp"
 #include "tests/archive/pg_server.hpp"
 

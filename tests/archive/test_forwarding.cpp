@@ -16,7 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "archive/background.hpp"
-#include "daemon/core/config.hpp"
+#include "daemon/config.hpp"
 #include "tests/archive/archive_checks.hpp"
 #include "tests/archive/pg_server.hpp"
 #include "tests/daemon/daemon_fixture.hpp"

@@ -18,7 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "../daemon/daemon_process.hpp"
-#include "daemon/cli/commands.hpp"
+#include "cli/commands.hpp"
 #include "physics/sign_convention.hpp"
 #include "run_cli.hpp"
 

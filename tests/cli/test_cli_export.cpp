@@ -16,8 +16,8 @@
 #include <nlohmann/json.hpp>
 
 #include "analysis/recording.hpp"
-#include "daemon/core/hdf5_export.hpp"
-#include "daemon/core/recorder/database.hpp"
+#include "store/hdf5_export.hpp"
+#include "store/database.hpp"
 #include "run_cli.hpp"
 
 namespace fs = std::filesystem;

@@ -11,7 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "../daemon/daemon_process.hpp"
-#include "daemon/core/lab_daemon.hpp"
+#include "daemon/lab_daemon.hpp"
 #include "run_cli.hpp"
 
 using manikind::test::DaemonProcess;

@@ -8,7 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "daemon/core/recorder/database.hpp"
+#include "store/database.hpp"
 #include "run_cli.hpp"
 
 using manikind::test::run_manikin;

@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <memory>
 
-#include "daemon/core/lab_daemon.hpp"
+#include "daemon/lab_daemon.hpp"
 
 namespace manikind::test {
 

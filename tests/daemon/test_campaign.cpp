@@ -4,10 +4,10 @@
 
 #include <map>
 
-#include "daemon/core/campaign_plan.hpp"
-#include "daemon/core/control_api.hpp"
-#include "daemon/core/database_export.hpp"
-#include "daemon/core/setup_record.hpp"
+#include "daemon/campaign_plan.hpp"
+#include "daemon/control_api.hpp"
+#include "store/database_export.hpp"
+#include "daemon/setup_record.hpp"
 #include "daemon_fixture.hpp"
 
 using manikind::test::DaemonFixture;

@@ -8,7 +8,7 @@
 #include <set>
 #include <string>
 
-#include "daemon/core/database_export.hpp"
+#include "store/database_export.hpp"
 #include "daemon_fixture.hpp"
 
 using manikind::test::DaemonFixture;

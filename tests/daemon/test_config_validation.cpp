@@ -14,9 +14,9 @@
 #include <random>
 #include <string>
 
-#include "daemon/core/config.hpp"
-#include "daemon/core/toml_input.hpp"
-#include "daemon/core/user_error.hpp"
+#include "daemon/config.hpp"
+#include "base/toml_input.hpp"
+#include "base/user_error.hpp"
 
 using namespace manikind;
 namespace fs = std::filesystem;

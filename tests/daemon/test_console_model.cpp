@@ -4,7 +4,7 @@
 
 #include <fmt/format.h>
 
-#include "daemon/core/console_model.hpp"
+#include "daemon/console_model.hpp"
 
 using manikind::console::ChamberHistory;
 using manikind::console::DeviceSeverity;

@@ -8,7 +8,7 @@
 
 #include <fmt/format.h>
 
-#include "daemon/core/control_api.hpp"
+#include "daemon/control_api.hpp"
 #include "daemon_fixture.hpp"
 
 using manikind::ControlOptions;

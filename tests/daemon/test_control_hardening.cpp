@@ -21,8 +21,8 @@
 
 #include <fmt/format.h>
 
-#include "daemon/core/control_api.hpp"
-#include "daemon/core/user_error.hpp"
+#include "daemon/control_api.hpp"
+#include "base/user_error.hpp"
 #include "daemon_fixture.hpp"
 #include "daemon_process.hpp"
 

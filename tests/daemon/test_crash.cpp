@@ -13,7 +13,7 @@
 #include <map>
 #include <string>
 
-#include "daemon/core/recorder/database.hpp"
+#include "store/database.hpp"
 #include "daemon_process.hpp"
 
 namespace fs = std::filesystem;

@@ -9,10 +9,10 @@
 #include <random>
 #include <sstream>
 
-#include "daemon/core/campaign_plan.hpp"
-#include "daemon/core/config.hpp"
-#include "daemon/core/register_map.hpp"
-#include "daemon/core/user_error.hpp"
+#include "daemon/campaign_plan.hpp"
+#include "daemon/config.hpp"
+#include "drivers/register_map.hpp"
+#include "base/user_error.hpp"
 
 using namespace manikind;
 

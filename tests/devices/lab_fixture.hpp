@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "daemon/core/acquisition.hpp"
+#include "daemon/acquisition.hpp"
 
 namespace manikind::test {
 

@@ -9,9 +9,9 @@
 #include <vector>
 
 #include "analysis/zone_map.hpp"
-#include "daemon/core/acquisition.hpp"
-#include "daemon/core/config.hpp"
-#include "daemon/core/user_error.hpp"
+#include "daemon/acquisition.hpp"
+#include "daemon/config.hpp"
+#include "base/user_error.hpp"
 #include "physics/twin/twin.hpp"
 #include "sim/campaign/campaign_generator.hpp"
 #include "sim/world/world.hpp"

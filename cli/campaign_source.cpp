@@ -1,0 +1,103 @@
+#include "cli/campaign_source.hpp"
+
+#include <stdlib.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+
+#include <fmt/core.h>
+
+#include "analysis/input_error.hpp"
+#include "archive/pull.hpp"
+#include "store/database_export.hpp"
+#include "store/database.hpp"
+#include "base/user_error.hpp"
+
+namespace manikind::cli {
+namespace {
+
+// A private folder under $TMPDIR (or /tmp), removed with everything in it: the pulled database
+// and SQLite's -wal and -shm files beside it.
+class TempFolder {
+public:
+    TempFolder() {
+        const char* tmpdir = std::getenv("TMPDIR");
+        std::string pattern = std::string(tmpdir && *tmpdir ? tmpdir : "/tmp") + "/manikin-archive-XXXXXX";
+        if (!mkdtemp(pattern.data()))
+            throw UserError(fmt::format("cannot create a temporary folder {}: {}", pattern, std::strerror(errno)));
+        path_ = pattern;
+    }
+    TempFolder(const TempFolder&) = delete;
+    TempFolder& operator=(const TempFolder&) = delete;
+    ~TempFolder() {
+        std::error_code ec;
+        std::filesystem::remove_all(path_, ec);
+    }
+    const std::filesystem::path& path() const { return path_; }
+
+private:
+    std::filesystem::path path_;
+};
+
+}  // namespace
+
+void add_campaign_source_options(CLI::App* cmd, CampaignSource& source) {
+    cmd->add_option("campaign", source.campaign,
+                    "Campaign folder in the manikin-recording/1 format: campaign.json + trials/<id>.csv\n"
+                    "(with --db or --archive: the campaign's name)");
+    auto* db = cmd->add_option("--db", source.db,
+                               "Read the campaign from the daemon's SQLite database instead of a folder "
+                               "(default campaign: the newest)");
+    cmd->add_option("--campaign", source.campaign, "The campaign's name (same as the positional argument)");
+    auto* archive = cmd->add_option("--archive", source.archive,
+                                    "Read the campaign from the PostgreSQL archive (a libpq conninfo or URI, "
+                                    "docs/archive.md); needs --lab and the campaign's name");
+    auto* lab = cmd->add_option("--lab", source.lab, "With --archive: the lab id the campaign was pushed under");
+    archive->excludes(db);
+    lab->needs(archive);
+}
+
+analysis::Campaign campaign_from_archive(const std::string& conninfo, const std::string& lab_id,
+                                         const std::string& campaign_name) {
+    TempFolder tmp;
+    analysis::Campaign c;
+    {
+        auto db = recorder::Database::open(tmp.path() / "pulled.db");
+        const auto pulled = archive::pull_campaign(conninfo, lab_id, campaign_name, db);
+        c = campaign_from_database(db, campaign_name);
+        // Not the temporary file's name: where the numbers came from (no password, conninfo may hold one).
+        c.provenance["database"] = fmt::format("archive {} lab {}", pulled.archive, lab_id);
+    }  // closed before the folder goes
+    return c;
+}
+
+analysis::Campaign read_campaign_source(const CampaignSource& source, const analysis::ReadOptions& options) {
+    try {
+        if (!source.archive.empty()) {
+            if (source.lab.empty())
+                throw UserError("--archive needs --lab <id>: the lab the campaign was pushed under");
+            if (source.campaign.empty()) throw UserError("--archive needs the campaign's name (--campaign <name>)");
+            return campaign_from_archive(source.archive, source.lab, source.campaign);
+        }
+        if (source.db.empty()) {
+            if (source.campaign.empty())
+                throw UserError("give the campaign folder, or --db <file> [--campaign <name>], or --archive <conninfo> "
+                                "--lab <id> --campaign <name>");
+            return analysis::read_campaign(source.campaign, options);
+        }
+        if (!std::filesystem::exists(source.db)) throw UserError(fmt::format("{}: no such database", source.db));
+        auto db = recorder::Database::open(source.db);
+        std::string name = source.campaign;
+        if (name.empty()) {
+            const auto campaigns = db.campaigns();  // by id: the last one is the newest
+            if (campaigns.empty()) throw UserError(fmt::format("{}: the database holds no campaign", source.db));
+            name = campaigns.back().name;
+        }
+        return campaign_from_database(db, name);
+    } catch (const analysis::InputError& e) {
+        throw UserError(e.what());
+    }
+}
+
+}  // namespace manikind::cli

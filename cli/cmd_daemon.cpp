@@ -1,0 +1,507 @@
+// The `manikin` commands that talk to a running daemon over its control socket, and the ones that
+// read its database: status, live, campaign run|abort|pause|resume|check, setpoint, trial watch,
+// results, campaigns, export.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+
+#include "analysis/analyze.hpp"
+#include "daemon/campaign_plan.hpp"
+#include "daemon/config.hpp"
+#include "base/toml_input.hpp"
+#include "cli/campaign_source.hpp"
+#include "cli/commands.hpp"
+#include "daemon/control_api.hpp"
+#include "store/database_export.hpp"
+#include "store/hdf5_export.hpp"
+#include "store/database.hpp"
+#include "base/user_error.hpp"
+#include "physics/sign_convention.hpp"
+
+namespace manikind::cli {
+
+namespace {
+
+struct Conn {
+    std::string socket = "manikind.sock";
+    std::string token;
+    double timeout_s = 10.0;
+    bool json = false;
+};
+
+void add_conn_options(CLI::App* cmd, Conn& c, bool mutating) {
+    cmd->add_option("--socket", c.socket, "The daemon's control socket ([api] socket)")->capture_default_str();
+    if (mutating) cmd->add_option("--token", c.token, "API token (default: read from <socket>.token, or $MANIKIND_TOKEN)");
+    cmd->add_option("--timeout", c.timeout_s, "Seconds to wait for the daemon's answer before saying what it waited for")
+        ->capture_default_str()
+        ->check(CLI::Range(0.1, 3600.0));
+    cmd->add_flag("--json", c.json, "Print the daemon's JSON reply");
+}
+
+nlohmann::json call(const Conn& c, nlohmann::json req, bool mutating) {
+    if (mutating) {
+        std::string token = c.token;
+        if (token.empty())
+            if (const char* env = std::getenv("MANIKIND_TOKEN")) token = env;
+        if (token.empty()) token = read_token_file(c.socket);
+        req["token"] = token;
+    }
+    auto reply = call_daemon(c.socket, req, c.timeout_s);
+    if (!reply.value("ok", false))
+        throw UserError::refused("the daemon refused: " + reply.value("error", std::string("?")));
+    return reply;
+}
+
+std::string heat_flux_footer() { return std::string("Heat flux: ") + physics::heat_flux_sign + "."; }
+
+std::string bar(double fraction, int width = 30) {
+    const int filled = static_cast<int>(std::floor(std::clamp(fraction, 0.0, 1.0) * width));  // full only at 1
+    return "[" + std::string(static_cast<std::size_t>(filled), '#') + std::string(static_cast<std::size_t>(width - filled), '.') + "]";
+}
+
+// "2026-11-03 14:05:09" (UTC) from nanoseconds since the epoch.
+std::string utc_text(std::int64_t utc_ns) {
+    const std::time_t t = static_cast<std::time_t>(utc_ns / 1'000'000'000);
+    std::tm tm{};
+    ::gmtime_r(&t, &tm);
+    char buf[32];
+    std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
+    return buf;
+}
+
+// "12.34" or "—" for a JSON null (a channel not yet seen, a NaN).
+std::string number_or_dash(const nlohmann::json& v, int decimals) {
+    return v.is_number() ? fmt::format("{:.{}f}", v.get<double>(), decimals) : std::string("—");
+}
+
+std::string age_text(const nlohmann::json& age_s) {
+    return age_s.is_number() ? fmt::format("{:.1f} s ago", age_s.get<double>()) : std::string("never");
+}
+
+// One measured value: "chamber air      35.21 °C  (setpoint 35.30 °C)  good, 0.4 s ago".
+void print_measured(const nlohmann::json& measured) {
+    const struct {
+        const char* key;
+        const char* label;
+        int decimals;
+    } rows[] = {{"chamber_air_temp_c", "chamber air temp", 2}, {"chamber_air_rh_pct", "chamber air RH", 1},
+                {"air_speed_m_s", "air speed", 2},            {"mean_skin_temp_c", "mean skin temp", 2},
+                {"mean_heat_flux_w_m2", "mean heat flux", 1}};
+    for (const auto& row : rows) {
+        if (!measured.contains(row.key)) continue;
+        const auto& m = measured[row.key];
+        const std::string unit = m.value("unit", "");
+        std::string setpoint;
+        if (m.contains("setpoint"))
+            setpoint = m["setpoint"].is_number() ? fmt::format("  (setpoint {} {})", number_or_dash(m["setpoint"], row.decimals), unit)
+                                                 : std::string("  (no setpoint sent)");
+        std::printf("  %-17s %8s %-5s%s  %s, %s  [%s]\n", row.label, number_or_dash(m["value"], row.decimals).c_str(),
+                    unit.c_str(), setpoint.c_str(), m["quality"].is_string() ? m["quality"].get<std::string>().c_str() : "no data",
+                    age_text(m["age_s"]).c_str(), m.value("source", "").c_str());
+    }
+}
+
+void print_status(const nlohmann::json& s) {
+    std::printf("%s lab, %s clock, t = %.0f s; database %s\n", s["mode"].get<std::string>().c_str(),
+                s["clock"].get<std::string>().c_str(), s["time_s"].get<double>(), s["database"].get<std::string>().c_str());
+    if (s["campaign"].is_null()) std::printf("no campaign running\n");
+    else
+        std::printf("campaign %s: %d of %d trials done; stage %s%s\n", s["campaign"].get<std::string>().c_str(),
+                    s["trials_done"].get<int>(), s["trials_total"].get<int>(), s["stage"].get<std::string>().c_str(),
+                    s["paused"].get<bool>() ? " (paused)" : "");
+    if (s.contains("trial")) {
+        const auto& t = s["trial"];
+        std::printf("trial %ld: case %d replicate %d, %.0f s in stage\n", t["id"].get<long>(), t["case"].get<int>(),
+                    t["replicate"].get<int>(), t["stage_elapsed_s"].get<double>());
+        if (t.contains("steady_progress")) {
+            const double progress = t["steady_progress"].get<double>();
+            // Floor, not round: 99.9 % must not print as 100 % while the rule says no.
+            std::printf("  steady %s %3.0f %%%s\n", bar(progress).c_str(), std::floor(100.0 * progress),
+                        t["steady"].get<bool>() ? "  STEADY" : "  not steady");
+            const auto& wz = t["worst_zone"];
+            std::printf("    window filled %3.0f %% of %.0f min; worst zone %s range %s °C (limit < %.3f °C); "
+                        "%.0f of %.0f min\n",
+                        std::floor(100.0 * t["window_filled_fraction"].get<double>()), t["window_s"].get<double>() / 60.0,
+                        wz.is_object() ? fmt::format("{} ({})", wz["zone"].get<int>(), wz["name"].get<std::string>()).c_str() : "—",
+                        number_or_dash(t["worst_zone_range_c"], 3).c_str(), t["limit_c"].get<double>(),
+                        std::floor(t["elapsed_s"].get<double>() / 60.0), t["min_duration_s"].get<double>() / 60.0);
+        }
+    }
+    if (s.contains("measured")) {
+        std::printf("measured:  (heat flux %s)\n", physics::heat_flux_sign);
+        print_measured(s["measured"]);
+    }
+    std::printf("%-11s %-5s %-5s %9s %6s %6s %6s %6s %6s  %s\n", "device", "conn", "stale", "samples", "cksum", "tmout", "exc",
+                "recon", "faults", "last error");
+    for (const auto& d : s["devices"])
+        std::printf("%-11s %-5s %-5s %9llu %6llu %6llu %6llu %6llu %6llu  %s\n", d["name"].get<std::string>().c_str(),
+                    d["connected"].get<bool>() ? "yes" : "NO", d["stale"].get<bool>() ? "YES" : "no",
+                    d["samples"].get<unsigned long long>(), d["checksum_errors"].get<unsigned long long>(),
+                    d["timeouts"].get<unsigned long long>(), d["exceptions"].get<unsigned long long>(),
+                    d["reconnects"].get<unsigned long long>(), d["device_faults"].get<unsigned long long>(),
+                    d["last_error"].get<std::string>().c_str());
+    const auto& r = s["recorder"];
+    std::printf("recorder: %llu samples committed, %llu not stored (%llu queue full, %llu re-sent duplicates, %llu lost)\n",
+                r["committed"].get<unsigned long long>(), r["dropped"].get<unsigned long long>(),
+                r.value("dropped_queue_full", 0ULL), r.value("duplicates", 0ULL), r.value("lost_after_retries", 0ULL));
+    // Where uncommitted samples wait (docs/recorder.md, "Durability"), and what a crash left there.
+    const std::string ring = r.value("crash_ring", std::string());
+    std::printf("          %llu waiting for their commit, %s; %llu recovered at start from a crashed daemon\n",
+                r.value("queue_rows", 0ULL), ring.empty() ? "NOT kept safe from a crash (no crash ring)" : ("kept in " + ring).c_str(),
+                r.value("recovered_from_crash_ring", 0ULL));
+    if (r.value("locked", false))
+        std::printf("          COMMITS WAITING: another program holds the database's lock (%llu attempts so far)\n",
+                    r.value("locked_commits", 0ULL));
+    if (const std::string journal = r.value("journal", std::string()); !journal.empty())
+        std::printf("          journal: %s\n", journal == "wal" ? "WAL (readers never wait)"
+                                                                 : "rollback (a commit waits for running reads)");
+}
+
+}  // namespace
+
+void add_daemon_commands(CLI::App& app) {
+    {
+        auto c = std::make_shared<Conn>();
+        auto* cmd = app.add_subcommand("status", "The running daemon: campaign, trial stage, devices and their counters");
+        add_conn_options(cmd, *c, false);
+        cmd->footer(heat_flux_footer());
+        cmd->callback([c] {
+            const auto r = call(*c, {{"cmd", "status"}}, false);
+            if (c->json) std::printf("%s\n", r["status"].dump(2).c_str());
+            else print_status(r["status"]);
+        });
+    }
+    {
+        auto* campaign = app.add_subcommand("campaign", "Start, abort, pause or resume a campaign on the running daemon");
+        campaign->require_subcommand(1);
+        auto c = std::make_shared<Conn>();
+        auto file = std::make_shared<std::string>();
+        auto* run = campaign->add_subcommand("run", "Queue a campaign: a TOML file (cases x replicates), or builtin:table-s3");
+        run->add_option("file", *file, "Campaign file (see config/campaign-example.toml) or builtin:table-s3")->required();
+        add_conn_options(run, *c, true);
+        run->callback([c, file] {
+            nlohmann::json req{{"cmd", "start_campaign"}};
+            if (*file == "builtin:table-s3") {
+                req["builtin"] = "table-s3";
+                req["name"] = "table-s3";
+            } else {
+                std::ifstream in(*file);
+                if (!in) throw UserError(fmt::format("{}: cannot open the campaign file", *file));
+                std::stringstream ss;
+                ss << in.rdbuf();
+                req["plan_toml"] = ss.str();
+                req["source"] = *file;
+            }
+            call(*c, req, true);
+            if (c->json) std::printf("{\"ok\":true}\n");
+            else std::printf("campaign queued; follow it with `manikin trial watch`\n");
+        });
+        {
+            auto check_file = std::make_shared<std::string>(), config_file = std::make_shared<std::string>();
+            auto json = std::make_shared<bool>(false);
+            auto* check = campaign->add_subcommand(
+                "check", "Parse a campaign file as the daemon would: unknown keys are errors (file:line:column, "
+                         "with the nearest known key), setpoints checked against [safety]");
+            check->add_option("file", *check_file, "Campaign file")->required();
+            check->add_option("--config", *config_file, "Daemon config whose [safety] limits apply (default: built-in limits)");
+            check->add_flag("--json", *json, "Print the parsed plan as JSON");
+            check->footer("Exit status 0 when the plan is valid, 5 when it has errors, 2 when a file cannot be read (docs/cli.md).");
+            check->callback([check_file, config_file, json] {
+                const auto text = toml_input::read_file(*check_file);
+                if (!text) throw UserError(fmt::format("{}: cannot open the campaign file", *check_file));
+                const auto cfg = config_file->empty() ? config::default_config() : config::load_config(*config_file);
+                // The files were read: what is wrong in the plan is the check's negative verdict.
+                const CampaignPlan plan = [&] {
+                    try {
+                        return parse_campaign_plan(*text, *check_file);
+                    } catch (const UserError& e) {
+                        throw UserError::check_failed(e.what());
+                    }
+                }();
+                if (const auto why = check_plan_against_limits(plan, cfg.safety); !why.empty())
+                    throw UserError::check_failed(fmt::format("{}: {}", *check_file, why));
+                if (*json) {
+                    nlohmann::json cases = nlohmann::json::array();
+                    for (const auto& pc : plan.cases)
+                        cases.push_back({{"id", pc.id}, {"chamber_temp_c", pc.chamber_temp_c}, {"chamber_rh_pct", pc.chamber_rh_pct},
+                                         {"skin_setpoint_c", pc.skin_setpoint_c}, {"wet", pc.wet},
+                                         {"sweat_rate_g_m2_h", pc.sweat_rate_g_m2_h}});
+                    std::printf("%s\n", nlohmann::json{{"ok", true}, {"name", plan.name}, {"replicates", plan.replicates},
+                                                        {"trial_duration_s", plan.trial_duration_s}, {"cases", cases}}
+                                                .dump(2)
+                                                .c_str());
+                } else {
+                    std::printf("%s: ok: campaign '%s', %zu case(s) x %d replicate(s) = %zu trials of %.0f min\n",
+                                check_file->c_str(), plan.name.c_str(), plan.cases.size(), plan.replicates,
+                                plan.cases.size() * static_cast<std::size_t>(plan.replicates), plan.trial_duration_s / 60.0);
+                }
+            });
+        }
+        for (const char* name : {"abort", "pause", "resume"}) {
+            auto* sub = campaign->add_subcommand(name, fmt::format("{} the running campaign", name));
+            add_conn_options(sub, *c, true);
+            sub->callback([c, name] {
+                call(*c, {{"cmd", name}}, true);
+                std::printf("%s\n", c->json ? "{\"ok\":true}" : "done");
+            });
+        }
+    }
+    {
+        auto c = std::make_shared<Conn>();
+        auto temp = std::make_shared<double>(), rh = std::make_shared<double>();
+        auto* cmd = app.add_subcommand("setpoint", "Set the chamber's temperature and humidity (checked against [safety])");
+        cmd->add_option("--chamber-temp", *temp, "°C")->required();
+        cmd->add_option("--chamber-rh", *rh, "%")->required();
+        add_conn_options(cmd, *c, true);
+        cmd->footer("A setpoint outside the daemon's [safety] limits is refused: exit status 4 (docs/cli.md).");
+        cmd->callback([c, temp, rh] {
+            call(*c, {{"cmd", "set_chamber"}, {"chamber_temp_c", *temp}, {"chamber_rh_pct", *rh}}, true);
+            if (c->json)
+                std::printf("%s\n", nlohmann::json{{"ok", true}, {"chamber_temp_c", *temp}, {"chamber_rh_pct", *rh}}.dump().c_str());
+            else
+                std::printf("chamber setpoints sent\n");
+        });
+    }
+    {
+        auto c = std::make_shared<Conn>();
+        auto once = std::make_shared<bool>(false);
+        auto* trial = app.add_subcommand("trial", "Follow the running trial");
+        trial->require_subcommand(1);
+        auto* watch = trial->add_subcommand("watch", "Live status with a progress bar toward steady state (Ctrl-C to stop)");
+        add_conn_options(watch, *c, false);
+        watch->add_flag("--once", *once, "Print one update and exit (implied by --json: one JSON document)");
+        watch->footer(heat_flux_footer());
+        watch->callback([c, once] {
+            // Clear the screen only on a terminal; a pipe or a log file gets plain blocks.
+            const bool terminal = ::isatty(STDOUT_FILENO) == 1;
+            for (bool first = true;; first = false) {
+                const auto r = call(*c, {{"cmd", "status"}}, false);
+                if (c->json) std::printf("%s\n", r["status"].dump(2).c_str());
+                else {
+                    if (terminal) std::printf("\033[H\033[2J");
+                    else if (!first) std::printf("\n");
+                    print_status(r["status"]);
+                }
+                std::fflush(stdout);
+                if (*once || c->json || r["status"]["campaign"].is_null()) break;
+                std::this_thread::sleep_for(std::chrono::seconds(1));
+            }
+        });
+    }
+    {
+        auto c = std::make_shared<Conn>();
+        auto campaign = std::make_shared<std::string>();
+        auto* cmd = app.add_subcommand("results", "Whole-body heat flux per case with 95 % CIs, from the running daemon");
+        cmd->add_option("--campaign", *campaign, "Campaign name (default: the last one run)");
+        add_conn_options(cmd, *c, false);
+        cmd->footer(heat_flux_footer() +
+                    "\nNo results yet is not an error: exit status 0, and under --json {\"campaign\": ..., \"cases\": [],\n"
+                    "\"note\": ...} (docs/cli.md).");
+        cmd->callback([c, campaign] {
+            nlohmann::json req{{"cmd", "results"}};
+            if (!campaign->empty()) req["campaign"] = *campaign;
+            const auto r = call(*c, req, false);
+            if (r["results"].is_null()) {
+                const std::string note = r.value("note", std::string("no results yet"));
+                if (c->json)
+                    std::printf("%s\n", nlohmann::json{{"campaign", r.value("campaign", nlohmann::json())},
+                                                       {"cases", nlohmann::json::array()}, {"note", note}}
+                                            .dump(2)
+                                            .c_str());
+                else
+                    std::printf("%s\n", note.c_str());
+                return;
+            }
+            if (c->json) {
+                auto j = r["results"];
+                j["heat_flux_sign"] = physics::heat_flux_sign;
+                std::printf("%s\n", j.dump(2).c_str());
+                return;
+            }
+            std::printf("campaign %s%s; heat flux %s\n  case  n   Q_WB W/m²   U (95 %%)   95 %% CI\n",
+                        r["campaign"].get<std::string>().c_str(),
+                        r["results"].value("interim", false) ? " (interim: the trials done so far)" : "", physics::heat_flux_sign);
+            for (const auto& cs : r["results"]["cases"]) {
+                const auto& wb = cs["whole_body"];
+                std::printf("  %4d  %d  %9.2f  %9.2f   [%.2f, %.2f]\n", cs.value("case", 0), cs.value("n_replicates", 0),
+                            wb.value("q_w_m2", 0.0), wb.value("U", 0.0), wb.value("ci_low_w_m2", 0.0), wb.value("ci_high_w_m2", 0.0));
+            }
+        });
+    }
+    {
+        auto c = std::make_shared<Conn>();
+        auto* cmd = app.add_subcommand("live", "Every live channel of the running daemon: value, unit, quality and age");
+        add_conn_options(cmd, *c, false);
+        cmd->footer(heat_flux_footer());
+        cmd->callback([c] {
+            const auto r = call(*c, {{"cmd", "live"}}, false);
+            if (c->json) {
+                std::printf("%s\n", r["live"].dump(2).c_str());
+                return;
+            }
+            std::printf("%-36s %12s %-9s %-12s %10s\n", "channel", "value", "unit", "quality", "age s");
+            for (const auto& [key, ch] : r["live"].items()) {
+                const auto& v = ch["value"];
+                std::printf("%-36s %12s %-9s %-12s %10.1f\n", key.c_str(),
+                            v.is_number() ? fmt::format("{:.4g}", v.get<double>()).c_str() : "—", ch.value("unit", "").c_str(),
+                            ch.value("quality", "").c_str(), ch.value("age_s", 0.0));
+            }
+        });
+    }
+    {
+        auto db = std::make_shared<std::string>("manikind.db");
+        auto json = std::make_shared<bool>(false);
+        auto* cmd = app.add_subcommand("campaigns", "The campaigns in a daemon's database: name, created, trials done/total, state");
+        cmd->add_option("--db", *db, "The daemon's database")->capture_default_str();
+        cmd->add_flag("--json", *json, "Print one JSON array");
+        cmd->callback([db, json] {
+            if (!std::filesystem::exists(*db)) throw UserError(fmt::format("{}: no such database", *db));
+            auto database = recorder::Database::open(*db);
+            nlohmann::json out = nlohmann::json::array();
+            for (const auto& row : database.campaigns()) {
+                // Trials are created as they start, so the total comes from the plan: cases x replicates.
+                const auto definition = nlohmann::json::parse(row.definition_json, nullptr, false);
+                const int replicates = definition.is_object() ? definition.value("replicates", 1) : 1;
+                const auto cases = database.cases(row.id).size();
+                int done = 0, failed = 0;
+                for (const auto& t : database.trials(row.id)) {
+                    if (t.state == "done") ++done;
+                    else if (recorder::is_terminal_trial_state(t.state)) ++failed;
+                }
+                out.push_back({{"name", row.name}, {"created_utc", utc_text(row.created_utc_ns)},
+                               {"created_utc_ns", row.created_utc_ns}, {"trials_done", done}, {"trials_failed_or_aborted", failed},
+                               {"trials_total", static_cast<int>(cases) * replicates}, {"state", row.state}});
+            }
+            if (*json) {
+                std::printf("%s\n", out.dump(2).c_str());
+                return;
+            }
+            if (out.empty()) {
+                std::printf("%s: no campaigns\n", db->c_str());
+                return;
+            }
+            std::printf("%-28s %-20s %11s %6s  %s\n", "campaign", "created (UTC)", "done/total", "failed", "state");
+            for (const auto& r : out)
+                std::printf("%-28s %-20s %5d/%-5d %6d  %s\n", r["name"].get<std::string>().c_str(),
+                            r["created_utc"].get<std::string>().c_str(), r["trials_done"].get<int>(), r["trials_total"].get<int>(),
+                            r["trials_failed_or_aborted"].get<int>(), r["state"].get<std::string>().c_str());
+        });
+    }
+    {
+        auto db = std::make_shared<std::string>("manikind.db");
+        auto wanted = std::make_shared<std::vector<std::string>>();
+        auto last_min = std::make_shared<double>(60.0);
+        auto json = std::make_shared<bool>(false);
+        auto* cmd = app.add_subcommand("log", "The idle log: readings recorded outside trials ([lab] idle_log_period_s), "
+                                              "as CSV (utc, channel, value, unit, quality)");
+        cmd->add_option("--db", *db, "The daemon's database")->capture_default_str();
+        cmd->add_option("--channel", *wanted, "DEVICE/CHANNEL, e.g. chamber/air_temp_pv_c (repeatable; default: every channel)");
+        cmd->add_option("--last-min", *last_min, "Minutes back from the newest reading")->capture_default_str()->check(CLI::PositiveNumber);
+        cmd->add_flag("--json", *json, "One JSON object per channel instead of CSV");
+        cmd->callback([db, wanted, last_min, json] {
+            if (!std::filesystem::exists(*db)) throw UserError(fmt::format("{}: no such database", *db));
+            auto database = recorder::Database::open(*db);
+            std::vector<recorder::ChannelRow> chosen;
+            for (const auto& ch : database.channels()) {
+                const std::string key = ch.device_name + "/" + ch.name;
+                if (wanted->empty() || std::find(wanted->begin(), wanted->end(), key) != wanted->end()) chosen.push_back(ch);
+            }
+            for (const auto& w : *wanted)
+                if (std::none_of(chosen.begin(), chosen.end(), [&](const auto& ch) { return ch.device_name + "/" + ch.name == w; }))
+                    throw UserError(fmt::format("--channel {}: no such channel in {} (see `manikin live` for names)", w, *db));
+            // The window ends at the newest idle reading; the log is keyed by time, so only the
+            // window is read.
+            const std::int64_t newest = database.newest_idle_utc_ns().value_or(0);
+            const auto since = newest - static_cast<std::int64_t>(*last_min * 60e9);
+            std::vector<std::vector<recorder::SampleRow>> rows;
+            for (const auto& ch : chosen) rows.push_back(database.idle_samples(ch.id, since));
+            nlohmann::json out = nlohmann::json::array();
+            if (!*json) std::printf("utc_s,channel,value,unit,quality\n");
+            for (std::size_t i = 0; i < chosen.size(); ++i) {
+                const std::string key = chosen[i].device_name + "/" + chosen[i].name;
+                nlohmann::json points = nlohmann::json::array();
+                for (const auto& r : rows[i]) {
+                    if (r.utc_ns < since) continue;
+                    if (*json)
+                        points.push_back({static_cast<double>(r.utc_ns) * 1e-9, std::isnan(r.value) ? nlohmann::json(nullptr) : nlohmann::json(r.value), r.quality});
+                    else
+                        std::printf("%.3f,%s,%.6g,%s,%d\n", static_cast<double>(r.utc_ns) * 1e-9, key.c_str(), r.value,
+                                    chosen[i].unit.c_str(), r.quality);
+                }
+                if (*json) out.push_back({{"channel", key}, {"unit", chosen[i].unit}, {"points_utc_s_value_quality", points}});
+            }
+            if (*json) std::printf("%s\n", out.dump().c_str());
+        });
+    }
+    {
+        struct ExportOptions {
+            std::string db = "manikind.db", campaign, out, format = "csv", archive, lab;
+            bool json = false;
+        };
+        auto o = std::make_shared<ExportOptions>();
+        auto* cmd = app.add_subcommand("export", "Write a recorded campaign from the database: every channel with its unit and "
+                                                 "quality, UTC beside trial time (CSV folder or one HDF5 file)");
+        cmd->add_option("campaign", o->campaign, "Campaign name (manikin campaigns --db FILE lists them)")->required();
+        cmd->add_option("out", o->out, "Output: a folder for csv (campaign.json + trials/*.csv), a file for hdf5")->required();
+        auto* db_option = cmd->add_option("--db", o->db, "The daemon's database")->capture_default_str();
+        auto* archive_option = cmd->add_option("--archive", o->archive, "Read the campaign from the PostgreSQL archive "
+                                                                        "instead (a libpq conninfo, docs/archive.md)");
+        cmd->add_option("--lab", o->lab, "With --archive: the lab id the campaign was pushed under")->needs(archive_option);
+        archive_option->excludes(db_option);
+        cmd->add_option("--format", o->format, "csv: manikin-recording/2, read by manikin analyze, pandas, MATLAB; "
+                                               "hdf5: manikin-hdf5/1 with the analysis beside the data")
+            ->check(CLI::IsMember({"csv", "hdf5"}))
+            ->capture_default_str();
+        cmd->add_flag("--json", o->json, "Print what was written as one JSON object");
+        cmd->footer(std::string("The formats are in docs/formats.md (section 1 and \"HDF5\"). Heat flux: ") + analysis::kHeatFluxSign +
+                    ".\nExamples:\n  manikin export --db lab.db validation-2026 recordings/validation-2026\n"
+                    "  manikin export --db lab.db validation-2026 validation-2026.h5 --format hdf5\n"
+                    "  manikin export --archive postgresql://archive.example/manikin --lab lab-3 validation-2026 out");
+        cmd->callback([o] {
+            auto c = [&] {
+                if (!o->archive.empty()) {
+                    if (o->lab.empty()) throw UserError("--archive needs --lab <id>: the lab the campaign was pushed under");
+                    return campaign_from_archive(o->archive, o->lab, o->campaign);
+                }
+                if (!std::filesystem::exists(o->db)) throw UserError(fmt::format("{}: no such database", o->db));
+                auto database = recorder::Database::open(o->db);
+                return campaign_from_database(database, o->campaign);
+            }();
+            c.provenance["exported_utc"] = analysis::iso_utc_ms(
+                std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+            std::size_t rows = 0;
+            for (const auto& t : c.trials) rows += t.data.rows();
+            if (o->format == "hdf5") {
+                const auto analysis = analysis::analyze_campaign(c);
+                write_campaign_hdf5(o->out, c, analysis::to_json(analysis));
+            } else {
+                analysis::write_campaign(o->out, c);
+            }
+            if (o->json) {
+                const nlohmann::json doc{{"campaign", o->campaign}, {"format", o->format == "hdf5" ? kHdf5Format : analysis::kRecordingFormat},
+                                         {"path", o->out}, {"trials", c.trials.size()}, {"rows", rows},
+                                         {"channels", c.channels.size()}, {"provenance", c.provenance}};
+                std::printf("%s\n", doc.dump(2).c_str());
+            } else {
+                std::printf("%zu trials of '%s' (%zu rows, %zu recorded channels) written to %s\n", c.trials.size(),
+                            o->campaign.c_str(), rows, c.channels.size(), o->out.c_str());
+                if (o->format == "csv") std::printf("analyse with: manikin analyze %s\n", o->out.c_str());
+            }
+        });
+    }
+}
+
+}  // namespace manikind::cli

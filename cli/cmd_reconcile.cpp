@@ -1,0 +1,133 @@
+// `manikin reconcile <campaign>`: where the twin and the recordings disagree, which physics
+// term explains it, and the fit before and after (analysis/reconcile).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <cstdint>
+#include <string>
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "analysis/analyze.hpp"
+#include "analysis/reconcile/from_analysis.hpp"
+#include "analysis/reconcile/reconcile.hpp"
+#include "analysis/reconcile/report_output.hpp"
+#include "cli/campaign_source.hpp"
+#include "cli/commands.hpp"
+#include "analysis/reconcile/twin_store.hpp"
+#include "base/user_error.hpp"
+#include "physics/sign_convention.hpp"
+
+namespace manikind::cli {
+namespace {
+
+namespace rc = analysis::reconcile;
+
+}  // namespace
+
+void add_reconcile_command(CLI::App& app) {
+    struct Opts {
+        CampaignSource source;
+        std::string twin = "baseline", plots, write_twin;
+        bool json = false, no_pairs = false, power = false;
+        double alpha = 0.01;
+        int simulations = 2000;
+        std::uint64_t seed = 20261123;
+    };
+    auto o = std::make_shared<Opts>();
+    auto* cmd = app.add_subcommand("reconcile", "Find the physics the twin left out: locate the mismatch, fit candidate "
+                                                "terms, show the fit improve");
+    add_campaign_source_options(cmd, o->source);
+    cmd->add_option("--twin", o->twin, "Twin version: 'baseline' (docs/twin-baseline.md) or a twin-version TOML file")
+        ->capture_default_str();
+    cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 3) instead of the report");
+    cmd->add_option("--plots", o->plots, "Write parity.svg and residual_vs_driver.svg into this folder");
+    cmd->add_option("--write-twin", o->write_twin, "Write the new twin version (TOML) here when a term is found");
+    cmd->add_flag("--no-pairs", o->no_pairs, "Fit single terms only");
+    cmd->add_option("--alpha", o->alpha, "False-claim rate: a term is claimed only when its evidence exceeds what "
+                                          "noise alone reaches in this fraction of simulated campaigns")
+        ->check(CLI::Range(0.0001, 0.2))
+        ->capture_default_str();
+    cmd->add_option("--simulations", o->simulations, "Campaigns simulated under the twin for the null distribution")
+        ->check(CLI::Range(200, 100000))
+        ->capture_default_str();
+    cmd->add_option("--seed", o->seed, "Seed of the simulations (results are reproducible)")->capture_default_str();
+    cmd->add_flag("--power", o->power, "Plan instead: per candidate, the smallest effect named with 80 % power for "
+                                       "this campaign's cases and noise, at its replicates and at 3, 5 and 10");
+    cmd->footer("The twin sees only the campaign's recorded conditions. The noise of every case mean comes from the\n"
+                "recordings: replicate scatter pooled per zone, the manikin's calibration shared by all points, each\n"
+                "case's probe errors shared by its zones (campaign.json `instruments`). A term is claimed only beyond\n"
+                "the evidence noise alone reaches (--alpha), chosen out of sample by case, and told apart from its\n"
+                "rivals; otherwise the report says where the mismatch is and that it is unexplained. A steady offset\n"
+                "on a few zones is reported as a local anomaly, not physics. docs/reconcile.md has the equations.\n"
+                "Heat flux: " + std::string(physics::heat_flux_sign) + ".\n"
+                "Exit status 0 whether or not a term is found (docs/cli.md).\n"
+                "Example: manikin simulate-campaign --effect humidity_buoyancy:gamma=146 --out /tmp/c\n"
+                "         manikin reconcile /tmp/c --plots /tmp/c/plots --write-twin /tmp/c/twin.toml\n"
+                "         manikin reconcile --db manikind-demo/manikind.db --campaign validation-20261124T010203Z");
+    cmd->callback([o] {
+        const auto t0 = std::chrono::steady_clock::now();
+        const auto base = twin_store::load_twin_version(o->twin);
+        const analysis::Campaign campaign = read_campaign_source(o->source);
+        // With --db the positional names a campaign in it, otherwise a folder: report what was read.
+        const std::string campaign_label = !o->source.archive.empty() ? "archive lab " + o->source.lab + ": " + campaign.name
+                                            : o->source.db.empty()    ? o->source.campaign
+                                                                      : o->source.db + ": " + campaign.name;
+        for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
+        const auto result = analysis::analyze_campaign(campaign);
+        std::vector<int> skipped;
+        auto cases = rc::case_inputs_from_results(result, campaign.zone_map, &skipped);
+        for (int id : skipped) spdlog::warn("case {}: no air temperature or humidity in the steady window; left out", id);
+        if (cases.empty()) throw UserError(fmt::format("{}: no case has a steady window to compare", campaign_label));
+        const auto model = rc::make_twin_model(std::move(cases), base);
+        rc::Options opt;
+        opt.try_pairs = !o->no_pairs;
+        opt.alpha = o->alpha;
+        opt.null_simulations = o->simulations;
+        opt.seed = o->seed;
+        opt.instruments = campaign.instruments;
+        if (o->power) {
+            std::vector<int> reps = {3, 5, 10};
+            const auto plan = rc::detection_limits(*model, opt, reps);
+            const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            if (o->json) {
+                nlohmann::json j = rc::power_to_json(plan);
+                j["campaign"] = campaign_label;
+                j["seconds"] = seconds;
+                std::printf("%s\n", j.dump(2).c_str());
+            } else {
+                std::printf("Campaign: %s (%zu cases, %d replicates)\n%s(%.2f s)\n", campaign_label.c_str(), result.cases.size(),
+                            plan.campaign_replicates, rc::power_to_text(plan).c_str(), seconds);
+            }
+            return;
+        }
+        opt.new_version_name = fmt::format("{}+reconciled", base.name);
+        const auto report = rc::reconcile(*model, opt);
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (!o->plots.empty()) {
+            for (const auto& p : rc::write_plots(report, *model, o->plots)) spdlog::info("wrote {}", p.string());
+        }
+        if (!o->write_twin.empty() && report.explanation) {
+            twin_store::save_twin_version(report.new_version, o->write_twin, base.name,
+                                          fmt::format("found by manikin reconcile {}", campaign_label));
+            spdlog::info("wrote twin version {}", o->write_twin);
+        }
+        if (o->json) {
+            auto j = rc::report_to_json(report, *model);
+            j["campaign"] = campaign_label;
+            j["heat_flux_sign"] = physics::heat_flux_sign;
+            j["seconds"] = seconds;
+            std::printf("%s\n", j.dump(2).c_str());
+        } else {
+            std::printf("Campaign: %s (%zu cases); heat flux %s\n%s", campaign_label.c_str(), result.cases.size(),
+                        physics::heat_flux_sign,
+                        rc::report_to_text(report).c_str());
+            std::printf("(%.2f s)\n", seconds);
+        }
+    });
+}
+
+}  // namespace manikind::cli

@@ -1,0 +1,243 @@
+#include "daemon/acquisition.hpp"
+
+#include <boost/asio/executor_work_guard.hpp>
+#include <boost/asio/post.hpp>
+#include <fmt/format.h>
+
+#include <chrono>
+#include <filesystem>
+#include <unistd.h>
+
+#include "analysis/zone_map.hpp"
+#include "drivers/register_map.hpp"
+#include "base/user_error.hpp"
+
+namespace manikind {
+
+sim::SimLabOptions simulated_lab_options(const config::Config& config) {
+    sim::SimLabOptions o;
+    for (const auto& z : analysis::andi35_zone_map().zones)
+        o.world.zones.push_back({{z.zone, z.segment, z.region, z.area_m2, 35.0}, z.name});
+    o.world.physics.name = "simulated world";
+    for (const auto& e : config.simulation.world_effects) {
+        try {
+            o.world.physics.terms.push_back(sim::parse_effect(e));
+        } catch (const std::exception& ex) {
+            throw UserError(fmt::format("simulation.world_effects: {}", ex.what()));
+        }
+    }
+    o.world.seed = config.simulation.seed;
+    o.world.scatter = config.simulation.scatter;
+    o.manikin_period_s = config.simulation.manikin_period_s;
+    o.world.enclosure_table = sim::table_s3_cases();
+    o.world.watchdog_s = config.safety.watchdog_timeout_s;
+    const auto convert = [](const RegisterMap& map) {
+        std::vector<sim::RegisterDef> defs;
+        for (const auto& r : map.registers) defs.push_back({r.spec, r.unit_id, r.probe});
+        return defs;
+    };
+    o.chamber_registers = convert(register_map_from_setting(config.devices.chamber.register_map, "chamber", config.source_dir));
+    o.datalogger_registers =
+        convert(register_map_from_setting(config.devices.datalogger.register_map, "datalogger", config.source_dir));
+    o.runtime_dir = config.simulation.runtime_dir.empty()
+                        ? std::filesystem::temp_directory_path() / fmt::format("manikind-sim-{}", ::getpid())
+                        : std::filesystem::path(config.simulation.runtime_dir);
+    for (const auto& f : config.simulation.faults) {
+        try {
+            o.faults.push_back(sim::parse_fault(f));
+        } catch (const std::exception& ex) {
+            throw UserError(fmt::format("simulation.faults: {}", ex.what()));
+        }
+    }
+    return o;
+}
+
+std::vector<drivers::ModbusPoint> modbus_points(const RegisterMap& map) {
+    std::vector<drivers::ModbusPoint> points;
+    for (const auto& r : map.registers) {
+        drivers::ModbusPoint p;
+        p.channel = r.spec.name;
+        p.spec = r.spec;
+        p.unit_id = r.unit_id;
+        p.scaling = r.probe;
+        p.valid_min = r.valid_min;
+        p.valid_max = r.valid_max;
+        // Setpoints are written by the daemon; their read-back is the controller's working setpoint.
+        p.poll = !r.spec.writable;
+        points.push_back(std::move(p));
+    }
+    return points;
+}
+
+Acquisition::Acquisition(const config::Config& config, drivers::ManualClock& clock, drivers::SampleSink sink,
+                         std::optional<sim::SimLabOptions> lab_options)
+    : manual_clock_(&clock), sink_(std::move(sink)) {
+    lab_ = std::make_unique<sim::SimLab>(lab_options ? std::move(*lab_options) : simulated_lab_options(config));
+    const auto ep = lab_->endpoints();
+    build_drivers(config, clock, lab_->take_manikin_fd(), ep.windsonic_path, ep.csat3b_path, ep.chamber_host,
+                  ep.chamber_port, ep.chamber_host, ep.datalogger_port);
+}
+
+Acquisition::Acquisition(const config::Config& config, const drivers::Clock& clock, drivers::SampleSink sink)
+    : sink_(std::move(sink)) {
+    const int fd = drivers::open_socketcan(config.devices.manikin_interface, manikin_open_error_);
+    const auto& d = config.devices;
+    build_drivers(config, clock, fd, d.windsonic_path, d.csat3b_path, d.chamber.host, static_cast<int>(d.chamber.port),
+                  d.datalogger.host, static_cast<int>(d.datalogger.port));
+}
+
+void Acquisition::build_drivers(const config::Config& config, const drivers::Clock& clock, int manikin_fd,
+                                const std::string& windsonic_path, const std::string& csat3b_path,
+                                const std::string& chamber_host, int chamber_port, const std::string& datalogger_host,
+                                int datalogger_port) {
+    const auto& d = config.devices;
+    poll_period_s_ = d.poll_period_s;
+    auto modbus = [&](const char* name, const config::ModbusDeviceConfig& m, const std::string& host, int port) {
+        drivers::ModbusOptions o;
+        o.device_name = name;
+        o.host = host;
+        o.port = port;
+        o.serial_path = lab_ ? std::string() : m.serial;
+        o.baud = static_cast<int>(m.baud);
+        o.response_timeout_s = d.modbus_timeout_s;
+        o.poll_period_s = d.poll_period_s;
+        o.max_gap_registers = static_cast<int>(m.max_gap_registers);
+        o.points = modbus_points(register_map_from_setting(m.register_map, name, config.source_dir));
+        return std::make_unique<drivers::ModbusDriver>(std::move(o), clock, sink_);
+    };
+    chamber_ = modbus("chamber", d.chamber, chamber_host, chamber_port);
+    datalogger_ = modbus("datalogger", d.datalogger, datalogger_host, datalogger_port);
+    drivers::ManikinBusOptions mo;
+    mo.interface = d.manikin_interface;
+    mo.stale_after_s = d.stale_after_s;
+    mo.max_skin_temp_c = config.safety.max_skin_temp_c;
+    mo.open_error = manikin_open_error_;
+    manikin_ = std::make_unique<drivers::ManikinCanDriver>(io_, manikin_fd, mo, clock, sink_);
+    if (!d.manikin_capture.empty()) manikin_->capture_to(d.manikin_capture);  // candump -l, for `manikin replay`
+    windsonic_ = std::make_unique<drivers::WindSonicDriver>(
+        io_, drivers::SerialOptions{"windsonic", windsonic_path, static_cast<unsigned>(d.windsonic_baud), d.stale_after_s},
+        clock, sink_);
+    csat3b_ = std::make_unique<drivers::Csat3bDriver>(
+        io_, drivers::SerialOptions{"csat3b", csat3b_path, static_cast<unsigned>(d.csat3b_baud), d.stale_after_s},
+        clock, sink_);
+}
+
+Acquisition::~Acquisition() { stop(); }
+
+void Acquisition::start() {
+    chamber_->start();
+    datalogger_->start();
+    manikin_->start();
+    windsonic_->start();
+    csat3b_->start();
+}
+
+void Acquisition::checks(std::int64_t now_ns) {
+    chamber_->check(now_ns);
+    datalogger_->check(now_ns);
+    manikin_->check(now_ns);
+    windsonic_->check(now_ns);
+    csat3b_->check(now_ns);
+}
+
+void Acquisition::step(double dt_s) {
+    if (!manual_clock_ || realtime_) throw std::logic_error("Acquisition::step needs the virtual clock");
+    const auto ws0 = windsonic_->bytes_received(), cs0 = csat3b_->bytes_received();
+    const auto mf0 = manikin_->frames_received();
+    lab_->step(dt_s);
+    manual_clock_->advance_s(dt_s);
+    // Modbus first, so that its round trips overlap the bus reads below: the datalogger on its
+    // worker, the chamber here. Both read the lab as this step left it (lab_->step is done and
+    // nothing below changes the world), so the result is the lockstep's, only sooner. The
+    // datalogger's samples reach the sink from this thread, which holds the daemon's lock.
+    const double now_s = manual_clock_->elapsed_s();
+    const bool poll_due = now_s + 1e-9 >= next_poll_s_;
+    if (poll_due) {
+        next_poll_s_ = now_s + poll_period_s_;
+        if (!datalogger_poll_)
+            datalogger_poll_ = std::make_unique<StepWorker>([this] { datalogger_samples_ = datalogger_->read_all(); });
+        datalogger_poll_->start();
+    }
+    // Whatever leaves this step early (a sink that throws), the datalogger's read is over first.
+    struct AwaitPoll {
+        StepWorker* worker;
+        ~AwaitPoll() {
+            if (!worker) return;
+            try {
+                worker->wait();
+            } catch (...) {  // already leaving with another error; the read's own is lost
+            }
+        }
+    } await_poll{poll_due ? datalogger_poll_.get() : nullptr};
+    if (poll_due) chamber_->poll();
+    const auto ws_expected = windsonic_->status().connected ? lab_->serial_bytes_last_step("windsonic") : 0;
+    const auto cs_expected = csat3b_->status().connected ? lab_->serial_bytes_last_step("csat3b") : 0;
+    const auto mf_expected = lab_->can_frames_last_step();
+    // Lockstep: wait (on I/O events, never a sleep) until every driver has read what the lab
+    // sent this step. A pty delivers asynchronously, so this is a real wait, capped at 0.5 s.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(500);
+    while (windsonic_->bytes_received() - ws0 < ws_expected || csat3b_->bytes_received() - cs0 < cs_expected ||
+           manikin_->frames_received() - mf0 < mf_expected) {
+        if (std::chrono::steady_clock::now() > deadline) {
+            ++lockstep_stalls_;
+            break;
+        }
+        if (io_.stopped()) io_.restart();
+        io_.run_one_for(std::chrono::milliseconds(50));
+    }
+    if (io_.stopped()) io_.restart();
+    io_.poll();  // completions already queued (errors, writes)
+    if (poll_due) {
+        await_poll.worker = nullptr;
+        datalogger_poll_->wait();
+        for (const auto& s : datalogger_samples_) sink_(s);
+    }
+    checks(manual_clock_->mono_ns());
+}
+
+void Acquisition::start_realtime(double speed) {
+    realtime_ = true;
+    stop_ = false;
+    if (lab_) {  // keep the virtual poll rate when the simulated lab runs faster than the wall clock
+        chamber_->set_poll_period(poll_period_s_ / speed);
+        datalogger_->set_poll_period(poll_period_s_ / speed);
+    }
+    chamber_->start_worker();
+    datalogger_->start_worker();
+    io_thread_ = std::thread([this] {
+        auto guard = boost::asio::make_work_guard(io_);
+        while (!stop_) io_.run_for(std::chrono::milliseconds(200));
+    });
+    // Checks (and the simulated lab, if any) on a paced thread.
+    pacer_thread_ = std::thread([this, speed] {
+        const double tick_s = 0.1;
+        auto next = std::chrono::steady_clock::now();
+        drivers::SystemClock sys;
+        while (!stop_) {
+            next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(tick_s));
+            if (lab_) {
+                lab_->step(tick_s * speed);
+                if (manual_clock_) manual_clock_->advance_s(tick_s * speed);
+            }
+            boost::asio::post(io_, [this, now = manual_clock_ ? manual_clock_->mono_ns() : sys.mono_ns()] { checks(now); });
+            std::this_thread::sleep_until(next);
+        }
+    });
+}
+
+void Acquisition::stop() {
+    stop_ = true;
+    if (pacer_thread_.joinable()) pacer_thread_.join();
+    if (io_thread_.joinable()) io_thread_.join();
+    if (chamber_) chamber_->stop();
+    if (datalogger_) datalogger_->stop();
+    if (windsonic_) windsonic_->stop();
+    if (csat3b_) csat3b_->stop();
+    if (manikin_) manikin_->stop();
+}
+
+std::vector<drivers::DriverStatus> Acquisition::status() const {
+    return {chamber_->status(), datalogger_->status(), manikin_->status(), windsonic_->status(), csat3b_->status()};
+}
+
+}  // namespace manikind

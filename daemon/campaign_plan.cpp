@@ -1,0 +1,189 @@
+#include "daemon/campaign_plan.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <initializer_list>
+#include <string_view>
+#include <vector>
+
+#include <fmt/format.h>
+#include <toml++/toml.h>
+
+#include "base/toml_input.hpp"
+#include "base/user_error.hpp"
+#include "sim/campaign/campaign_generator.hpp"
+
+namespace manikind {
+
+nlohmann::json campaign_definition_json(const CampaignPlan& plan) {
+    return {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
+}
+
+nlohmann::json case_conditions_json(const PlannedCase& c) {
+    return {{"id", c.id},           {"chamber_temp_c", c.chamber_temp_c}, {"chamber_rh_pct", c.chamber_rh_pct},
+            {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
+}
+
+std::vector<std::string> plan_differences(const CampaignPlan& plan, const nlohmann::json& definition,
+                                          const std::vector<nlohmann::json>& case_conditions) {
+    std::vector<std::string> out;
+    const auto compare = [&](const std::string& where, const nlohmann::json& stored, const nlohmann::json& planned) {
+        for (const auto& [key, value] : planned.items())
+            if (!stored.contains(key)) out.push_back(fmt::format("{}{}: not stored, now {}", where, key, value.dump()));
+            else if (stored.at(key) != value)
+                out.push_back(fmt::format("{}{}: was {}, now {}", where, key, stored.at(key).dump(), value.dump()));
+    };
+    compare("", definition, campaign_definition_json(plan));
+    if (case_conditions.size() != plan.cases.size())
+        out.push_back(fmt::format("cases: {} stored, {} in the plan", case_conditions.size(), plan.cases.size()));
+    for (std::size_t i = 0; i < std::min(case_conditions.size(), plan.cases.size()); ++i)
+        compare(fmt::format("case {} (position {}): ", plan.cases[i].id, i + 1), case_conditions[i],
+                case_conditions_json(plan.cases[i]));
+    return out;
+}
+
+CampaignPlan table_s3_plan(const std::string& name) {
+    CampaignPlan p;
+    p.name = name;
+    for (const auto& c : sim::table_s3_cases())
+        p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
+                           c.wettedness > 0.5 ? 300.0 : 0.0});
+    return p;
+}
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diagonal = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            const std::size_t up = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diagonal = up;
+        }
+    }
+    return row[b.size()];
+}
+
+namespace {
+
+// A misspelt key would otherwise be silently replaced by its default (replicate = 1 would run 3
+// replicates), so every key the parser does not read is an error, with the nearest known key.
+void refuse_unknown_keys(const toml::table& table, std::initializer_list<std::string_view> known, const std::string& source,
+                         const std::string& prefix) {
+    for (const auto& [key, node] : table) {
+        const std::string_view k = key.str();
+        if (std::find(known.begin(), known.end(), k) != known.end()) continue;
+        std::string_view nearest;
+        std::size_t best = std::string_view::npos;
+        for (const auto candidate : known)
+            if (const auto d = edit_distance(k, candidate); d < best) best = d, nearest = candidate;
+        // Close: at most 2 edits, and fewer than a third of the key (so "id" does not suggest "wet").
+        const bool close = best <= 2 && best * 3 <= std::max(k.size(), nearest.size());
+        throw UserError(fmt::format("{}: {}{}: unknown key{}", toml_input::where(source, key.source()), prefix, k,
+                                    close ? fmt::format(" (did you mean '{}'?)", nearest) : std::string()));
+    }
+}
+
+}  // namespace
+
+CampaignPlan parse_campaign_plan(const std::string& text, const std::string& source) {
+    const toml::table root = toml_input::parse(text, source);
+    auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
+    refuse_unknown_keys(root,
+                        {"name", "replicates", "trial_duration_min", "settle_window_min", "settle_band_c", "builtin_cases", "cases"},
+                        source, "");
+    auto number = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
+        const auto* n = t.get(key);
+        if (!n) return fallback;
+        if (!n->is_number()) throw UserError(fmt::format("{}: {}: expected a number", where(*n), key));
+        const double v = n->is_integer() ? static_cast<double>(n->as_integer()->get()) : n->as_floating_point()->get();
+        if (!(v >= lo && v <= hi)) throw UserError(fmt::format("{}: {}: {} is outside {}..{}", where(*n), key, v, lo, hi));
+        return v;
+    };
+    // Counts: 2.5 replicates is a typo, not 2.
+    auto whole = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
+        const double v = number(t, key, fallback, lo, hi);
+        if (v != std::floor(v))
+            throw UserError(fmt::format("{}: {}: {} is not a whole number", where(*t.get(key)), key, v));
+        return static_cast<int>(v);
+    };
+    CampaignPlan p;
+    const auto* name = root.get("name");
+    if (!name || !name->is_string()) throw UserError(fmt::format("{}: name: expected the campaign's name (a string)", source));
+    p.name = name->as_string()->get();
+    if (p.name.empty() || p.name.find_first_of("/\\") != std::string::npos)
+        throw UserError(fmt::format("{}: name: must be non-empty and contain no '/'", where(*name)));
+    // The name becomes a folder name and a column in exports: printable and of a sane length.
+    if (p.name.size() > 120 ||
+        std::any_of(p.name.begin(), p.name.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; }))
+        throw UserError(fmt::format("{}: name: at most 120 characters, none of them control characters", where(*name)));
+    p.replicates = whole(root, "replicates", 3, 1, 20);
+    p.trial_duration_s = 60.0 * number(root, "trial_duration_min", 75, 1, 24 * 60);
+    p.settle_window_s = 60.0 * number(root, "settle_window_min", 10, 0, 600);
+    p.settle_band_c = number(root, "settle_band_c", 0.3, 0.01, 10);
+    if (const auto* b = root.get("builtin_cases")) {
+        if (!b->is_string() || b->as_string()->get() != "table-s3")
+            throw UserError(fmt::format("{}: builtin_cases: the only built-in list is \"table-s3\"", where(*b)));
+        p.cases = table_s3_plan(p.name).cases;
+    }
+    if (const auto* cases = root.get("cases")) {
+        const auto* arr = cases->as_array();
+        if (!arr) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(*cases)));
+        for (const auto& node : *arr) {
+            const auto* t = node.as_table();
+            if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
+            refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h"},
+                                source, "cases.");
+            PlannedCase c;
+            c.id = whole(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6);
+            // A case id names the case in results and exports, and pairs trials on continuing.
+            for (const auto& earlier : p.cases)
+                if (earlier.id == c.id)
+                    throw UserError(fmt::format("{}: cases.id: {} is already the id of an earlier case (ids must differ)",
+                                                where(t->get("id") ? *t->get("id") : node), c.id));
+            if (!t->get("chamber_temp_c") || !t->get("chamber_rh_pct"))
+                throw UserError(fmt::format("{}: cases: chamber_temp_c and chamber_rh_pct are required", where(node)));
+            c.chamber_temp_c = number(*t, "chamber_temp_c", 0, -40, 80);
+            c.chamber_rh_pct = number(*t, "chamber_rh_pct", 0, 0, 100);
+            c.skin_setpoint_c = number(*t, "skin_setpoint_c", 35, 0, 60);
+            if (const auto* w = t->get("wet")) {
+                if (!w->is_boolean()) throw UserError(fmt::format("{}: wet: expected true or false", where(*w)));
+                c.wet = w->as_boolean()->get();
+            }
+            c.sweat_rate_g_m2_h = number(*t, "sweat_rate_g_m2_h", c.wet ? 300 : 0, 0, 510);
+            if (!c.wet && c.sweat_rate_g_m2_h > 0)
+                throw UserError(fmt::format("{}: cases.sweat_rate_g_m2_h: {} g/m²/h on a dry case (wet = false); set "
+                                            "wet = true, or leave the rate out",
+                                            where(*t->get("sweat_rate_g_m2_h")), c.sweat_rate_g_m2_h));
+            p.cases.push_back(c);
+        }
+    }
+    if (p.cases.empty()) throw UserError(fmt::format("{}: no cases (give [[cases]] or builtin_cases = \"table-s3\")", source));
+    return p;
+}
+
+CampaignPlan load_campaign_plan(const std::string& file) {
+    if (file == "builtin:table-s3") return table_s3_plan("table-s3");
+    const auto text = toml_input::read_file(file);
+    if (!text) throw UserError(fmt::format("{}: cannot open the campaign file", file));
+    return parse_campaign_plan(*text, file);
+}
+
+std::string check_plan_against_limits(const CampaignPlan& plan, const config::SafetyLimits& l) {
+    for (const auto& c : plan.cases) {
+        if (c.chamber_temp_c < l.min_chamber_temp_c || c.chamber_temp_c > l.max_chamber_temp_c)
+            return fmt::format("case {}: chamber_temp_c {} is outside the safety limits {}..{} °C (safety.min/max_chamber_temp_c)",
+                               c.id, c.chamber_temp_c, l.min_chamber_temp_c, l.max_chamber_temp_c);
+        if (c.chamber_rh_pct < l.min_chamber_rh_pct || c.chamber_rh_pct > l.max_chamber_rh_pct)
+            return fmt::format("case {}: chamber_rh_pct {} is outside the safety limits {}..{} % (safety.min/max_chamber_rh_pct)",
+                               c.id, c.chamber_rh_pct, l.min_chamber_rh_pct, l.max_chamber_rh_pct);
+        if (c.skin_setpoint_c < l.min_skin_temp_c || c.skin_setpoint_c > l.max_skin_temp_c)
+            return fmt::format("case {}: skin_setpoint_c {} is outside the safety limits {}..{} °C (safety.min/max_skin_temp_c)",
+                               c.id, c.skin_setpoint_c, l.min_skin_temp_c, l.max_skin_temp_c);
+    }
+    return {};
+}
+
+}  // namespace manikind

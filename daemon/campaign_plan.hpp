@@ -1,0 +1,60 @@
+#pragma once
+// A campaign to run: cases (chamber setpoints, skin setpoint, wet or dry) x replicates, from a
+// TOML file or the built-in Table S3 list. Every setpoint is checked against the configured
+// safety limits before anything starts; an error names the file, line and key.
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/config.hpp"
+
+namespace manikind {
+
+struct PlannedCase {
+    int id = 0;
+    double chamber_temp_c = 0.0;
+    double chamber_rh_pct = 0.0;
+    double skin_setpoint_c = 35.0;
+    bool wet = false;
+    double sweat_rate_g_m2_h = 0.0;   // wet cases: the manikin's sweat supply
+};
+
+struct CampaignPlan {
+    std::string name;
+    int replicates = 3;
+    double trial_duration_s = 4500.0;       // Methods: 75 min
+    double settle_window_s = 600.0;         // enclosure stable when its air varies < settle_band_c for this long
+    double settle_band_c = 0.3;
+    double settle_timeout_s = 3.0 * 3600.0;
+    double acquire_timeout_s = 4.0 * 3600.0;
+    std::vector<PlannedCase> cases;
+};
+
+// What the database stores of a plan (campaigns.definition_json, cases.conditions_json): what a
+// continued campaign is compared with.
+nlohmann::json campaign_definition_json(const CampaignPlan& plan);
+nlohmann::json case_conditions_json(const PlannedCase& c);
+
+// How `plan` differs from a campaign stored as `definition` and `case_conditions` (in position
+// order), one readable line per difference; empty when it is the same plan.
+std::vector<std::string> plan_differences(const CampaignPlan& plan, const nlohmann::json& definition,
+                                          const std::vector<nlohmann::json>& case_conditions);
+
+// The paper's 15 validation cases (Table S3) x 3 replicates.
+CampaignPlan table_s3_plan(const std::string& name);
+
+// `text` is the TOML; `source` names it in messages. A key the parser does not know is an error
+// ("file:line:column: key: unknown key (did you mean '...'?)"): the daemon refuses such a plan. "builtin:table-s3" as a file name gives the
+// Table S3 plan. Throws UserError.
+CampaignPlan parse_campaign_plan(const std::string& text, const std::string& source);
+CampaignPlan load_campaign_plan(const std::string& file_or_builtin);
+
+// Empty when every case is inside the limits, else the first violation with the limit named.
+// Levenshtein distance, for "did you mean" suggestions.
+std::size_t edit_distance(std::string_view a, std::string_view b);
+
+std::string check_plan_against_limits(const CampaignPlan& plan, const config::SafetyLimits& limits);
+
+}  // namespace manikind

@@ -1,0 +1,224 @@
+// config::validate: the checks manikind makes at start, runnable without starting it, so that
+// `manikin config check` and the daemon accept and refuse the same files.
+#include <sys/un.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include <fmt/core.h>
+#include <libpq-fe.h>
+
+#include "daemon/config.hpp"
+#include "daemon/web_server.hpp"
+#include "drivers/register_map.hpp"
+#include "base/user_error.hpp"
+#include "sim/campaign/campaign_generator.hpp"
+#include "sim/lab/sim_lab.hpp"
+
+namespace manikind::config {
+namespace {
+
+// The longest path bind() and connect() take: sun_path less its terminating NUL (107 on Linux).
+constexpr std::size_t max_socket_path_chars = sizeof(sockaddr_un{}.sun_path) - 1;
+constexpr std::size_t min_token_chars = 24;
+constexpr std::size_t min_token_distinct_chars = 10;
+constexpr double min_token_bits = 80.0;
+
+// "file:line:column" of a key, or of the nearest thing we know (the file) when it is absent.
+std::string where_of(const Config& c, const std::string& key) {
+    if (const auto it = c.key_where.find(key); it != c.key_where.end()) return it->second;
+    return c.source_name.empty() ? std::string("configuration") : c.source_name;
+}
+
+bool set_in_file(const Config& c, const std::string& key) { return c.key_where.count(key) != 0; }
+
+void check_register_maps(const Config& c, std::vector<std::string>& problems) {
+    for (const auto& [device, m] : {std::pair<const char*, const ModbusDeviceConfig*>{"chamber", &c.devices.chamber},
+                                    {"datalogger", &c.devices.datalogger}}) {
+        if (m->register_map == "builtin") continue;
+        const std::string key = fmt::format("devices.{}.register_map", device);
+        try {
+            (void)register_map_from_setting(m->register_map, device, c.source_dir);
+        } catch (const UserError& e) {
+            problems.push_back(fmt::format("{}: {}: {}", where_of(c, key), key, e.what()));
+        }
+    }
+}
+
+// Each entry is parsed as the simulated lab will parse it at start (acquisition.cpp).
+template <typename Parse>
+void check_entries(const Config& c, const char* key, const std::vector<std::string>& entries, Parse parse,
+                   std::vector<std::string>& problems) {
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+        const std::string element = fmt::format("{}[{}]", key, i);
+        try {
+            (void)parse(entries[i]);
+        } catch (const std::exception& e) {
+            const std::string at = set_in_file(c, element) ? where_of(c, element) : where_of(c, key);
+            // Parsers explain on several lines (fault_help); indent them so each problem starts with file:line.
+            std::string why = e.what();
+            for (std::size_t nl = why.find('\n'); nl != std::string::npos; nl = why.find('\n', nl + 3)) why.insert(nl + 1, "  ");
+            problems.push_back(fmt::format("{}: {}: '{}': {}", at, element, entries[i], why));
+        }
+    }
+}
+
+void check_socket(const Config& c, std::vector<std::string>& problems) {
+    // The daemon binds the path as given (relative: from its working directory) and writes
+    // <socket>.token and takes <socket>.lock beside it; every one must fit in sun_path.
+    if (!c.http.listen.empty()) {
+        try {
+            parse_listen(c.http.listen, where_of(c, "http.listen") + ": http.listen");
+        } catch (const UserError& e) {
+            problems.push_back(e.what());
+        }
+    }
+    const std::string socket = c.api.socket;
+    if (socket.empty()) {
+        problems.push_back(fmt::format("{}: api.socket: empty; give the control socket's path", where_of(c, "api.socket")));
+        return;
+    }
+    const std::size_t longest = socket.size() + std::string(".token").size();
+    if (longest > max_socket_path_chars)
+        problems.push_back(fmt::format(
+            "{}: api.socket: '{}' is {} characters, {} with '.token'; a Unix socket path holds at most {} "
+            "(sockaddr_un::sun_path, 108 bytes with the NUL), so the socket path must be at most {} characters",
+            where_of(c, "api.socket"), socket, socket.size(), longest, max_socket_path_chars,
+            max_socket_path_chars - std::string(".token").size()));
+}
+
+// mode = "real": a lab's file must say every limit and address itself; the simulated lab's
+// defaults (127.0.0.1, /dev/ttyUSB0, its safety limits) are never a real lab's.
+void check_real_mode(const Config& c, std::vector<std::string>& problems) {
+    const std::string at = where_of(c, "lab.mode");
+    static const std::array<const char*, 9> safety_keys = {
+        "max_skin_temp_c",    "min_skin_temp_c",    "max_heater_temp_c",  "max_heater_power_w_m2", "min_chamber_temp_c",
+        "max_chamber_temp_c", "min_chamber_rh_pct", "max_chamber_rh_pct", "watchdog_timeout_s"};
+    std::string missing;
+    for (const char* k : safety_keys)
+        if (!set_in_file(c, std::string("safety.") + k)) missing += (missing.empty() ? "" : ", ") + std::string(k);
+    if (!missing.empty())
+        problems.push_back(fmt::format("{}: safety: mode = \"real\" needs every [safety] limit set in the file; missing: {}",
+                                       at, missing));
+    const auto require = [&](const std::string& key, const std::string& value, const char* what) {
+        if (!set_in_file(c, key) || value.empty())
+            problems.push_back(fmt::format("{}: {}: mode = \"real\" needs {} set in the file", at, key, what));
+    };
+    require("lab.database", c.database.string(), "the database path");
+    for (const auto& [device, m] : {std::pair<const char*, const ModbusDeviceConfig*>{"chamber", &c.devices.chamber},
+                                    {"datalogger", &c.devices.datalogger}}) {
+        const std::string base = std::string("devices.") + device;
+        const bool host = set_in_file(c, base + ".host") && !m->host.empty();
+        const bool serial = set_in_file(c, base + ".serial") && !m->serial.empty();
+        if (!host && !serial)
+            problems.push_back(fmt::format("{}: {}: mode = \"real\" needs host (Modbus TCP) or serial (RTU) set in the file",
+                                           at, base));
+    }
+    require("devices.windsonic.path", c.devices.windsonic_path, "the WindSonic's serial device");
+    require("devices.csat3b.path", c.devices.csat3b_path, "the CSAT3B's serial device");
+    require("devices.manikin.interface", c.devices.manikin_interface, "the manikin's CAN interface");
+    require("api.token", c.api.token, "the API token (make one with `manikin config token`)");
+}
+
+void check_token(const Config& c, std::vector<std::string>& problems) {
+    if (c.api.token.empty()) return;  // the daemon makes one (<socket>.token, 0600)
+    if (const auto why = token_problem(c.api.token); !why.empty())
+        problems.push_back(fmt::format("{}: api.token: {}", where_of(c, "api.token"), why));
+    if (set_in_file(c, "api.token") && c.file_mode != 0 && (c.file_mode & 0004) != 0)
+        problems.push_back(fmt::format("{}: holds the API token but is readable by every user (mode {:04o}): chmod 640 {}",
+                                       c.source_name, c.file_mode & 07777, c.source_name));
+}
+
+// [archive]: a conninfo libpq parses, a lab id the archive accepts, no password in a file every
+// user can read (docs/archive.md).
+void check_archive(const Config& c, std::vector<std::string>& problems) {
+    const auto& a = c.archive;
+    if (a.postgresql.empty()) {
+        if (!a.lab_id.empty())
+            problems.push_back(fmt::format("{}: archive.lab_id: set, but archive.postgresql is empty: nothing would "
+                                           "be forwarded; give the archive's connection string",
+                                           where_of(c, "archive.lab_id")));
+        return;
+    }
+    char* parse_error = nullptr;
+    PQconninfoOption* options = PQconninfoParse(a.postgresql.c_str(), &parse_error);
+    if (!options) {
+        std::string why = parse_error ? parse_error : "out of memory";
+        while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
+        PQfreemem(parse_error);
+        problems.push_back(fmt::format("{}: archive.postgresql: does not parse as a libpq connection string or URI: {}",
+                                       where_of(c, "archive.postgresql"), why));
+    } else {
+        bool has_password = false;
+        for (const PQconninfoOption* o = options; o->keyword; ++o)
+            if (std::string(o->keyword) == "password" && o->val && *o->val) has_password = true;
+        PQconninfoFree(options);
+        if (has_password && set_in_file(c, "archive.postgresql") && c.file_mode != 0 && (c.file_mode & 0004) != 0)
+            problems.push_back(fmt::format("{}: archive.postgresql holds a password but the file is readable by every "
+                                           "user (mode {:04o}): chmod 640 {}, or move the password to ~/.pgpass",
+                                           c.source_name, c.file_mode & 07777, c.source_name));
+    }
+    const bool ok_chars = std::all_of(a.lab_id.begin(), a.lab_id.end(), [](char ch) {
+        return std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' || ch == '.';
+    });
+    if (a.lab_id.empty())
+        problems.push_back(fmt::format("{}: archive.lab_id: needed with archive.postgresql: this lab's key in the "
+                                       "archive (1 to 64 letters, digits, '-', '_' or '.'), the same at every push",
+                                       where_of(c, "archive")));
+    else if (a.lab_id.size() > 64 || !ok_chars)
+        problems.push_back(fmt::format("{}: archive.lab_id: '{}': expected 1 to 64 letters, digits, '-', '_' or '.'",
+                                       where_of(c, "archive.lab_id"), a.lab_id));
+}
+
+}  // namespace
+
+std::string token_problem(const std::string& token) {
+    static const char* const how = "make one with `manikin config token` (or `openssl rand -hex 32`)";
+    std::string lower(token);
+    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+    for (const char* word : {"change-me", "changeme", "example", "placeholder", "your-token", "secret", "password"})
+        if (lower.find(word) != std::string::npos)
+            return fmt::format("is a placeholder (contains '{}'), refused until replaced; {}", word, how);
+    if (token.size() < min_token_chars)
+        return fmt::format("is {} characters, fewer than {}; {}", token.size(), min_token_chars, how);
+    std::map<char, std::size_t> counts;
+    for (const char ch : token) ++counts[ch];
+    if (counts.size() < min_token_distinct_chars)
+        return fmt::format("has only {} distinct characters (at least {}); {}", counts.size(), min_token_distinct_chars, how);
+    // Shannon estimate: length x the per-character entropy of the token's own character frequencies.
+    double bits_per_char = 0.0;
+    for (const auto& [ch, n] : counts) {
+        const double p = static_cast<double>(n) / static_cast<double>(token.size());
+        bits_per_char -= p * std::log2(p);
+    }
+    const double bits = bits_per_char * static_cast<double>(token.size());
+    if (bits < min_token_bits)
+        return fmt::format("carries about {:.0f} bits by its character statistics (at least {:.0f}); {}", bits, min_token_bits, how);
+    return {};
+}
+
+std::vector<std::string> validate(const Config& c) {
+    std::vector<std::string> problems;
+    check_register_maps(c, problems);
+    check_entries(c, "simulation.world_effects", c.simulation.world_effects, sim::parse_effect, problems);
+    check_entries(c, "simulation.faults", c.simulation.faults, sim::parse_fault, problems);
+    check_socket(c, problems);
+    if (c.mode == "real") check_real_mode(c, problems);
+    check_token(c, problems);
+    check_archive(c, problems);
+    return problems;
+}
+
+void require_valid(const Config& c) {
+    const auto problems = validate(c);
+    if (problems.empty()) return;
+    std::string text;
+    for (const auto& p : problems) text += (text.empty() ? "" : "\n") + p;
+    throw UserError(text);
+}
+
+}  // namespace manikind::config

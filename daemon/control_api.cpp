@@ -1,0 +1,281 @@
+#include "daemon/control_api.hpp"
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/random.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <fmt/format.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <chrono>
+
+#include "daemon/config.hpp"
+#include "base/user_error.hpp"
+
+namespace manikind {
+
+namespace {
+
+nlohmann::json fail(const std::string& why) { return {{"ok", false}, {"error", why}}; }
+
+const std::map<std::string, bool>& commands() {  // name -> mutating
+    static const std::map<std::string, bool> c = {{"status", false}, {"live", false},          {"results", false},
+                                                  {"start_campaign", true}, {"abort", true}, {"pause", true},
+                                                  {"resume", true},  {"set_chamber", true},  {"shutdown", true},
+                                                  {"alarms", false}, {"ack_alarm", true}};
+    return c;
+}
+
+// Constant-time comparison: the token is a secret.
+bool same_token(const std::string& a, const std::string& b) {
+    if (a.size() != b.size()) return false;
+    unsigned char diff = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) diff |= static_cast<unsigned char>(a[i] ^ b[i]);
+    return diff == 0;
+}
+
+}  // namespace
+
+nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const std::string& line, bool& shutdown) {
+    if (line.size() > o.max_message_bytes)
+        return fail(fmt::format("message of {} bytes is over the limit of {} bytes", line.size(), o.max_message_bytes));
+    const nlohmann::json req = nlohmann::json::parse(line, nullptr, false);
+    if (req.is_discarded()) return fail("not valid JSON");
+    if (!req.is_object()) return fail("expected a JSON object");
+    if (!req.contains("cmd") || !req["cmd"].is_string()) return fail("missing \"cmd\" (a string)");
+    const std::string cmd = req["cmd"].get<std::string>();
+    const auto known = commands().find(cmd);
+    if (known == commands().end()) {
+        std::string list;
+        for (const auto& [name, m] : commands()) list += (list.empty() ? "" : ", ") + name;
+        return fail(fmt::format("unknown command '{}' (known: {})", cmd, list));
+    }
+    if (known->second) {
+        if (o.token.empty()) return fail("mutating commands are disabled: no token is configured");
+        if (!req.contains("token") || !req["token"].is_string() || !same_token(req["token"].get<std::string>(), o.token))
+            return fail("wrong or missing token");
+    }
+    auto number = [&](const char* key) -> std::optional<double> {
+        if (!req.contains(key) || !req[key].is_number()) return std::nullopt;
+        return req[key].get<double>();
+    };
+    auto text = [&](const char* key) -> std::optional<std::string> {
+        if (!req.contains(key) || !req[key].is_string()) return std::nullopt;
+        return req[key].get<std::string>();
+    };
+    auto done = [](const std::string& why) { return why.empty() ? nlohmann::json{{"ok", true}} : fail(why); };
+    try {
+        if (cmd == "status") return {{"ok", true}, {"status", daemon.status_json()}};
+        if (cmd == "live") return {{"ok", true}, {"live", daemon.live_json()}};
+        if (cmd == "results") {
+            auto name = text("campaign");
+            if (!name) name = daemon.last_campaign();
+            // Nothing to show yet is an answer, not a refusal: "results" is null and "note" says why.
+            if (!name) return {{"ok", true}, {"campaign", nullptr}, {"results", nullptr}, {"note", "no campaign has run yet"}};
+            auto results = daemon.latest_results_json(*name);
+            if (!results)
+                return {{"ok", true}, {"campaign", *name}, {"results", nullptr},
+                        {"note", fmt::format("campaign '{}' has no results yet", *name)}};
+            return {{"ok", true}, {"campaign", *name}, {"results", std::move(*results)}};
+        }
+        if (cmd == "start_campaign") {
+            CampaignPlan plan;
+            if (const auto b = text("builtin")) {
+                if (*b != "table-s3") return fail("\"builtin\": the only built-in campaign is \"table-s3\"");
+                const auto name = text("name");
+                if (!name || name->empty()) return fail("\"name\": expected the campaign's name (a string)");
+                plan = table_s3_plan(*name);
+            } else if (const auto t = text("plan_toml")) {
+                plan = parse_campaign_plan(*t, text("source").value_or("campaign"));
+            } else {
+                return fail("expected \"plan_toml\" (the campaign file's text) or \"builtin\":\"table-s3\"");
+            }
+            return done(daemon.start_campaign(plan));
+        }
+        if (cmd == "abort") return done(daemon.abort(text("reason").value_or("aborted by the operator")));
+        if (cmd == "alarms") return {{"ok", true}, {"alarms", daemon.alarms_json()}};
+        if (cmd == "ack_alarm") {
+            const auto id = number("id");
+            // Bounded before the conversion: a double beyond int64 (1e300) makes it undefined.
+            if (!id || *id != std::trunc(*id) || std::fabs(*id) > 9e15)
+                return fail("\"id\": expected the alarm's id (a whole number)");
+            return done(daemon.acknowledge_alarm(static_cast<std::int64_t>(*id)));
+        }
+        if (cmd == "pause") return done(daemon.pause());
+        if (cmd == "resume") return done(daemon.resume());
+        if (cmd == "set_chamber") {
+            const auto t = number("chamber_temp_c"), rh = number("chamber_rh_pct");
+            if (!t || !rh) return fail("\"chamber_temp_c\" and \"chamber_rh_pct\": expected numbers");
+            return done(daemon.set_chamber(*t, *rh));
+        }
+        if (cmd == "shutdown") {
+            shutdown = true;
+            return {{"ok", true}};
+        }
+    } catch (const UserError& e) {
+        return fail(e.what());
+    }
+    return fail("unhandled command");
+}
+
+namespace {
+
+using client_clock = std::chrono::steady_clock;
+
+// Waits for `events` on `fd` until `deadline`; false on timeout.
+bool wait_for(int fd, short events, client_clock::time_point deadline) {
+    for (;;) {
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - client_clock::now()).count();
+        if (left <= 0) return false;
+        pollfd p{fd, events, 0};
+        const int rc = ::poll(&p, 1, static_cast<int>(std::min<long long>(left, 1000)));
+        if (rc > 0) return true;
+        if (rc < 0 && errno != EINTR) return true;  // let the read/write report the error
+    }
+}
+
+}  // namespace
+
+sockaddr_un unix_address(const std::string& path, const std::string& what) {
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    if (path.size() >= sizeof addr.sun_path)
+        throw UserError(fmt::format("{} path is {} characters, over the limit of {}: {}", what, path.size(),
+                                    sizeof addr.sun_path - 1, path));
+    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    return addr;
+}
+
+nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohmann::json& request, double timeout_s) {
+    const std::string path = socket_path.string();
+    const std::string cmd = request.value("cmd", std::string("?"));
+    const auto deadline = client_clock::now() + std::chrono::duration_cast<client_clock::duration>(
+                                                    std::chrono::duration<double>(timeout_s));
+    auto timed_out = [&](const char* waiting_for) {
+        return UserError::unreachable(fmt::format("no answer from the daemon at {} within {} s: waited for {} ('{}'). It may "
+                                                  "be hung or overloaded: see its log (journalctl -u manikind), or try a "
+                                                  "longer --timeout",
+                                                  path, timeout_s, waiting_for, cmd),
+                                      "daemon_timeout");
+    };
+    sockaddr_un addr = unix_address(path, "socket");
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+    if (fd < 0) throw UserError(fmt::format("cannot create a socket: {}", std::strerror(errno)));
+    struct Closer {
+        int fd;
+        ~Closer() { ::close(fd); }
+    } closer{fd};
+    // A Unix connect fails with EAGAIN while the daemon's backlog is full: retry until the deadline.
+    for (;;) {
+        if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0) break;
+        if (errno == EAGAIN || errno == EINTR) {
+            if (client_clock::now() >= deadline) throw timed_out("a free place in its connection queue");
+            pollfd none{-1, 0, 0};
+            ::poll(&none, 1, 20);
+            continue;
+        }
+        if (errno == EINPROGRESS) {
+            if (!wait_for(fd, POLLOUT, deadline)) throw timed_out("it to accept the connection");
+            int err = 0;
+            socklen_t len = sizeof err;
+            ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len);
+            if (err == 0) break;
+            errno = err;
+        }
+        throw UserError::unreachable(fmt::format("cannot reach the daemon at {}: {} (is manikind running? --socket)",
+                                                 path, std::strerror(errno)));
+    }
+    const std::string msg = request.dump() + "\n";
+    for (std::size_t sent = 0; sent < msg.size();) {
+        const ssize_t n = ::send(fd, msg.data() + sent, msg.size() - sent, MSG_NOSIGNAL);
+        if (n > 0) {
+            sent += static_cast<std::size_t>(n);
+            continue;
+        }
+        if (n < 0 && (errno == EAGAIN || errno == EINTR)) {
+            if (!wait_for(fd, POLLOUT, deadline)) throw timed_out("it to take the request");
+            continue;
+        }
+        throw UserError::unreachable(fmt::format("the daemon at {} closed the connection: {}", path, std::strerror(errno)));
+    }
+    std::string reply;
+    char buf[65536];
+    while (reply.empty() || reply.back() != '\n') {
+        const ssize_t n = ::read(fd, buf, sizeof buf);
+        if (n > 0) {
+            reply.append(buf, static_cast<std::size_t>(n));
+            continue;
+        }
+        if (n < 0 && (errno == EAGAIN || errno == EINTR)) {
+            if (!wait_for(fd, POLLIN, deadline)) throw timed_out("its reply");
+            continue;
+        }
+        if (reply.empty())
+            throw UserError::unreachable(fmt::format("the daemon at {} closed the connection without replying", path));
+        break;
+    }
+    const auto j = nlohmann::json::parse(reply, nullptr, false);
+    if (j.is_discarded())
+        throw UserError::unreachable("the daemon's reply is not JSON: " + reply.substr(0, 200), "daemon_bad_reply");
+    return j;
+}
+
+std::string read_token_file(const std::filesystem::path& socket_path) {
+    std::ifstream in(socket_path.string() + ".token");
+    std::string token;
+    std::getline(in, token);
+    return token;
+}
+
+std::string load_or_create_token(const std::string& configured, const std::filesystem::path& socket_path) {
+    if (!configured.empty()) {
+        if (const auto why = config::token_problem(configured); !why.empty()) throw UserError("[api] token: " + why);
+        return configured;
+    }
+    unsigned char bytes[32];
+    for (std::size_t got = 0; got < sizeof bytes;) {
+        const ssize_t n = ::getrandom(bytes + got, sizeof bytes - got, 0);
+        if (n < 0 && errno != EINTR) throw UserError(fmt::format("cannot make an API token: getrandom: {}", std::strerror(errno)));
+        if (n > 0) got += static_cast<std::size_t>(n);
+    }
+    std::string token;
+    for (unsigned char b : bytes) token += fmt::format("{:02x}", b);
+
+    const std::string file = socket_path.string() + ".token";
+    struct stat st {};
+    if (::lstat(file.c_str(), &st) == 0) {
+        // Replace only our own private file; anything else is someone's mistake or a trap: say so.
+        if (S_ISLNK(st.st_mode))
+            throw UserError(fmt::format("{} is a symbolic link; refusing to write the API token through it (remove it)", file));
+        if (!S_ISREG(st.st_mode)) throw UserError(fmt::format("{} exists and is not a regular file; remove it", file));
+        if (st.st_uid != ::geteuid())
+            throw UserError(fmt::format("{} belongs to user id {}, not to the daemon's user ({}); remove it", file, st.st_uid,
+                                        ::geteuid()));
+        if ((st.st_mode & 077) != 0)
+            throw UserError(fmt::format("{} has mode {:04o}: others could read the API token; remove it (the daemon "
+                                        "writes a fresh one, mode 0600)",
+                                        file, st.st_mode & 07777));
+        if (::unlink(file.c_str()) != 0)
+            throw UserError(fmt::format("cannot replace the API token file {}: {}", file, std::strerror(errno)));
+    }
+    // O_EXCL|O_NOFOLLOW: a file or symlink that appeared since is never written through.
+    const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0600);
+    if (fd < 0) throw UserError(fmt::format("cannot write the API token to {}: {}", file, std::strerror(errno)));
+    const std::string line = token + "\n";
+    const bool written = ::write(fd, line.data(), line.size()) == static_cast<ssize_t>(line.size());
+    ::close(fd);
+    if (!written) throw UserError(fmt::format("cannot write the API token to {}", file));
+    return token;
+}
+
+}  // namespace manikind

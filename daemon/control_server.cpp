@@ -1,0 +1,423 @@
+// The control API's server: one Boost.Asio thread, every client asynchronous, every limit a drop
+// or a refusal, never a blocked call. Rules (docs/daemon.md, "Control API"):
+//   - requests are read as they come; each reply is queued on its own client and written
+//     asynchronously, so a client that never reads only fills its own queue; past
+//     max_unread_reply_bytes (or a write stalled for idle_timeout_s) it is dropped;
+//   - a request line must arrive whole within request_timeout_s of its first byte (slow writers);
+//   - a client that sends nothing for idle_timeout_s is disconnected;
+//   - at most max_clients (lowered to fit RLIMIT_NOFILE, leaving descriptors for the drivers);
+//     a new client beyond it takes the place of the longest-idle one, and is refused with a
+//     clear reply only when every slot is busy mid-request;
+//   - out of file descriptors, accept is retried after a pause (never spun) once an idle client
+//     has been let go.
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <boost/asio/basic_socket_acceptor.hpp>
+#include <boost/asio/generic/stream_protocol.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/read.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/write.hpp>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include "daemon/control_api.hpp"
+#include "daemon/instance_lock.hpp"
+#include "base/user_error.hpp"
+
+namespace manikind {
+
+namespace asio = boost::asio;
+using stream = asio::generic::stream_protocol;
+using acceptor_t = asio::basic_socket_acceptor<stream>;
+using steady = std::chrono::steady_clock;
+
+namespace {
+
+std::chrono::nanoseconds seconds(double s) {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(s));
+}
+
+std::string error_line(const std::string& why) { return nlohmann::json{{"ok", false}, {"error", why}}.dump() + "\n"; }
+
+// A last word to a client being let go, only if its socket takes it at once: never blocks.
+void say_goodbye(int fd, const std::string& why) {
+    const std::string line = error_line(why);
+    [[maybe_unused]] const auto n = ::send(fd, line.data(), line.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+}
+
+int count_open_fds() {
+    std::error_code ec;
+    int n = 0;
+    for (std::filesystem::directory_iterator it("/proc/self/fd", ec), end; !ec && it != end; it.increment(ec)) ++n;
+    return n;
+}
+
+// A stale socket file (its daemon died) refuses connections; a live one accepts or has a full backlog.
+bool someone_answers(const std::string& path) {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+    if (fd < 0) return false;
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", path.c_str());
+    const int rc = ::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+    const int err = errno;
+    ::close(fd);
+    return rc == 0 || err == EAGAIN || err == EINPROGRESS;
+}
+
+}  // namespace
+
+struct ControlServer::Impl {
+    struct Session : std::enable_shared_from_this<Session> {
+        Session(Impl& server, stream::socket s, std::uint64_t session_id)
+            : owner(server), socket(std::move(s)), id(session_id), last_activity(steady::now()) {}
+        Impl& owner;
+        stream::socket socket;
+        std::uint64_t id;
+        std::array<char, 4096> read_buffer{};
+        std::string pending_input;                  // bytes of a request line not yet complete
+        std::optional<steady::time_point> partial_since;
+        std::deque<std::string> replies;            // queued, unwritten (front: being written)
+        std::size_t reply_bytes = 0;
+        bool writing = false, close_after_write = false, closed = false;
+        steady::time_point last_activity;           // last byte in, or last reply fully written
+        steady::time_point write_started;
+        std::optional<steady::time_point> last_request;  // none yet: the first to go when room is needed
+
+        void read() {
+            socket.async_read_some(asio::buffer(read_buffer), [self = shared_from_this()](const boost::system::error_code& ec,
+                                                                                          std::size_t n) {
+                self->on_read(ec, n);
+            });
+        }
+
+        void on_read(const boost::system::error_code& ec, std::size_t n) {
+            if (closed) return;
+            if (ec) return owner.close(*this, {});
+            const auto now = steady::now();
+            last_activity = now;
+            pending_input.append(read_buffer.data(), n);
+            if (!partial_since) partial_since = now;
+            std::size_t start = 0;
+            for (auto nl = pending_input.find('\n', start); nl != std::string::npos; nl = pending_input.find('\n', start)) {
+                const std::string line = pending_input.substr(start, nl - start);
+                start = nl + 1;
+                last_request = now;
+                queue(owner.answer(line));
+                if (closed) return;
+            }
+            pending_input.erase(0, start);
+            if (start > 0) partial_since = pending_input.empty() ? std::nullopt : std::optional(now);
+            if (pending_input.size() > owner.o.max_message_bytes) {  // oversized: refuse and hang up
+                queue(error_line(fmt::format("message over the limit of {} bytes; connection closed", owner.o.max_message_bytes)));
+                close_after_write = true;
+                return;
+            }
+            if (reply_bytes > owner.o.max_unread_reply_bytes) {
+                ++owner.counters.dropped_unread;
+                return owner.close(*this, fmt::format("{} bytes of replies unread (limit {}); disconnected", reply_bytes,
+                                                      owner.o.max_unread_reply_bytes));
+            }
+            read();
+        }
+
+        void queue(std::string reply) {
+            reply_bytes += reply.size();
+            replies.push_back(std::move(reply));
+            if (!writing) write_front();
+        }
+
+        void write_front() {
+            if (replies.empty()) {
+                writing = false;
+                if (close_after_write) owner.close(*this, {});
+                return;
+            }
+            writing = true;
+            write_started = steady::now();
+            asio::async_write(socket, asio::buffer(replies.front()),
+                              [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+                                  if (self->closed) return;
+                                  if (ec) return self->owner.close(*self, {});
+                                  self->reply_bytes -= self->replies.front().size();
+                                  self->replies.pop_front();
+                                  self->last_activity = steady::now();
+                                  self->write_front();
+                              });
+        }
+
+        bool idle() const { return !writing && replies.empty() && pending_input.empty(); }
+    };
+
+    Impl(LabDaemon& d, ControlOptions options) : daemon(d), o(std::move(options)) {}
+
+    LabDaemon& daemon;
+    ControlOptions o;
+    asio::io_context io;
+    std::vector<std::unique_ptr<acceptor_t>> acceptors;
+    std::optional<asio::steady_timer> sweep_timer, accept_retry_timer;
+    std::map<std::uint64_t, std::shared_ptr<Session>> sessions;
+    std::uint64_t next_id = 1;
+    std::thread thread;
+    std::atomic<bool> shutdown{false};
+    std::atomic<std::int64_t> heartbeat_ns{0};
+    InstanceLock socket_lock;
+    struct stat bound{};
+    bool socket_bound = false;
+    int bound_tcp_port = 0;
+    mutable std::mutex counters_lock;  // counters are written on the server thread, read by status
+    ControlServerCounters counters;
+    steady::time_point last_accept_error_log{};
+
+    std::string answer(const std::string& line) {
+        bool shutdown_now = false;
+        std::string reply = handle_request(daemon, o, line, shutdown_now).dump() + "\n";
+        // Flag before replying: a client that reads "ok" must find the shutdown requested.
+        if (shutdown_now) shutdown = true;
+        return reply;
+    }
+
+    void close(Session& s, const std::string& goodbye) {
+        if (s.closed) return;
+        s.closed = true;
+        if (!goodbye.empty() && !s.writing) say_goodbye(s.socket.native_handle(), goodbye);
+        if (!goodbye.empty()) spdlog::info("control API: client {} {}", s.id, goodbye);
+        boost::system::error_code ignored;
+        s.socket.shutdown(stream::socket::shutdown_both, ignored);
+        s.socket.close(ignored);
+        std::lock_guard lk(counters_lock);
+        sessions.erase(s.id);
+        counters.connected = sessions.size();
+    }
+
+    // The client that has gone longest without a request (never sent one: first), if idle.
+    Session* longest_idle() {
+        Session* pick = nullptr;
+        for (auto& [id, s] : sessions) {
+            if (!s->idle()) continue;
+            if (!pick || (!s->last_request && pick->last_request) ||
+                (s->last_request && pick->last_request && *s->last_request < *pick->last_request) ||
+                (!s->last_request && !pick->last_request && s->last_activity < pick->last_activity))
+                pick = s.get();
+        }
+        return pick;
+    }
+
+    void admit(stream::socket socket) {
+        {
+            std::lock_guard lk(counters_lock);
+            ++counters.accepted;
+        }
+        if (sessions.size() >= counters.max_clients) {
+            if (Session* victim = longest_idle()) {
+                {
+                    std::lock_guard lk(counters_lock);
+                    ++counters.evicted_idle;
+                }
+                close(*victim, fmt::format("disconnected to make room: {} clients is the limit (api.max_clients) and this "
+                                           "one was the longest idle",
+                                           counters.max_clients));
+            } else {
+                {  // counted before the client can read the refusal
+                    std::lock_guard lk(counters_lock);
+                    ++counters.refused_full;
+                }
+                say_goodbye(socket.native_handle(),
+                            fmt::format("refused: {} clients are connected and busy (api.max_clients); try again shortly",
+                                        counters.max_clients));
+                boost::system::error_code ignored;
+                socket.close(ignored);
+                return;
+            }
+        }
+        auto s = std::make_shared<Session>(*this, std::move(socket), next_id++);
+        {
+            std::lock_guard lk(counters_lock);
+            sessions.emplace(s->id, s);
+            counters.connected = sessions.size();
+        }
+        s->read();
+    }
+
+    void accept(acceptor_t& acceptor) {
+        acceptor.async_accept([this, &acceptor](const boost::system::error_code& ec, stream::socket socket) {
+            if (ec == asio::error::operation_aborted) return;
+            if (!ec) {
+                admit(std::move(socket));
+                return accept(acceptor);
+            }
+            {
+                std::lock_guard lk(counters_lock);
+                ++counters.accept_errors;
+            }
+            const auto now = steady::now();
+            if (now - last_accept_error_log > std::chrono::seconds(10)) {
+                spdlog::warn("control API: accept failed ({}); {} clients connected; retrying", ec.message(), sessions.size());
+                last_accept_error_log = now;
+            }
+            // Out of descriptors: let the longest-idle client go and try at once; with none to let
+            // go, wait a little instead of spinning on an accept that cannot succeed.
+            if (Session* victim = longest_idle()) {
+                close(*victim, "disconnected: the daemon is out of file descriptors");
+                return accept(acceptor);
+            }
+            accept_retry_timer->expires_after(std::chrono::milliseconds(100));
+            accept_retry_timer->async_wait([this, &acceptor](const boost::system::error_code& wait_ec) {
+                if (!wait_ec) accept(acceptor);
+            });
+        });
+    }
+
+    void sweep() {
+        const auto now = steady::now();
+        heartbeat_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()).count();
+        std::vector<std::pair<Session*, std::string>> expired;
+        for (auto& [id, s] : sessions) {
+            if (s->writing && now - s->write_started > seconds(o.idle_timeout_s))
+                expired.emplace_back(s.get(), fmt::format("replies unread for {} s; disconnected", o.idle_timeout_s));
+            else if (s->partial_since && now - *s->partial_since > seconds(o.request_timeout_s))
+                expired.emplace_back(s.get(), fmt::format("request not completed within {} s (one JSON object per line); "
+                                                          "disconnected",
+                                                          o.request_timeout_s));
+            else if (s->idle() && now - s->last_activity > seconds(o.idle_timeout_s))
+                expired.emplace_back(s.get(), fmt::format("idle for {} s; disconnected", o.idle_timeout_s));
+        }
+        for (auto& [s, why] : expired) {
+            {
+                std::lock_guard lk(counters_lock);
+                ++counters.timed_out;
+            }
+            close(*s, why);
+        }
+        sweep_timer->expires_after(std::chrono::milliseconds(100));
+        sweep_timer->async_wait([this](const boost::system::error_code& ec) {
+            if (!ec) sweep();
+        });
+    }
+};
+
+ControlServer::ControlServer(LabDaemon& daemon, ControlOptions options)
+    : impl_(std::make_unique<Impl>(daemon, std::move(options))) {}
+ControlServer::~ControlServer() { stop(); }
+
+bool ControlServer::shutdown_requested() const { return impl_->shutdown.load(); }
+int ControlServer::tcp_port() const { return impl_->bound_tcp_port; }
+
+double ControlServer::seconds_since_heartbeat() const {
+    const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(steady::now().time_since_epoch()).count();
+    return static_cast<double>(now - impl_->heartbeat_ns.load()) * 1e-9;
+}
+
+ControlServerCounters ControlServer::counters() const {
+    std::lock_guard lk(impl_->counters_lock);
+    return impl_->counters;
+}
+
+void ControlServer::adopt_socket_lock(InstanceLock lock) { impl_->socket_lock = std::move(lock); }
+
+void ControlServer::start() {
+    Impl& s = *impl_;
+    const std::string path = s.o.socket_path.string();
+    sockaddr_un addr = unix_address(path, "control socket");
+
+    // One daemon per socket. Under the lock, an existing socket file is stale only if no one answers.
+    if (!s.socket_lock.held()) s.socket_lock = InstanceLock::acquire(s.o.socket_path, "control socket");
+    struct stat existing {};
+    if (::lstat(path.c_str(), &existing) == 0) {
+        if (!S_ISSOCK(existing.st_mode))
+            throw UserError(fmt::format("{} exists and is not a socket; not replacing it (remove it or choose another "
+                                        "[api] socket)",
+                                        path));
+        if (someone_answers(path))
+            throw UserError(fmt::format("another process answers on {}; not replacing its socket", path));
+        ::unlink(path.c_str());
+    }
+
+    const int unix_fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (unix_fd < 0) throw UserError(fmt::format("cannot create the control socket: {}", std::strerror(errno)));
+    const mode_t old_mask = ::umask(0117);  // created 0660: owner and group only
+    const int rc = ::bind(unix_fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+    ::umask(old_mask);
+    if (rc != 0 || ::listen(unix_fd, s.o.listen_backlog) != 0) {
+        const std::string why = std::strerror(errno);
+        ::close(unix_fd);
+        throw UserError(fmt::format("cannot listen on {}: {}", path, why));
+    }
+    ::chmod(path.c_str(), 0660);
+    ::stat(path.c_str(), &s.bound);
+    s.socket_bound = true;
+    s.acceptors.push_back(std::make_unique<acceptor_t>(s.io));
+    s.acceptors.back()->assign(stream(AF_UNIX, 0), unix_fd);
+
+    if (s.o.tcp_port > 0) {
+        const int tcp_fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        int one = 1;
+        ::setsockopt(tcp_fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+        sockaddr_in in{};
+        in.sin_family = AF_INET;
+        in.sin_addr.s_addr = htonl(INADDR_LOOPBACK);  // never any other interface
+        in.sin_port = htons(static_cast<std::uint16_t>(s.o.tcp_port));
+        if (::bind(tcp_fd, reinterpret_cast<sockaddr*>(&in), sizeof in) != 0 || ::listen(tcp_fd, s.o.listen_backlog) != 0) {
+            const std::string why = std::strerror(errno);
+            ::close(tcp_fd);
+            throw UserError(fmt::format("cannot listen on 127.0.0.1:{}: {}", s.o.tcp_port, why));
+        }
+        s.acceptors.push_back(std::make_unique<acceptor_t>(s.io));
+        s.acceptors.back()->assign(stream(AF_INET, IPPROTO_TCP), tcp_fd);
+        s.bound_tcp_port = s.o.tcp_port;
+    }
+
+    // Leave descriptors for the drivers (reconnects), SQLite and the recorder: clients never take the last ones.
+    // (getrlimit is prlimit64, which a seccomp filter may refuse: then the configured cap stands.)
+    rlimit nofile{RLIM_INFINITY, RLIM_INFINITY};
+    if (::getrlimit(RLIMIT_NOFILE, &nofile) != 0) nofile.rlim_cur = RLIM_INFINITY;
+    const long budget = nofile.rlim_cur == RLIM_INFINITY
+                            ? static_cast<long>(s.o.max_clients)
+                            : static_cast<long>(nofile.rlim_cur) - count_open_fds() - 32;
+    s.counters.max_clients = static_cast<std::size_t>(std::max(2L, std::min(static_cast<long>(s.o.max_clients), budget)));
+    if (s.counters.max_clients < s.o.max_clients)
+        spdlog::warn("control API: at most {} clients (api.max_clients {}), to fit the open-file limit of {}",
+                     s.counters.max_clients, s.o.max_clients, nofile.rlim_cur);
+
+    s.sweep_timer.emplace(s.io);
+    s.accept_retry_timer.emplace(s.io);
+    for (auto& a : s.acceptors) s.accept(*a);
+    s.sweep();
+    s.thread = std::thread([&s] { s.io.run(); });
+}
+
+void ControlServer::stop() {
+    Impl& s = *impl_;
+    if (s.thread.joinable()) {
+        s.io.stop();
+        s.thread.join();
+    }
+    s.sessions.clear();
+    s.acceptors.clear();
+    // Remove the socket only if it is still the one this server bound (never a successor's).
+    struct stat now {};
+    if (s.socket_bound && ::stat(s.o.socket_path.c_str(), &now) == 0 && now.st_ino == s.bound.st_ino &&
+        now.st_dev == s.bound.st_dev)
+        ::unlink(s.o.socket_path.c_str());
+    s.socket_bound = false;
+    s.socket_lock = InstanceLock{};
+}
+
+}  // namespace manikind

@@ -1,0 +1,945 @@
+#include "daemon/lab_daemon.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <set>
+#include <chrono>
+#include <cmath>
+
+#include "analysis/analyze.hpp"
+#include "analysis/zone_map.hpp"
+#include "store/database_export.hpp"
+#include "analysis/reconcile/results_parity.hpp"
+#include "daemon/setup_record.hpp"
+#include "base/user_error.hpp"
+
+namespace manikind {
+
+namespace mc = protocol::manikin_can;
+
+namespace {
+std::int64_t steady_now_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+}  // namespace
+
+const char* to_string(Stage s) {
+    switch (s) {
+        case Stage::idle: return "idle";
+        case Stage::configuring: return "configuring";
+        case Stage::chamber_settling: return "chamber_settling";
+        case Stage::manikin_starting: return "manikin_starting";
+        case Stage::acquiring: return "acquiring";
+        case Stage::stopping: return "stopping";
+        case Stage::computing: return "computing";
+    }
+    return "unknown";
+}
+
+void SlidingRange::push(std::int64_t t, double v) {
+    while (!maxq_.empty() && maxq_.back().second <= v) maxq_.pop_back();
+    maxq_.emplace_back(t, v);
+    while (!minq_.empty() && minq_.back().second >= v) minq_.pop_back();
+    minq_.emplace_back(t, v);
+    all_.push_back(t);
+}
+
+void SlidingRange::evict_before(std::int64_t t) {
+    while (!maxq_.empty() && maxq_.front().first < t) maxq_.pop_front();
+    while (!minq_.empty() && minq_.front().first < t) minq_.pop_front();
+    while (!all_.empty() && all_.front() < t) all_.pop_front();
+}
+
+double SlidingRange::range() const {
+    if (maxq_.empty()) return std::nan("");
+    return maxq_.front().second - minq_.front().second;
+}
+
+namespace {
+recorder::Durability durability_of(const config::Config& c) {
+    return c.recorder_durability == "power" ? recorder::Durability::power : recorder::Durability::process;
+}
+
+recorder::Journal journal_of(const config::Config& c) {
+    return c.recorder_journal == "rollback" ? recorder::Journal::rollback : recorder::Journal::wal;
+}
+}  // namespace
+
+LabDaemon::LabDaemon(DaemonOptions options)
+    : o_(std::move(options)),
+      db_path_(o_.config.database.is_relative() && !o_.config.source_dir.empty() ? o_.config.source_dir / o_.config.database
+                                                                                 : o_.config.database),
+      db_lock_(InstanceLock::acquire(db_path_, "database")),
+      db_(recorder::Database::open(db_path_, durability_of(o_.config), journal_of(o_.config))) {
+    last_tick_steady_ns_ = steady_now_ns();
+    const int interrupted = db_.mark_interrupted_trials(system_clock_.utc_ns());
+    const int campaigns_interrupted = db_.mark_interrupted_campaigns();
+    if (interrupted > 0 || campaigns_interrupted > 0)
+        db_.add_event(std::nullopt, 0, system_clock_.utc_ns(), "warn", "restart",
+                      fmt::format("{} trial(s) and {} campaign(s) were running when the daemon stopped; marked "
+                                  "interrupted (start the same campaign again to continue it)",
+                                  interrupted, campaigns_interrupted));
+    recorder::RecorderOptions recorder_options;
+    recorder_options.durability = durability_of(o_.config);
+    recorder_options.journal = journal_of(o_.config);
+    recorder_options.max_batch_delay =
+        std::chrono::milliseconds(std::llround(o_.config.recorder_commit_interval_s * 1000.0));
+    recorder_options.crash_ring_dir = o_.config.recorder_crash_ring_dir;
+    recorder_ = std::make_unique<recorder::Recorder>(db_path_, recorder_options);
+    skin_range_.resize(analysis::andi35_zone_map().size());
+    auto sink = [this](const drivers::Sample& s) { on_sample(s); };
+    if (o_.config.mode == "simulated") {
+        clock_ = &virtual_clock_;
+        acq_ = std::make_unique<Acquisition>(o_.config, virtual_clock_, sink);
+    } else {
+        clock_ = &system_clock_;
+        acq_ = std::make_unique<Acquisition>(o_.config, system_clock_, sink);
+        o_.virtual_clock = false;
+    }
+    acq_->start();
+    for (const auto& st : acq_->status())
+        device_ids_[st.name] = db_.device_id(st.name, st.name == "manikin" ? "can" : (st.name == "chamber" || st.name == "datalogger") ? "modbus" : "serial",
+                      st.transport);
+    event("info", "daemon", fmt::format("started ({} lab, database {})", o_.config.mode, db_path_.string()));
+    // Exports name the configuration their trials ran under by this fingerprint (provenance).
+    if (!o_.config.source_sha256.empty())
+        event("info", "config", fmt::format("sha256 {} {}", o_.config.source_sha256, o_.config.source_name));
+    // Every trial of this run names its set-up: lab, chamber, manikin, calibration, configuration.
+    setup_id_ = db_.record_setup(setup_of(o_.config), clock_->utc_ns());
+}
+
+LabDaemon::~LabDaemon() {
+    stop();
+    acq_.reset();
+    recorder_.reset();
+}
+
+std::int64_t LabDaemon::channel_id(const std::string& device, const std::string& channel) {
+    const std::string key = device + "/" + channel;
+    if (const auto it = channel_ids_.find(key); it != channel_ids_.end()) return it->second;
+    // Devices were registered with their kind and transport at start; device_id() would
+    // overwrite those, so look the id up rather than calling it again.
+    const auto dev = device_ids_.find(device);
+    const std::int64_t device_id = dev != device_ids_.end() ? dev->second : db_.device_id(device, "unknown", "");
+    const std::int64_t id = db_.channel_id(device_id, channel, drivers::unit_of_channel(channel));
+    channel_ids_[key] = id;
+    return id;
+}
+
+void LabDaemon::event(const std::string& severity, const std::string& kind, const std::string& message) {
+    const std::optional<std::int64_t> trial = trial_id_ ? std::optional<std::int64_t>(trial_id_) : std::nullopt;
+    const std::int64_t mono_ns = clock_ ? clock_->mono_ns() : 0;
+    const std::int64_t utc_ns = clock_ ? clock_->utc_ns() : system_clock_.utc_ns();
+    write_or_defer([=, this] { db_.add_event(trial, mono_ns, utc_ns, severity, kind, message); });
+    if (severity == "error") spdlog::error("{}: {}", kind, message);
+    else if (severity == "warn") spdlog::warn("{}: {}", kind, message);
+    else spdlog::debug("{}: {}", kind, message);
+    if (severity == "warn" || severity == "error") {
+        alarms_.push_back({next_alarm_id_++, clock_ ? clock_->utc_ns() : system_clock_.utc_ns(), severity, kind, message});
+        if (alarms_.size() > 200) alarms_.pop_front();
+    }
+}
+
+void LabDaemon::external_event(const std::string& severity, const std::string& kind, const std::string& message) {
+    std::lock_guard lk(lock_);
+    event(severity, kind, message);
+}
+
+void LabDaemon::add_status_section(const std::string& name, std::function<nlohmann::json()> section) {
+    std::lock_guard lk(lock_);
+    status_sections_.emplace_back(name, std::move(section));
+}
+
+nlohmann::json LabDaemon::alarms_json() {
+    std::lock_guard lk(lock_);
+    nlohmann::json a = nlohmann::json::array();
+    for (const auto& al : alarms_)
+        a.push_back({{"id", al.id}, {"utc_ms", al.utc_ns / 1000000}, {"severity", al.severity == "error" ? "MAJOR" : "MINOR"},
+                     {"kind", al.kind}, {"message", al.message}, {"acknowledged", al.acknowledged}});
+    return a;
+}
+
+std::string LabDaemon::acknowledge_alarm(std::int64_t id) {
+    std::lock_guard lk(lock_);
+    for (auto& al : alarms_)
+        if (al.id == id) {
+            if (!al.acknowledged) {
+                al.acknowledged = true;
+                db_.add_event(std::nullopt, clock_->mono_ns(), clock_->utc_ns(), "info", "alarm_ack",
+                              fmt::format("alarm {} acknowledged: {}", id, al.message));
+            }
+            return {};
+        }
+    return fmt::format("no alarm with id {} (the newest 200 are kept)", id);
+}
+
+void LabDaemon::set_sample_listener(std::function<void()> listener) {
+    std::lock_guard lk(lock_);
+    sample_listener_ = std::move(listener);
+}
+
+void LabDaemon::on_sample(const drivers::Sample& s) {
+    std::lock_guard lk(lock_);
+    try {
+        record_sample_locked(s);
+    } catch (const recorder::StorageFull& e) {
+        storage_stop_locked(e.what());
+    }
+}
+
+void LabDaemon::record_sample_locked(const drivers::Sample& s) {
+    const std::string key = s.device + "/" + s.channel;
+    live_[key] = s;
+    if (sample_listener_) sample_listener_();
+    // Safety: enforced here, whatever a client asked for.
+    if (s.device == "manikin" && s.quality != drivers::Quality::comm_error && acq_ && acq_->manikin().running_command()) {
+        const auto& lim = o_.config.safety;
+        if (s.channel.ends_with(".skin_temp_c") && s.value > lim.max_skin_temp_c)
+            safety_stop(fmt::format("{} = {:.2f} °C is above safety.max_skin_temp_c = {} °C", s.channel, s.value,
+                                    lim.max_skin_temp_c));
+        if (s.channel.ends_with(".heater_power_w_m2") && s.value > lim.max_heater_power_w_m2)
+            safety_stop(fmt::format("{} = {:.1f} W/m² is above safety.max_heater_power_w_m2 = {} W/m²", s.channel, s.value,
+                                    lim.max_heater_power_w_m2));
+    }
+    if (s.device == "manikin" && s.channel.ends_with(".skin_temp_c") && s.quality == drivers::Quality::good &&
+        stage_ == Stage::acquiring) {
+        const int zone = std::atoi(s.channel.c_str() + 1);
+        if (zone >= 1 && zone <= static_cast<int>(skin_range_.size())) skin_range_[static_cast<std::size_t>(zone - 1)].push(s.mono_ns, s.value);
+    }
+    if (s.device == "datalogger" && s.channel.ends_with("air_temp_c") && s.quality == drivers::Quality::good &&
+        s.channel == "ee181_1.air_temp_c")
+        enclosure_range_.push(s.mono_ns, s.value);
+    if (trial_id_ == 0) {
+        // Outside trials: the idle log, one reading per channel per idle_log_period_s.
+        const double period_s = o_.config.idle_log_period_s;
+        if (period_s <= 0) return;
+        const auto [it, first] = idle_logged_ns_.try_emplace(key, s.mono_ns);
+        if (!first) {
+            if (static_cast<double>(s.mono_ns - it->second) < period_s * 1e9) return;
+            it->second = s.mono_ns;
+        }
+    }
+    recorder::SampleRow row{trial_id_, channel_id(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
+                            static_cast<std::uint8_t>(s.quality)};
+    if (!recorder_->push(row)) {
+        if (o_.virtual_clock && !storage_full_) {
+            // Virtual time waits for the disk; nothing is dropped (unless the disk is full).
+            if (recorder_->flush()) recorder_->push(row);
+            else storage_stop_locked(recorder_->stats().storage_error);
+        } else {
+            ++dropped_samples_;
+        }
+    }
+}
+
+double LabDaemon::enclosure_air_c() const {
+    double sum = 0;
+    int n = 0;
+    for (const auto& [key, s] : live_)
+        if (key.starts_with("datalogger/ee181_") && key.ends_with(".air_temp_c") && s.quality == drivers::Quality::good)
+            sum += s.value, ++n;
+    return n ? sum / n : std::nan("");
+}
+
+LabDaemon::SteadyCheck LabDaemon::check_steady_window_locked(std::int64_t now) {
+    const double window_s = o_.config.steady_state.window_s;
+    SteadyCheck c;
+    const double acquiring_s = static_cast<double>(now - acquiring_since_ns_) * 1e-9;
+    c.window_filled_fraction = window_s > 0 ? std::clamp(acquiring_s / window_s, 0.0, 1.0) : 1.0;
+    bool observed = acquiring_s >= window_s;
+    double worst = -1.0;
+    for (std::size_t i = 0; i < skin_range_.size(); ++i) {
+        auto& r = skin_range_[i];
+        r.evict_before(now - static_cast<std::int64_t>(window_s * 1e9));
+        if (r.empty()) {
+            observed = false;
+        } else if (r.range() > worst) {
+            worst = r.range();
+            c.worst_zone = static_cast<int>(i + 1);
+        }
+    }
+    if (worst >= 0.0) c.worst_zone_range_c = worst;
+    // Methods: "< 0.05 °C", strictly, as the analysis applies it.
+    c.window_steady = observed && worst >= 0.0 && worst < o_.config.steady_state.max_skin_fluctuation_c;
+    return c;
+}
+
+double LabDaemon::stage_elapsed_s() const {
+    const std::int64_t now = paused_ ? paused_at_ns_ : clock_->mono_ns();
+    return static_cast<double>(now - stage_start_ns_) * 1e-9;
+}
+
+void LabDaemon::enter(Stage s, const std::string& why) {
+    stage_ = s;
+    device_retry_logged_ = false;
+    stage_start_ns_ = clock_->mono_ns();
+    event("info", "stage", to_string(s));
+    if (!why.empty()) event("info", "stage_reason", why);
+    if (trial_id_) db_.set_trial_state(trial_id_, to_string(s), why, clock_->utc_ns());
+}
+
+std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
+    std::lock_guard lk(lock_);
+    if (const auto why = check_plan_against_limits(plan, o_.config.safety); !why.empty()) return why;
+    if (storage_full_)
+        return fmt::format("the disk holding {} is full ({}); free space first, recording resumes by itself",
+                           db_path_.string(), storage_error_);
+    if ((plan_ && plan_->name == plan.name) ||
+        std::any_of(waiting_.begin(), waiting_.end(), [&](const CampaignPlan& p) { return p.name == plan.name; }))
+        return fmt::format("a campaign named '{}' is already running or queued", plan.name);
+    // One already in the database is continued, if it is the same plan and not complete.
+    if (const auto existing = db_.find_campaign(plan.name)) {
+        const auto campaigns = db_.campaigns();
+        const auto row = std::find_if(campaigns.begin(), campaigns.end(), [&](const auto& c) { return c.id == *existing; });
+        // "done" with a failed trial (a device gave up for good) is not complete: it continues too.
+        std::set<std::pair<std::int64_t, std::int64_t>> done_trials;
+        for (const auto& t : db_.trials(*existing))
+            if (t.state == "done") done_trials.insert({t.case_id, t.replicate});
+        if (row->state == "done" && done_trials.size() >= static_cast<std::size_t>(plan.replicates) * plan.cases.size())
+            return fmt::format("campaign '{}' is complete in {}; give the plan a new name to run it again", plan.name,
+                               db_path_.string());
+        std::vector<nlohmann::json> stored_cases;
+        for (const auto& c : db_.cases(*existing))
+            stored_cases.push_back(nlohmann::json::parse(c.conditions_json, nullptr, false));
+        const auto differences =
+            plan_differences(plan, nlohmann::json::parse(row->definition_json, nullptr, false), stored_cases);
+        if (!differences.empty()) {
+            std::string list;
+            for (const auto& d : differences) list += "\n  " + d;
+            return fmt::format("campaign '{}' in {} was planned differently; continue it with the same plan, or give "
+                               "this one a new name. Differences:{}",
+                               plan.name, db_path_.string(), list);
+        }
+    }
+    if (plan_) {
+        waiting_.push_back(plan);
+        event("info", "campaign", fmt::format("'{}' queued behind '{}' ({} waiting)", plan.name, plan_->name, waiting_.size()));
+        return {};
+    }
+    begin_campaign(plan);
+    return {};
+}
+
+void LabDaemon::begin_campaign(const CampaignPlan& plan) {
+    queue_.clear();
+    std::vector<std::pair<PlannedCase, std::int64_t>> cases;
+    std::set<std::pair<std::int64_t, std::int64_t>> done;  // (case row, replicate) finished before
+    const auto existing = db_.find_campaign(plan.name);
+    if (existing) {
+        // Continuing (start_campaign checked it is the same plan): finished trials are kept; an
+        // interrupted, aborted or failed one stays in the database with its reason (the analysis
+        // reads done trials only) and is run again.
+        campaign_id_ = *existing;
+        const auto stored = db_.cases(campaign_id_);
+        for (std::size_t i = 0; i < plan.cases.size() && i < stored.size(); ++i) cases.emplace_back(plan.cases[i], stored[i].id);
+        for (const auto& t : db_.trials(campaign_id_))
+            if (t.state == "done") done.insert({t.case_id, t.replicate});
+    } else {
+        campaign_id_ = db_.create_campaign(plan.name, campaign_definition_json(plan).dump());
+        int position = 0;
+        for (const auto& c : plan.cases)
+            cases.emplace_back(c, db_.add_case(campaign_id_, fmt::format("case {}", c.id), case_conditions_json(c).dump(),
+                                               position++));
+    }
+    for (int r = 1; r <= plan.replicates; ++r)
+        for (const auto& [c, id] : cases)
+            if (!done.count({id, r})) queue_.push_back({c, id, r});
+    trials_total_ = plan.replicates * static_cast<int>(cases.size());
+    trials_done_ = static_cast<int>(done.size());
+    plan_ = plan;
+    safety_tripped_ = false;
+    last_campaign_ = plan.name;
+    db_.set_campaign_state(campaign_id_, "running");
+    if (existing)
+        event("info", "campaign", fmt::format("'{}' continued: {} of {} trials done before, {} to run", plan.name,
+                                              trials_done_, trials_total_, queue_.size()));
+    else
+        event("info", "campaign",
+              fmt::format("'{}' started: {} cases x {} replicates", plan.name, plan.cases.size(), plan.replicates));
+}
+
+std::string LabDaemon::abort(const std::string& reason) {
+    std::lock_guard lk(lock_);
+    if (!plan_) return "no campaign is running";
+    acq_->manikin().set_run(false);
+    if (trial_id_) finish_trial("aborted", reason);
+    waiting_.clear();  // an operator's abort stops what was queued too
+    finish_campaign("aborted");
+    return {};
+}
+
+std::string LabDaemon::pause() {
+    std::lock_guard lk(lock_);
+    if (!plan_) return "no campaign is running";
+    if (paused_) return "already paused";
+    paused_ = true;
+    paused_at_ns_ = clock_->mono_ns();
+    event("info", "campaign", "paused");
+    return {};
+}
+
+std::string LabDaemon::resume() {
+    std::lock_guard lk(lock_);
+    if (!paused_) return "not paused";
+    stage_start_ns_ += clock_->mono_ns() - paused_at_ns_;  // the stage's clock stood still
+    paused_ = false;
+    event("info", "campaign", "resumed");
+    return {};
+}
+
+std::string LabDaemon::set_chamber(double temp_c, double rh_pct) {
+    std::lock_guard lk(lock_);
+    const auto& l = o_.config.safety;
+    if (temp_c < l.min_chamber_temp_c || temp_c > l.max_chamber_temp_c)
+        return fmt::format("chamber_temp_c {} is outside the safety limits {}..{} °C (safety.min/max_chamber_temp_c)", temp_c,
+                           l.min_chamber_temp_c, l.max_chamber_temp_c);
+    if (rh_pct < l.min_chamber_rh_pct || rh_pct > l.max_chamber_rh_pct)
+        return fmt::format("chamber_rh_pct {} is outside the safety limits {}..{} % (safety.min/max_chamber_rh_pct)", rh_pct,
+                           l.min_chamber_rh_pct, l.max_chamber_rh_pct);
+    if (auto why = acq_->chamber().write("air_temp_remote_setpoint_c", temp_c); !why.empty()) return why;
+    if (auto why = acq_->chamber().write("air_rh_remote_setpoint_pct", rh_pct); !why.empty()) return why;
+    chamber_setpoint_temp_c_ = temp_c;
+    chamber_setpoint_rh_pct_ = rh_pct;
+    event("info", "setpoint", fmt::format("chamber {} °C, {} %", temp_c, rh_pct));
+    return {};
+}
+
+void LabDaemon::safety_stop(const std::string& why) {
+    if (safety_tripped_) return;
+    safety_tripped_ = true;
+    acq_->manikin().set_run(false);
+    event("error", "safety", "heating stopped: " + why);
+    if (trial_id_) {
+        db_.add_trial_flag(trial_id_, flag_safety_stop);
+        finish_trial("failed", "safety stop: " + why);
+    }
+    waiting_.clear();
+    if (plan_) finish_campaign("aborted");
+}
+
+namespace {
+// What the daemon holds for the database while the disk is full: events and state changes are
+// small, and an hour of 1-Hz gap events is 3600; past this the oldest wait, the newest are counted.
+constexpr std::size_t kMaxDeferredWrites = 100000;
+}  // namespace
+
+void LabDaemon::write_or_defer(std::function<void()> write) {
+    if (!storage_full_) {
+        try {
+            write();
+            return;
+        } catch (const recorder::StorageFull& e) {
+            storage_stop_locked(e.what());
+        }
+    }
+    if (deferred_writes_.size() < kMaxDeferredWrites) deferred_writes_.push_back(std::move(write));
+    else ++deferred_writes_lost_;
+}
+
+void LabDaemon::storage_stop_locked(const std::string& why) {
+    if (storage_full_) return;
+    storage_full_ = true;
+    storage_error_ = why;
+    dropped_when_full_ = recorder_->stats().dropped;
+    if (acq_) acq_->manikin().set_run(false);  // no heating that cannot be recorded
+    const std::string running = plan_ ? fmt::format(" '{}' interrupted (start it again to continue);", plan_->name) : "";
+    event("error", "disk_full",
+          fmt::format("disk full: heating stopped;{} recording resumes by itself when space is freed ({})", running, why));
+    if (trial_id_) {
+        const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
+        const std::string reason = "disk full";
+        write_or_defer([=, this] { db_.set_trial_state(trial, "interrupted", reason, utc_ns); });
+        trial_summaries_.push_back(fmt::format("case {} replicate {}: interrupted (disk full)", current_->c.id,
+                                               current_->replicate));
+        trial_id_ = 0;
+        current_.reset();
+        ++trials_done_;
+    }
+    if (plan_) {
+        const std::int64_t campaign = campaign_id_;
+        write_or_defer([=, this] { db_.set_campaign_state(campaign, "interrupted"); });
+        plan_.reset();
+    }
+    queue_.clear();
+    waiting_.clear();
+    paused_ = false;
+    stage_ = Stage::idle;
+}
+
+// Each tick while the disk is full: once the recorder commits again, write what waited, in order.
+void LabDaemon::retry_storage_locked() {
+    if (recorder_->stats().storage_full) return;  // the recorder retries each second (and at each flush)
+    while (!deferred_writes_.empty()) {
+        deferred_writes_.front()();  // throws StorageFull while there is still no room
+        deferred_writes_.pop_front();
+    }
+    storage_full_ = false;
+    const auto rs = recorder_->stats();
+    event("warn", "disk_full",
+          fmt::format("space is back: recording resumed; {} readings were dropped while the disk was full{}",
+                      rs.dropped - dropped_when_full_,
+                      deferred_writes_lost_ ? fmt::format(", {} events not kept", deferred_writes_lost_) : ""));
+    deferred_writes_lost_ = 0;
+    storage_error_.clear();
+}
+
+void LabDaemon::finish_trial(const std::string& state, const std::string& reason) {
+    flush_recorder();
+    db_.set_trial_state(trial_id_, state, reason, clock_->utc_ns());
+    if (dropped_samples_) db_.add_trial_flag(trial_id_, flag_dropped_samples);
+    db_.refresh_trial_table();  // a column for every channel this trial recorded
+    trial_summaries_.push_back(fmt::format("case {} replicate {}: {}{}", current_->c.id, current_->replicate, state,
+                                           reason.empty() ? "" : " (" + reason + ")"));
+    trial_id_ = 0;
+    current_.reset();
+    ++trials_done_;
+    stage_ = Stage::idle;
+    if (state == "done" && interim_results_.value_or(!o_.virtual_clock) && !queue_.empty()) start_interim_results();
+}
+
+// Results so far, after each trial in real time (a lab waits 75 min per trial; the console shows
+// each case's flux and the parity plot as they come). On its own thread and database connection:
+// the tick and the safety checks never wait for an analysis. On the virtual clock only the final
+// results are computed (a demo would spend its time re-analysing).
+void LabDaemon::start_interim_results() {
+    if (interim_thread_.joinable()) {
+        if (!interim_done_) return;  // the previous one is still running: the next trial will catch up
+        interim_thread_.join();
+    }
+    interim_done_ = false;
+    interim_thread_ = std::thread([this, name = plan_->name, campaign_id = campaign_id_, utc = clock_->utc_ns()] {
+        try {
+            auto db = recorder::Database::open(db_path_);
+            const auto result = analysis::analyze_campaign(campaign_from_database(db, name));
+            auto j = analysis::to_json(result);
+            j["interim"] = true;
+            j["twin_parity"] = twin_parity_json(result);
+            db.store_result(campaign_id, j.dump(), utc);
+        } catch (const std::exception& e) {
+            spdlog::warn("interim results for '{}': {}", name, e.what());
+        }
+        interim_done_ = true;
+    });
+}
+
+void LabDaemon::flush_recorder() { recorder_->flush(); }
+
+void LabDaemon::finish_campaign(const std::string& state) {
+    queue_.clear();
+    if (state == "done") {
+        stage_ = Stage::computing;
+        try {
+            const auto campaign = campaign_from_database(db_, plan_->name);
+            const auto result = analysis::analyze_campaign(campaign);
+            auto j = analysis::to_json(result);
+            j["interim"] = false;
+            j["twin_parity"] = twin_parity_json(result);
+            db_.store_result(campaign_id_, j.dump(), clock_->utc_ns());
+            event("info", "results", fmt::format("'{}': results stored", plan_->name));
+        } catch (const std::exception& e) {
+            event("error", "results", std::string("could not compute results: ") + e.what());
+        }
+    }
+    db_.set_campaign_state(campaign_id_, state);
+    event("info", "campaign", fmt::format("'{}' {}", plan_->name, state));
+    plan_.reset();
+    paused_ = false;
+    stage_ = Stage::idle;
+    if (!waiting_.empty()) {
+        const CampaignPlan next = waiting_.front();
+        waiting_.pop_front();
+        begin_campaign(next);
+    }
+}
+
+namespace {
+// How long a device's refusal of a trial's setpoint is retried before the trial fails.
+constexpr double kDeviceRetryTimeoutS = 300.0;
+}  // namespace
+
+// A device refused this stage's setpoint: warn once and let the next tick try again; after
+// kDeviceRetryTimeoutS in the stage the trial fails. `detail` is ": <device's reason>" or empty.
+void LabDaemon::setpoint_refused(const std::string& what, const std::string& detail) {
+    const double minutes = kDeviceRetryTimeoutS / 60;
+    if (stage_elapsed_s() > kDeviceRetryTimeoutS) {
+        finish_trial("failed", fmt::format("{} for {:.0f} min{}", what, minutes, detail));
+    } else if (!device_retry_logged_) {
+        device_retry_logged_ = true;
+        event("warn", "setpoint", fmt::format("{}, retrying for up to {:.0f} min{}", what, minutes, detail));
+    }
+}
+
+void LabDaemon::tick_locked() {
+    try {
+        if (!storage_full_) {
+            if (const auto rs = recorder_->stats(); rs.storage_full) storage_stop_locked(rs.storage_error);
+        }
+        if (storage_full_) retry_storage_locked();
+        advance_locked();
+    } catch (const recorder::StorageFull& e) {
+        storage_stop_locked(e.what());
+    }
+}
+
+// The trial state machine: one transition check per call (every tick of the clock).
+void LabDaemon::advance_locked() {
+    const std::int64_t now = clock_->mono_ns();
+    // Gaps: a device that goes stale or disconnects is recorded, and flags the running trial.
+    for (const auto& st : acq_->status()) {
+        const bool down = st.stale || !st.connected;
+        const auto it = gap_since_ns_.find(st.name);
+        if (down && it == gap_since_ns_.end()) {
+            gap_since_ns_[st.name] = now;
+            event("warn", "gap", fmt::format("{} lost ({}){}", st.name, st.connected ? "stale" : "disconnected",
+                                             st.last_error.empty() ? "" : ": " + st.last_error));
+            if (trial_id_) db_.add_trial_flag(trial_id_, flag_device_gap);
+        } else if (!down && it != gap_since_ns_.end()) {
+            event("info", "gap", fmt::format("{} back after {:.0f} s", st.name, static_cast<double>(now - it->second) * 1e-9));
+            gap_since_ns_.erase(it);
+        }
+    }
+    // Watchdog: heating with a silent manikin or chamber is not allowed.
+    if (acq_->manikin().running_command()) {
+        const double limit_s = o_.config.safety.watchdog_timeout_s;
+        for (const char* dev : {"manikin", "chamber"}) {
+            const auto it = gap_since_ns_.find(dev);
+            if (it != gap_since_ns_.end() && static_cast<double>(now - it->second) * 1e-9 > limit_s)
+                safety_stop(fmt::format("watchdog: {} silent for more than safety.watchdog_timeout_s = {} s", dev, limit_s));
+        }
+    }
+    if (!plan_ || paused_) return;
+    const double elapsed = stage_elapsed_s();
+    switch (stage_) {
+        case Stage::idle: {
+            if (queue_.empty()) {
+                finish_campaign("done");
+                return;
+            }
+            current_ = queue_.front();
+            queue_.pop_front();
+            trial_id_ = db_.create_trial(campaign_id_, current_->case_id, current_->replicate);
+            db_.set_trial_setup(trial_id_, setup_id_);
+            dropped_samples_ = 0;
+            enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
+            [[fallthrough]];
+        }
+        case Stage::configuring: {
+            // A chamber that answers with an exception or not at all for a while (a controller
+            // rebooting) is retried each tick, not failed at once: otherwise a 4-min glitch fails
+            // every queued trial in as many ticks. The plan was checked against [safety] already.
+            if (const auto why = set_chamber(current_->c.chamber_temp_c, current_->c.chamber_rh_pct); !why.empty()) {
+                setpoint_refused("chamber setpoint refused", ": " + why);
+                return;
+            }
+            enclosure_range_.clear();
+            enter(Stage::chamber_settling);
+            return;
+        }
+        case Stage::chamber_settling: {
+            enclosure_range_.evict_before(now - static_cast<std::int64_t>(plan_->settle_window_s * 1e9));
+            const bool window_full = !enclosure_range_.empty() &&
+                                     static_cast<double>(now - enclosure_range_.oldest_ns()) * 1e-9 >= plan_->settle_window_s - 1.0;
+            if (window_full && enclosure_range_.range() < plan_->settle_band_c) {
+                enter(Stage::manikin_starting, fmt::format("enclosure stable at {:.2f} °C", enclosure_air_c()));
+            } else if (elapsed > plan_->settle_timeout_s) {
+                finish_trial("failed", fmt::format("timeout: the enclosure did not settle within {:.0f} min",
+                                                   plan_->settle_timeout_s / 60));
+            }
+            return;
+        }
+        case Stage::manikin_starting: {
+            mc::Setpoint sp;
+            sp.zone = 0;
+            sp.mode = mc::ControlMode::constant_skin_temp;
+            sp.value = current_->c.skin_setpoint_c;
+            sp.sweating = current_->c.wet;
+            sp.sweat_rate_g_m2_h = current_->c.sweat_rate_g_m2_h;
+            if (!acq_->manikin().send(sp) || !acq_->manikin().set_run(true)) {
+                setpoint_refused("the manikin bus refused the setpoint", "");  // a bus-off recovers in seconds
+                return;
+            }
+            for (auto& r : skin_range_) r.clear();
+            steady_since_ns_.reset();
+            acquiring_since_ns_ = now;
+            enter(Stage::acquiring, fmt::format("skin {} °C, {}", sp.value, sp.sweating ? "wet" : "dry"));
+            return;
+        }
+        case Stage::acquiring: {
+            const double window_s = o_.config.steady_state.window_s;
+            const SteadyCheck check = check_steady_window_locked(now);
+            const double worst = std::isfinite(check.worst_zone_range_c) ? check.worst_zone_range_c : 0.0;
+            const bool steady = check.window_steady;
+            if (steady && !steady_since_ns_) {
+                steady_since_ns_ = now - static_cast<std::int64_t>(window_s * 1e9);
+                steady_seen_at_ns_ = now;
+                db_.set_trial_steady(trial_id_, *steady_since_ns_);
+                event("info", "steady", fmt::format("every zone within {:.3f} °C over the last {:.0f} min", worst, window_s / 60));
+            } else if (!steady && steady_since_ns_) {
+                steady_since_ns_.reset();
+            }
+            // Stop once the duration is reached and the window has stayed steady for another minute,
+            // so the analysis (5-s bins, its own window alignment) sees the same steady window.
+            if (elapsed >= plan_->trial_duration_s && steady && now - steady_seen_at_ns_ >= 60'000'000'000LL) {
+                enter(Stage::stopping, "trial duration reached, steady");
+            } else if (elapsed > plan_->acquire_timeout_s) {
+                db_.add_trial_flag(trial_id_, flag_never_steady);
+                enter(Stage::stopping, fmt::format("timeout: not steady after {:.0f} min (worst zone {:.3f} °C)",
+                                                   plan_->acquire_timeout_s / 60, worst));
+            }
+            return;
+        }
+        case Stage::stopping: {
+            acq_->manikin().set_run(false);
+            finish_trial("done", steady_since_ns_ ? "" : "never steady");
+            return;
+        }
+        case Stage::computing: return;
+    }
+}
+
+void LabDaemon::step_virtual(double dt_s) {
+    std::lock_guard lk(lock_);
+    acq_->step(dt_s);
+    tick_locked();
+    last_tick_steady_ns_ = steady_now_ns();
+}
+
+void LabDaemon::step_wall_clock_virtual(std::int64_t dt_ns) {
+    std::lock_guard lk(lock_);
+    if (!o_.virtual_clock) throw std::logic_error("step_wall_clock_virtual: the daemon runs on the system clock");
+    virtual_clock_.step_utc_ns(dt_ns);
+}
+
+bool LabDaemon::campaign_active() {
+    std::lock_guard lk(lock_);
+    return plan_.has_value();
+}
+
+std::string LabDaemon::stage_line() {
+    std::lock_guard lk(lock_);
+    return current_ ? fmt::format("{} trial {}", to_string(stage_), trial_id_) : std::string(to_string(stage_));
+}
+
+void LabDaemon::run_virtual(std::function<void(const std::string&)> on_trial, double max_virtual_s) {
+    const double dt = o_.config.simulation.step_s;
+    std::size_t reported = 0;
+    for (double t = 0; t < max_virtual_s; t += dt) {
+        step_virtual(dt);
+        std::lock_guard lk(lock_);
+        while (reported < trial_summaries_.size()) {
+            if (on_trial) on_trial(fmt::format("[{}/{}] {}", reported + 1, trials_total_, trial_summaries_[reported]));
+            ++reported;
+        }
+        if (!plan_) break;
+    }
+    recorder_->flush();
+}
+
+void LabDaemon::start_realtime() {
+    acq_->start_realtime(o_.speed);
+    stop_ = false;
+    tick_thread_ = std::thread([this] {
+        auto next = std::chrono::steady_clock::now();
+        for (;;) {
+            next += std::chrono::seconds(1);
+            std::this_thread::sleep_until(next);
+            std::lock_guard lk(lock_);
+            if (stop_) break;
+            tick_locked();
+            last_tick_steady_ns_ = steady_now_ns();
+        }
+    });
+}
+
+double LabDaemon::seconds_since_tick() const {
+    const auto now = steady_now_ns();
+    return static_cast<double>(now - last_tick_steady_ns_.load()) * 1e-9;
+}
+
+void LabDaemon::stop() {
+    if (interim_thread_.joinable()) interim_thread_.join();
+    {
+        std::lock_guard lk(lock_);
+        stop_ = true;
+    }
+    if (tick_thread_.joinable()) tick_thread_.join();
+    {
+        // SIGTERM (or any stop) mid-campaign: the running trial and the campaign end
+        // "interrupted" now, not at the next start; starting the same plan continues it.
+        std::lock_guard lk(lock_);
+        try {
+            if (storage_full_) retry_storage_locked();
+            if (trial_id_) finish_trial("interrupted", "daemon stopped");
+            if (plan_ && campaign_id_) {
+                db_.set_campaign_state(campaign_id_, "interrupted");
+                event("warn", "campaign", fmt::format("'{}' interrupted: the daemon stopped (start it again to continue)", plan_->name));
+                plan_.reset();
+            }
+        } catch (const recorder::StorageFull& e) {
+            // The next start marks what was running interrupted (mark_interrupted_trials).
+            spdlog::error("stopping with the disk full: {} writes not made ({})", deferred_writes_.size() + 1, e.what());
+        }
+    }
+    if (acq_) {
+        acq_->manikin().set_run(false);
+        acq_->stop();
+    }
+    if (recorder_) recorder_->flush();
+}
+
+nlohmann::json LabDaemon::status_json() {
+    std::lock_guard lk(lock_);
+    nlohmann::json j;
+    j["mode"] = o_.config.mode;
+    j["clock"] = o_.virtual_clock ? "virtual" : "real";
+    j["database"] = db_path_.string();
+    j["time_s"] = static_cast<double>(clock_->mono_ns()) * 1e-9;
+    j["campaign"] = plan_ ? nlohmann::json(plan_->name) : nlohmann::json(nullptr);
+    j["queued_campaigns"] = nlohmann::json::array();
+    for (const auto& p : waiting_) j["queued_campaigns"].push_back(p.name);
+    j["stage"] = to_string(stage_);
+    j["paused"] = paused_;
+    j["trials_done"] = trials_done_;
+    j["trials_total"] = trials_total_;
+    if (current_) {
+        j["trial"] = {{"case", current_->c.id}, {"replicate", current_->replicate}, {"id", trial_id_},
+                      {"wet", current_->c.wet}, {"stage_elapsed_s", stage_elapsed_s()}};
+        if (stage_ == Stage::acquiring) {
+            const SteadyCheck c = check_steady_window_locked(paused_ ? paused_at_ns_ : clock_->mono_ns());
+            const double limit_c = o_.config.steady_state.max_skin_fluctuation_c;
+            const double elapsed_s = stage_elapsed_s();
+            const double min_duration_s = plan_->trial_duration_s;
+            // The rule (Methods): every zone's range over the window below the limit, and the
+            // trial's duration reached.
+            const bool steady = c.window_steady && elapsed_s >= min_duration_s;
+            // Progress is the least-advanced of the rule's three conditions, so the bar cannot be
+            // full while the rule says no.
+            const double range_fraction =
+                !std::isfinite(c.worst_zone_range_c) ? 0.0
+                : c.worst_zone_range_c <= 0.0     ? 1.0
+                                                  : std::min(1.0, limit_c / c.worst_zone_range_c);
+            const double duration_fraction = min_duration_s > 0 ? std::min(1.0, elapsed_s / min_duration_s) : 1.0;
+            double progress = std::min({c.window_filled_fraction, range_fraction, duration_fraction});
+            if (!steady) progress = std::min(progress, 0.999);
+            else progress = 1.0;
+            auto& t = j["trial"];
+            t["window_filled_fraction"] = c.window_filled_fraction;
+            t["window_s"] = o_.config.steady_state.window_s;
+            t["worst_zone_range_c"] = std::isfinite(c.worst_zone_range_c) ? nlohmann::json(c.worst_zone_range_c) : nlohmann::json(nullptr);
+            const auto& zones = analysis::andi35_zone_map().zones;
+            if (c.worst_zone >= 1 && c.worst_zone <= static_cast<int>(zones.size()))
+                t["worst_zone"] = {{"zone", c.worst_zone}, {"name", zones[static_cast<std::size_t>(c.worst_zone - 1)].name}};
+            else
+                t["worst_zone"] = nullptr;
+            t["limit_c"] = limit_c;
+            t["elapsed_s"] = elapsed_s;
+            t["min_duration_s"] = min_duration_s;
+            t["window_steady"] = c.window_steady;
+            t["steady"] = steady;
+            t["steady_progress"] = progress;
+        }
+    }
+    nlohmann::json devices = nlohmann::json::array();
+    for (const auto& s : acq_->status())
+        devices.push_back({{"name", s.name}, {"transport", s.transport}, {"connected", s.connected}, {"stale", s.stale},
+                           {"samples", s.samples}, {"frames", s.frames}, {"checksum_errors", s.checksum_errors},
+                           {"malformed", s.malformed}, {"timeouts", s.timeouts}, {"exceptions", s.exceptions},
+                           {"reconnects", s.reconnects}, {"comm_errors", s.comm_errors}, {"device_faults", s.device_faults},
+                           {"last_error", s.last_error}});
+    j["devices"] = devices;
+    const auto rs = recorder_->stats();
+    // Every reading not stored is counted here, whatever the cause (not only logged).
+    j["recorder"] = {{"accepted", rs.accepted},
+                     {"committed", rs.committed},
+                     {"dropped", rs.dropped + dropped_samples_ + rs.duplicates + rs.lost},
+                     {"dropped_queue_full", rs.dropped + dropped_samples_},
+                     {"duplicates", rs.duplicates},
+                     {"lost_after_retries", rs.lost},
+                     {"queue_rows", rs.queue_depth},
+                     {"recovered_from_crash_ring", rs.recovered},
+                     {"crash_ring", rs.crash_ring},
+                     {"journal", rs.journal},
+                     {"locked", rs.locked},
+                     {"locked_commits", rs.locked_commits}};
+    j["storage"] = {{"full", storage_full_},
+                    {"error", storage_error_},
+                    {"deferred_writes", deferred_writes_.size()},
+                    {"full_disk_commits", rs.full_disk_commits}};
+    j["safety_tripped"] = safety_tripped_;
+    j["measured"] = measured_json_locked();
+    for (const auto& [name, section] : status_sections_) j[name] = section();
+    return j;
+}
+
+// The values an operator watches, from the live channels: each with unit, age and the channel(s)
+// it came from. Mean skin temperature and heat flux are area-weighted over the zones whose last
+// sample is good; their age is the oldest of those samples.
+nlohmann::json LabDaemon::measured_json_locked() const {
+    const std::int64_t now = clock_->mono_ns();
+    auto null_if_nan = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    auto one = [&](const std::string& key, const std::string& unit) {
+        nlohmann::json m = {{"value", nullptr}, {"unit", unit}, {"age_s", nullptr}, {"quality", nullptr}, {"source", key}};
+        if (const auto it = live_.find(key); it != live_.end()) {
+            m["value"] = null_if_nan(it->second.value);
+            m["age_s"] = static_cast<double>(now - it->second.mono_ns) * 1e-9;
+            m["quality"] = drivers::to_string(it->second.quality);
+        }
+        return m;
+    };
+    auto zone_mean = [&](const std::string& suffix, const std::string& unit) {
+        const auto& zones = analysis::andi35_zone_map().zones;
+        double sum = 0, area = 0, oldest_s = 0;
+        std::size_t used = 0;
+        for (const auto& z : zones) {
+            const auto it = live_.find(fmt::format("manikin/z{:02d}.{}", z.zone, suffix));
+            if (it == live_.end() || it->second.quality != drivers::Quality::good || !std::isfinite(it->second.value)) continue;
+            sum += it->second.value * z.area_m2;
+            area += z.area_m2;
+            oldest_s = std::max(oldest_s, static_cast<double>(now - it->second.mono_ns) * 1e-9);
+            ++used;
+        }
+        return nlohmann::json{{"value", area > 0 ? nlohmann::json(sum / area) : nlohmann::json(nullptr)},
+                              {"unit", unit},
+                              {"age_s", used ? nlohmann::json(oldest_s) : nlohmann::json(nullptr)},
+                              {"quality", used == zones.size() ? "good" : used ? "partial" : "none"},
+                              {"zones_used", used},
+                              {"source", "manikin/zNN." + suffix + " (area-weighted)"}};
+    };
+    nlohmann::json m;
+    m["chamber_air_temp_c"] = one("datalogger/ee181_1.air_temp_c", "°C");
+    m["chamber_air_temp_c"]["setpoint"] = null_if_nan(chamber_setpoint_temp_c_);
+    m["chamber_air_rh_pct"] = one("datalogger/ee181_1.air_rh_pct", "%");
+    m["chamber_air_rh_pct"]["setpoint"] = null_if_nan(chamber_setpoint_rh_pct_);
+    m["air_speed_m_s"] = one("windsonic/air_speed_m_s", "m/s");
+    m["mean_skin_temp_c"] = zone_mean("skin_temp_c", "°C");
+    m["mean_heat_flux_w_m2"] = zone_mean("heat_flux_w_m2", "W/m²");
+    return m;
+}
+
+nlohmann::json LabDaemon::live_json() {
+    std::lock_guard lk(lock_);
+    nlohmann::json j = nlohmann::json::object();
+    for (const auto& [key, s] : live_)
+        j[key] = {{"value", std::isfinite(s.value) ? nlohmann::json(s.value) : nlohmann::json(nullptr)},
+                  {"unit", drivers::unit_of_channel(s.channel)}, {"quality", drivers::to_string(s.quality)}, {"age_s", static_cast<double>(clock_->mono_ns() - s.mono_ns) * 1e-9}};
+    return j;
+}
+
+std::optional<nlohmann::json> LabDaemon::latest_results_json(const std::string& campaign) {
+    std::lock_guard lk(lock_);
+    const auto id = db_.find_campaign(campaign);
+    if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), campaign));
+    const auto r = db_.latest_result(*id);
+    if (!r) return std::nullopt;
+    return nlohmann::json::parse(r->json);
+}
+
+nlohmann::json LabDaemon::results_json(const std::string& campaign) {
+    auto r = latest_results_json(campaign);
+    if (!r) throw UserError(fmt::format("campaign '{}' has no results yet", campaign));
+    return std::move(*r);
+}
+
+}  // namespace manikind

@@ -1,0 +1,227 @@
+#pragma once
+// The daemon's heart: acquisition (drivers, and the simulated lab in simulated mode), the
+// recorder, and the campaign state machine. One trial goes
+//   configuring -> chamber_settling -> manikin_starting -> acquiring -> stopping -> done
+// (or aborted / failed / interrupted), with a timeout and a reason for every stage that can
+// hang. Campaigns are cases x replicates, queued. The daemon enforces the manikin's safety
+// limits itself (skin temperature, heater power, a watchdog on the manikin and chamber) and
+// records every such event. Thread-safe: the control API calls in from its own thread.
+#include <atomic>
+#include <deque>
+#include <functional>
+#include <limits>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/acquisition.hpp"
+#include "daemon/campaign_plan.hpp"
+#include "daemon/config.hpp"
+#include "daemon/instance_lock.hpp"
+#include "store/database.hpp"
+#include "store/recorder.hpp"
+
+namespace manikind {
+
+enum class Stage { idle, configuring, chamber_settling, manikin_starting, acquiring, stopping, computing };
+const char* to_string(Stage s);
+
+// Trial quality flags (trials.quality_flags).
+enum TrialFlag : std::int64_t { flag_device_gap = 1, flag_safety_stop = 2, flag_never_steady = 4, flag_dropped_samples = 8 };
+
+// The sliding range (max - min) of one signal over a time window: monotonic deques, O(1) per sample.
+class SlidingRange {
+public:
+    void push(std::int64_t t_ns, double v);
+    void evict_before(std::int64_t t_ns);
+    double range() const;
+    std::int64_t oldest_ns() const { return all_.empty() ? 0 : all_.front(); }
+    bool empty() const { return all_.empty(); }
+    void clear() { maxq_.clear(), minq_.clear(), all_.clear(); }
+
+private:
+    std::deque<std::pair<std::int64_t, double>> maxq_, minq_;
+    std::deque<std::int64_t> all_;
+};
+
+struct DaemonOptions {
+    config::Config config;
+    bool virtual_clock = true;   // simulated mode only: run as fast as the CPU allows
+    double speed = 1.0;          // simulated real-time mode: x wall clock
+};
+
+class LabDaemon {
+public:
+    explicit LabDaemon(DaemonOptions options);
+    ~LabDaemon();
+
+    // Commands: an empty string when accepted, else why not (the limit or state named). A campaign
+    // started while another runs is queued behind it; abort ends the running one and the queue.
+    std::string start_campaign(const CampaignPlan& plan);
+    std::string abort(const std::string& reason);
+    std::string pause();
+    std::string resume();
+    std::string set_chamber(double temp_c, double rh_pct);
+
+    nlohmann::json status_json();
+    // Parts the daemon's owner adds to status_json() under `name` (the archive forwarder's state);
+    // `section` is called under the daemon's lock: it must not call back into the daemon.
+    void add_status_section(const std::string& name, std::function<nlohmann::json()> section);
+    // An event from a part the daemon's owner runs beside it (the archive forwarder): logged,
+    // stored, and an alarm when severity is warn or error. Any thread.
+    void external_event(const std::string& severity, const std::string& kind, const std::string& message);
+    nlohmann::json live_json();
+    nlohmann::json results_json(const std::string& campaign);   // latest stored results
+    // The latest stored results, or nothing while none are stored; throws for an unknown campaign.
+    std::optional<nlohmann::json> latest_results_json(const std::string& campaign);
+
+    // Alarms: every warn or error event since the daemon started (the newest 200), each with an
+    // id, for the console; acknowledging one records who saw it, it does not clear the cause.
+    nlohmann::json alarms_json();
+    std::string acknowledge_alarm(std::int64_t id);
+    // Called (under the daemon's lock: keep it to a flag and a post) after each new sample.
+    void set_sample_listener(std::function<void()> listener);
+    // Results so far after each trial, on their own thread. Default: in real time only.
+    void set_interim_results(bool on) { interim_results_ = on; }
+
+    // Virtual clock: steps until the queue is empty (or `max_virtual_s` passes). `on_trial` is
+    // called after each trial with a one-line summary.
+    void run_virtual(std::function<void(const std::string&)> on_trial = {}, double max_virtual_s = 1e12);
+    void step_virtual(double dt_s);
+    // Virtual clock only: steps the wall clock (UTC) by dt_ns and leaves monotonic time alone, as
+    // an NTP correction or a hand-set clock does. Trial timing is monotonic: only stamps move.
+    void step_wall_clock_virtual(std::int64_t dt_ns);
+    // Real time: acquisition threads plus a 1-s tick thread.
+    void start_realtime();
+    void stop();
+    bool campaign_active();
+    // The stage and trial now, cheaply (status_json() measures the steady window and every device):
+    // "acquiring trial 3", "idle". For a loop that reports each change.
+    std::string stage_line();
+    std::uint64_t committed_rows() const { return recorder_->stats().committed; }
+    std::uint64_t accepted_rows() const { return recorder_->stats().accepted; }
+    double virtual_time_s() const { return static_cast<double>(clock_->mono_ns()) * 1e-9; }
+
+    recorder::Database& db() { return db_; }
+    const config::Config& config() const { return o_.config; }
+    // Returns when every sample recorded so far is committed (exports and tests read after it).
+    void flush_recorder();
+    Acquisition& acquisition() { return *acq_; }
+    const std::filesystem::path& database_path() const { return db_path_; }
+    std::optional<std::string> last_campaign() const { return last_campaign_; }
+    // Seconds since the acquisition tick last ran (real time) or the virtual clock last stepped:
+    // the systemd watchdog is fed only while this stays small.
+    double seconds_since_tick() const;
+
+private:
+    struct TrialJob {
+        PlannedCase c;
+        std::int64_t case_id = 0;
+        int replicate = 0;
+    };
+    void on_sample(const drivers::Sample& s);
+    void record_sample_locked(const drivers::Sample& s);
+    void tick_locked();     // advance_locked(), surviving a full disk
+    void advance_locked();  // gaps, watchdog, then one step of the trial state machine
+    void enter(Stage s, const std::string& why = {});
+    void event(const std::string& severity, const std::string& kind, const std::string& message);
+    void finish_trial(const std::string& state, const std::string& reason);
+    void finish_campaign(const std::string& state);
+    void start_interim_results();
+    void begin_campaign(const CampaignPlan& plan);
+    void safety_stop(const std::string& why);
+    void setpoint_refused(const std::string& what, const std::string& detail);
+    // A full disk: heating stops, the trial and campaign end interrupted (continuable), an alarm
+    // is raised; what the daemon could not write waits in deferred_writes_ until space returns.
+    void storage_stop_locked(const std::string& why);
+    void retry_storage_locked();
+    void write_or_defer(std::function<void()> write);
+    double stage_elapsed_s() const;
+    std::int64_t channel_id(const std::string& device, const std::string& channel);
+    double enclosure_air_c() const;
+    // The steady-state rule's inputs now: evicts samples older than the window, then measures.
+    struct SteadyCheck {
+        double window_filled_fraction = 0.0;   // time acquiring / steady_state.window_s, capped at 1
+        double worst_zone_range_c = std::numeric_limits<double>::quiet_NaN();   // NaN: no zone sampled yet
+        int worst_zone = 0;                    // 1-based zone number, 0 when none
+        bool window_steady = false;            // every zone sampled over a full window, each range < the limit
+    };
+    SteadyCheck check_steady_window_locked(std::int64_t now_ns);
+    nlohmann::json measured_json_locked() const;
+
+    DaemonOptions o_;
+    std::filesystem::path db_path_;
+    InstanceLock db_lock_;   // before db_: a second daemon must not touch the database at all
+    recorder::Database db_;
+    std::unique_ptr<recorder::Recorder> recorder_;
+    drivers::ManualClock virtual_clock_;
+    drivers::SystemClock system_clock_;
+    const drivers::Clock* clock_ = nullptr;
+    std::unique_ptr<Acquisition> acq_;
+    std::recursive_mutex lock_;
+
+    // Campaign state.
+    std::optional<CampaignPlan> plan_;
+    std::deque<CampaignPlan> waiting_;   // campaigns queued behind the running one
+    std::int64_t campaign_id_ = 0;
+    std::deque<TrialJob> queue_;
+    std::optional<TrialJob> current_;
+    std::int64_t trial_id_ = 0;
+    std::int64_t setup_id_ = 0;  // the set-up recorded at start (schema version 7)
+    int trials_total_ = 0, trials_done_ = 0;
+    Stage stage_ = Stage::idle;
+    std::int64_t stage_start_ns_ = 0;
+    bool paused_ = false;
+    std::int64_t paused_at_ns_ = 0;
+    bool safety_tripped_ = false;
+    bool device_retry_logged_ = false;  // this stage's setpoint refusal was logged once
+    bool storage_full_ = false;
+    std::string storage_error_;
+    std::deque<std::function<void()>> deferred_writes_;  // in order; bounded by kMaxDeferredWrites
+    std::uint64_t deferred_writes_lost_ = 0;
+    std::uint64_t dropped_when_full_ = 0;                  // recorder drops when the disk filled
+    std::optional<std::string> last_campaign_;
+    std::vector<std::string> trial_summaries_;
+
+    // Live values and detectors.
+    std::map<std::string, drivers::Sample> live_;
+    std::map<std::string, std::int64_t> channel_ids_;
+    std::map<std::string, std::int64_t> idle_logged_ns_;  // channel -> last idle-log reading (mono)
+    std::map<std::string, std::int64_t> device_ids_;
+    std::vector<SlidingRange> skin_range_;
+    SlidingRange enclosure_range_;
+    std::int64_t acquiring_since_ns_ = 0;
+    std::optional<std::int64_t> steady_since_ns_;
+    std::int64_t steady_seen_at_ns_ = 0;
+    std::map<std::string, std::int64_t> gap_since_ns_;
+    std::uint64_t dropped_samples_ = 0;
+    // The chamber setpoints last commanded (NaN until the first set_chamber).
+    double chamber_setpoint_temp_c_ = std::numeric_limits<double>::quiet_NaN();
+    double chamber_setpoint_rh_pct_ = std::numeric_limits<double>::quiet_NaN();
+
+    struct Alarm {
+        std::int64_t id;
+        std::int64_t utc_ns;
+        std::string severity, kind, message;
+        bool acknowledged = false;
+    };
+    std::deque<Alarm> alarms_;
+    std::int64_t next_alarm_id_ = 1;
+    std::function<void()> sample_listener_;
+    std::vector<std::pair<std::string, std::function<nlohmann::json()>>> status_sections_;
+
+    std::thread tick_thread_;
+    bool stop_ = false;
+    std::thread interim_thread_;
+    std::atomic<bool> interim_done_{true};
+    std::optional<bool> interim_results_;
+    std::atomic<std::int64_t> last_tick_steady_ns_{0};
+};
+
+}  // namespace manikind

@@ -1,0 +1,459 @@
+#include "daemon/web_server.hpp"
+
+#include <sys/socket.h>
+
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <chrono>
+#include <deque>
+#include <list>
+#include <mutex>
+#include <thread>
+
+#include "analysis/zone_map.hpp"
+#include "daemon/console_model.hpp"
+#include "base/user_error.hpp"
+
+namespace manikind {
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+using tcp = asio::ip::tcp;
+using steady = std::chrono::steady_clock;
+
+namespace {
+
+std::chrono::nanoseconds seconds(double s) {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(s));
+}
+
+double utc_ms() {
+    return static_cast<double>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                   std::chrono::system_clock::now().time_since_epoch())
+                                   .count()) *
+           1e-3;
+}
+
+bool is_loopback(const std::string& host) {
+    boost::system::error_code ec;
+    const auto addr = asio::ip::make_address(host, ec);
+    return !ec && addr.is_loopback();
+}
+
+}  // namespace
+
+WebOptions parse_listen(const std::string& listen, const std::string& where) {
+    WebOptions o;
+    const auto colon = listen.rfind(':');
+    if (colon == std::string::npos || colon == 0)
+        throw UserError(fmt::format("{}: '{}': expected HOST:PORT, e.g. 127.0.0.1:8470", where, listen));
+    std::string host = listen.substr(0, colon);
+    if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+    if (host == "localhost") host = "127.0.0.1";
+    if (!is_loopback(host))
+        throw UserError(fmt::format("{}: '{}': the console listens on a loopback address only (127.0.0.1 or ::1); "
+                                    "reach it from another machine through an SSH tunnel",
+                                    where, listen));
+    const std::string port = listen.substr(colon + 1);
+    char* end = nullptr;
+    const long p = std::strtol(port.c_str(), &end, 10);
+    if (port.empty() || *end != '\0' || p < 0 || p > 65535)
+        throw UserError(fmt::format("{}: '{}': the port must be a number 0..65535 (0: any free port)", where, listen));
+    o.host = host;
+    o.port = static_cast<int>(p);
+    return o;
+}
+
+struct WebServer::Impl {
+    struct WsSession;
+    struct HttpSession;
+
+    Impl(LabDaemon& d, ControlOptions a, WebOptions w) : daemon(d), api(std::move(a)), o(std::move(w)), history(o.history_s) {}
+
+    LabDaemon& daemon;
+    ControlOptions api;
+    WebOptions o;
+    // Reset in stop(), after the timers and acceptor: pending handlers (and the sessions they
+    // keep alive) die while the rest of the server still exists.
+    std::unique_ptr<asio::io_context> io = std::make_unique<asio::io_context>();
+    std::optional<tcp::acceptor> acceptor;
+    std::optional<asio::steady_timer> push_timer, tick_timer;
+    std::thread thread;
+    int bound_port = 0;
+    std::atomic<bool> shutdown{false};
+    std::atomic<bool> sample_pending{false};
+    std::atomic<double> pending_since_utc_ms{0};  // wall time the oldest unsent sample reached the daemon
+    std::size_t clients = 0;  // HTTP and WebSocket sessions (server thread only)
+    std::list<std::weak_ptr<WsSession>> sockets;
+    steady::time_point last_push{};
+    bool push_scheduled = false;
+    console::DeviceSeverity severity;
+    console::ChamberHistory history;
+    std::vector<std::string> allowed_hosts;  // Host header values this server answers to
+
+    // --- what the page reads ------------------------------------------------------------
+    nlohmann::json status() {
+        auto s = daemon.status_json();
+        if (s.contains("devices")) severity.annotate(s["devices"], std::chrono::duration<double>(steady::now().time_since_epoch()).count());
+        return s;
+    }
+
+    nlohmann::json update_message() {
+        auto live = daemon.live_json();
+        history.add(std::chrono::duration<double>(steady::now().time_since_epoch()).count(), live);
+        auto s = status();
+        const bool wet = s.contains("trial") && s["trial"].value("wet", false);
+        auto twin = console::twin_zone_fluxes(live, wet);
+        return {{"type", "update"},
+                {"server_utc_ms", std::chrono::duration_cast<std::chrono::milliseconds>(
+                                      std::chrono::system_clock::now().time_since_epoch())
+                                      .count()},
+                {"status", s},
+                {"twin_q_w_m2", std::move(twin)},
+                {"live", std::move(live)},
+                {"alarms", daemon.alarms_json()}};
+    }
+
+    static nlohmann::json zones_json() {
+        nlohmann::json a = nlohmann::json::array();
+        for (const auto& z : analysis::andi35_zone_map().zones)
+            a.push_back({{"zone", z.zone}, {"name", z.name}, {"segment", z.segment}, {"region", z.region}, {"area_m2", z.area_m2}});
+        return a;
+    }
+
+    bool host_allowed(const http::request<http::string_body>& req) const {
+        const auto host = std::string(req[http::field::host]);
+        for (const auto& h : allowed_hosts)
+            if (host == h) return true;
+        return false;
+    }
+    // A browser sends Origin on cross-site requests: only this page's own origin may change state.
+    bool origin_allowed(const http::request<http::string_body>& req) const {
+        const auto origin = req.find(http::field::origin);
+        if (origin == req.end()) return true;  // not a browser (curl, scripts): the token decides
+        const std::string value(origin->value());
+        for (const auto& h : allowed_hosts)
+            if (value == "http://" + h) return true;
+        return false;
+    }
+
+    http::response<http::string_body> reply(const http::request<http::string_body>& req, http::status code,
+                                            std::string body, const char* type) {
+        http::response<http::string_body> res{code, req.version()};
+        res.set(http::field::server, "manikind");
+        res.set(http::field::content_type, type);
+        res.set(http::field::cache_control, "no-store");
+        res.set("X-Content-Type-Options", "nosniff");
+        res.set("X-Frame-Options", "DENY");
+        // The page may talk only to this daemon: nothing is loaded or sent anywhere else.
+        res.set("Content-Security-Policy",
+                "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "
+                "base-uri 'none'; form-action 'none'; frame-ancestors 'none'");
+        res.keep_alive(req.keep_alive());
+        res.body() = std::move(body);
+        res.prepare_payload();
+        return res;
+    }
+    http::response<http::string_body> json_reply(const http::request<http::string_body>& req, http::status code,
+                                                 const nlohmann::json& j) {
+        return reply(req, code, j.dump(), "application/json");
+    }
+    http::response<http::string_body> error(const http::request<http::string_body>& req, http::status code,
+                                            const std::string& why) {
+        return json_reply(req, code, {{"ok", false}, {"error", why}});
+    }
+
+    http::response<http::string_body> handle(const http::request<http::string_body>& req) {
+        if (!host_allowed(req))
+            return error(req, http::status::forbidden,
+                         fmt::format("Host '{}' is not this console's address", std::string(req[http::field::host])));
+        const std::string target(req.target());
+        const std::string path = target.substr(0, target.find('?'));
+        const std::string query = target.find('?') == std::string::npos ? "" : target.substr(target.find('?') + 1);
+        if (req.method() == http::verb::post) {
+            if (path != "/api/command") return error(req, http::status::not_found, "POST goes to /api/command only");
+            if (!origin_allowed(req))
+                return error(req, http::status::forbidden, "requests from another site cannot change the daemon's state");
+            bool stop_now = false;
+            const auto r = handle_request(daemon, api, req.body(), stop_now);
+            if (stop_now) shutdown = true;
+            return json_reply(req, r.value("ok", false) ? http::status::ok : http::status::bad_request, r);
+        }
+        if (req.method() != http::verb::get && req.method() != http::verb::head)
+            return error(req, http::status::method_not_allowed, "GET to read, POST /api/command to change");
+        if (path == "/") {
+            const auto* a = find_web_asset("/index.html");
+            return reply(req, http::status::ok, std::string(a->body, a->size), a->content_type);
+        }
+        if (const auto* a = find_web_asset(path)) return reply(req, http::status::ok, std::string(a->body, a->size), a->content_type);
+        try {
+            if (path == "/api/status") return json_reply(req, http::status::ok, status());
+            if (path == "/api/live") return json_reply(req, http::status::ok, daemon.live_json());
+            if (path == "/api/zones") return json_reply(req, http::status::ok, zones_json());
+            if (path == "/api/history") return json_reply(req, http::status::ok, history.to_json());
+            if (path == "/api/alarms") return json_reply(req, http::status::ok, daemon.alarms_json());
+            if (path == "/api/results") {
+                std::optional<std::string> name;
+                if (query.rfind("campaign=", 0) == 0) name = query.substr(9);
+                if (!name) name = daemon.last_campaign();
+                if (!name) return error(req, http::status::not_found, "no campaign has run yet");
+                return json_reply(req, http::status::ok, {{"campaign", *name}, {"results", daemon.results_json(*name)}});
+            }
+            if (path == "/metrics")
+                return reply(req, http::status::ok, console::prometheus_text(status(), daemon.live_json()),
+                             "text/plain; version=0.0.4; charset=utf-8");
+        } catch (const UserError& e) {
+            return error(req, http::status::not_found, e.what());
+        }
+        return error(req, http::status::not_found, fmt::format("no such page: {}", path));
+    }
+
+    // --- sessions -----------------------------------------------------------------------
+    struct WsSession : std::enable_shared_from_this<WsSession> {
+        WsSession(Impl& server, tcp::socket socket) : owner(server), ws(std::move(socket)) {}
+        ~WsSession() { --owner.clients; }
+        Impl& owner;
+        websocket::stream<beast::tcp_stream> ws;
+        beast::flat_buffer incoming;
+        std::deque<std::shared_ptr<const std::string>> outgoing;
+        std::size_t outgoing_bytes = 0;
+        bool open = false;
+
+        void start(http::request<http::string_body> req) {
+            beast::get_lowest_layer(ws).expires_never();
+            auto timeouts = websocket::stream_base::timeout::suggested(beast::role_type::server);
+            timeouts.idle_timeout = seconds(owner.o.idle_timeout_s);
+            timeouts.keep_alive_pings = true;
+            ws.set_option(timeouts);
+            ws.read_message_max(4096);  // the page sends nothing but pings and close
+            ws.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
+                if (ec) return;
+                self->open = true;
+                self->owner.sockets.push_back(self);
+                self->send(std::make_shared<const std::string>(self->owner.update_message().dump()));
+                self->read();
+            });
+        }
+        void read() {
+            ws.async_read(incoming, [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                if (ec) {
+                    self->open = false;
+                    return;
+                }
+                self->incoming.consume(self->incoming.size());
+                self->read();
+            });
+        }
+        void send(std::shared_ptr<const std::string> message) {
+            if (!open) return;
+            outgoing_bytes += message->size();
+            outgoing.push_back(std::move(message));
+            if (outgoing_bytes > owner.o.max_unsent_bytes) {  // the client stopped reading: let it go
+                spdlog::info("console: a WebSocket client {} bytes behind; disconnected", outgoing_bytes);
+                open = false;
+                beast::get_lowest_layer(ws).close();
+                return;
+            }
+            if (outgoing.size() == 1) write();
+        }
+        void write() {
+            ws.text(true);
+            ws.async_write(asio::buffer(*outgoing.front()), [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                if (ec) {
+                    self->open = false;
+                    return;
+                }
+                self->outgoing_bytes -= self->outgoing.front()->size();
+                self->outgoing.pop_front();
+                if (!self->outgoing.empty()) self->write();
+            });
+        }
+    };
+
+    struct HttpSession : std::enable_shared_from_this<HttpSession> {
+        HttpSession(Impl& server, tcp::socket socket) : owner(server), stream(std::move(socket)) {}
+        ~HttpSession() {
+            if (!upgraded) --owner.clients;
+        }
+        Impl& owner;
+        beast::tcp_stream stream;
+        beast::flat_buffer buffer;
+        std::optional<http::request_parser<http::string_body>> parser;
+        http::response<http::string_body> response;
+        bool upgraded = false;
+
+        void read() {
+            parser.emplace();
+            parser->header_limit(16 * 1024);
+            parser->body_limit(owner.api.max_message_bytes);
+            stream.expires_after(seconds(owner.o.idle_timeout_s));
+            http::async_read(stream, buffer, *parser, [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                self->on_read(ec);
+            });
+        }
+        void on_read(beast::error_code ec) {
+            if (ec) {
+                if (ec == http::error::body_limit) {
+                    http::request<http::string_body> req;
+                    return respond(owner.error(req, http::status::payload_too_large,
+                                               fmt::format("request over the limit of {} bytes", owner.api.max_message_bytes)),
+                                   true);
+                }
+                beast::error_code ignored;
+                stream.socket().shutdown(tcp::socket::shutdown_both, ignored);
+                return;
+            }
+            auto req = parser->release();
+            if (websocket::is_upgrade(req)) {
+                if (!owner.host_allowed(req) || !owner.origin_allowed(req))
+                    return respond(owner.error(req, http::status::forbidden, "WebSocket from another site or host refused"), true);
+                if (req.target() != "/ws") return respond(owner.error(req, http::status::not_found, "the WebSocket is at /ws"), true);
+                upgraded = true;  // the count moves to the WebSocket session
+                std::make_shared<WsSession>(owner, stream.release_socket())->start(std::move(req));
+                return;
+            }
+            respond(owner.handle(req), !req.keep_alive());
+        }
+        void respond(http::response<http::string_body> res, bool close_after) {
+            response = std::move(res);
+            if (close_after) response.keep_alive(false);
+            http::async_write(stream, response, [self = shared_from_this(), close_after](beast::error_code ec, std::size_t) {
+                if (ec || close_after || !self->response.keep_alive()) {
+                    beast::error_code ignored;
+                    self->stream.socket().shutdown(tcp::socket::shutdown_send, ignored);
+                    return;
+                }
+                self->read();
+            });
+        }
+    };
+
+    void accept() {
+        acceptor->async_accept([this](beast::error_code ec, tcp::socket socket) {
+            if (ec == asio::error::operation_aborted) return;
+            if (!ec) {
+                if (clients >= o.max_clients) {
+                    const std::string why = fmt::format("refused: {} console clients are connected\n", o.max_clients);
+                    const std::string busy = fmt::format(
+                        "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nConnection: close\r\n"
+                        "Content-Length: {}\r\n\r\n{}",
+                        why.size(), why);
+                    [[maybe_unused]] auto n = ::send(socket.native_handle(), busy.data(), busy.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+                } else {
+                    ++clients;
+                    std::make_shared<HttpSession>(*this, std::move(socket))->read();
+                }
+                return accept();
+            }
+            // Out of descriptors or similar: pause instead of spinning.
+            push_timer_retry_accept();
+        });
+    }
+    std::optional<asio::steady_timer> accept_retry;
+    void push_timer_retry_accept() {
+        accept_retry->expires_after(std::chrono::milliseconds(100));
+        accept_retry->async_wait([this](beast::error_code ec) {
+            if (!ec) accept();
+        });
+    }
+
+    // Updates go out when a sample arrives (a burst coalesced over 20 ms: the issue asks under 50 ms from sample to screen) and at least once a second.
+    void broadcast() {
+        last_push = steady::now();
+        // The oldest sample in this update reached the daemon then: the page (and bench_console)
+        // measures sample-to-screen latency from it.
+        const double oldest_sample_utc_ms = sample_pending.exchange(false) ? pending_since_utc_ms.load() : 0.0;
+        sockets.remove_if([](const std::weak_ptr<WsSession>& w) {
+            auto s = w.lock();
+            return !s || !s->open;
+        });
+        if (sockets.empty()) return;
+        auto update = update_message();
+        update["oldest_new_sample_utc_ms"] = oldest_sample_utc_ms > 0 ? nlohmann::json(oldest_sample_utc_ms) : nlohmann::json(nullptr);
+        const auto message = std::make_shared<const std::string>(update.dump());
+        for (auto& w : sockets)
+            if (auto s = w.lock()) s->send(message);
+    }
+    void on_sample_posted() {
+        if (push_scheduled) return;
+        const auto due = last_push + std::chrono::milliseconds(20);
+        if (steady::now() >= due) return broadcast();
+        push_scheduled = true;
+        push_timer->expires_at(due);
+        push_timer->async_wait([this](beast::error_code ec) {
+            push_scheduled = false;
+            if (!ec) broadcast();
+        });
+    }
+    void tick() {
+        if (steady::now() - last_push >= std::chrono::milliseconds(900)) broadcast();
+        else history.add(std::chrono::duration<double>(steady::now().time_since_epoch()).count(), daemon.live_json());
+        tick_timer->expires_after(std::chrono::seconds(1));
+        tick_timer->async_wait([this](beast::error_code ec) {
+            if (!ec) tick();
+        });
+    }
+};
+
+WebServer::WebServer(LabDaemon& daemon, ControlOptions api, WebOptions options)
+    : impl_(std::make_unique<Impl>(daemon, std::move(api), std::move(options))) {}
+WebServer::~WebServer() { stop(); }
+int WebServer::port() const { return impl_->bound_port; }
+bool WebServer::shutdown_requested() const { return impl_->shutdown.load(); }
+
+void WebServer::start() {
+    Impl& s = *impl_;
+    if (!is_loopback(s.o.host)) throw UserError(fmt::format("the console listens on a loopback address only, not {}", s.o.host));
+    const auto address = asio::ip::make_address(s.o.host);
+    const tcp::endpoint endpoint(address, static_cast<std::uint16_t>(s.o.port));
+    s.acceptor.emplace(*s.io);
+    beast::error_code ec;
+    s.acceptor->open(endpoint.protocol(), ec);
+    if (!ec) s.acceptor->set_option(asio::socket_base::reuse_address(true), ec);
+    if (!ec) s.acceptor->bind(endpoint, ec);
+    if (!ec) s.acceptor->listen(asio::socket_base::max_listen_connections, ec);
+    if (ec) throw UserError(fmt::format("console: cannot listen on {}:{}: {}", s.o.host, s.o.port, ec.message()));
+    s.bound_port = s.acceptor->local_endpoint().port();
+    const std::string host = address.is_v6() ? "[" + s.o.host + "]" : s.o.host;
+    s.allowed_hosts = {fmt::format("{}:{}", host, s.bound_port), fmt::format("localhost:{}", s.bound_port)};
+    s.push_timer.emplace(*s.io);
+    s.tick_timer.emplace(*s.io);
+    s.accept_retry.emplace(*s.io);
+    s.daemon.set_sample_listener([&s] {
+        if (!s.sample_pending.exchange(true)) {
+            s.pending_since_utc_ms = utc_ms();
+            asio::post(*s.io, [&s] { s.on_sample_posted(); });
+        }
+    });
+    s.accept();
+    s.tick();
+    s.thread = std::thread([&s] { s.io->run(); });
+}
+
+void WebServer::stop() {
+    Impl& s = *impl_;
+    s.daemon.set_sample_listener({});
+    if (!s.io) return;
+    if (s.thread.joinable()) {
+        s.io->stop();
+        s.thread.join();
+    }
+    s.acceptor.reset();
+    s.push_timer.reset();
+    s.tick_timer.reset();
+    s.accept_retry.reset();
+    s.sockets.clear();
+    s.io.reset();
+}
+
+}  // namespace manikind

@@ -1,0 +1,239 @@
+#include "store/database_export.hpp"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <ctime>
+#include <limits>
+#include <map>
+#include <optional>
+
+#include "analysis/zone_map.hpp"
+#include "base/user_error.hpp"
+
+namespace manikind {
+
+namespace {
+
+std::string iso_utc(std::int64_t utc_ns) {
+    const std::time_t t = static_cast<std::time_t>(utc_ns / 1000000000);
+    std::tm tm{};
+    gmtime_r(&t, &tm);
+    char buf[32];
+    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+    return buf;
+}
+
+// One channel on the trial's grid: row i covers (t_i - period, t_i] with t_i = i x period
+// after `t0_ns`. The value is the mean of the good samples in it (the recorded value itself
+// when one sample fell in it); when none was good, the last sample's value and quality.
+struct BinnedChannel {
+    std::vector<double> value;
+    std::vector<std::uint8_t> quality;  // analysis::kNoSample where no sample fell in the row
+};
+
+// Accumulates one channel's samples as they come (a trial is read once, in time order, for
+// every channel at once) and gives its BinnedChannel at the end.
+class ChannelBinner {
+public:
+    ChannelBinner(std::int64_t t0_ns, std::size_t n, double period_s)
+        : t0_ns_(t0_ns), period_s_(period_s), sum_(n, 0.0), good_(n, 0),
+          out_{std::vector<double>(n, std::numeric_limits<double>::quiet_NaN()), std::vector<std::uint8_t>(n, analysis::kNoSample)} {}
+
+    void add(const recorder::SampleRow& r) {
+        any_ = true;
+        const double t = static_cast<double>(r.mono_ns - t0_ns_) * 1e-9;
+        if (t < -period_s_) return;
+        const auto i = static_cast<long>(std::ceil(t / period_s_ - 1e-9));
+        if (i < 0 || static_cast<std::size_t>(i) >= sum_.size()) return;
+        const auto k = static_cast<std::size_t>(i);
+        if (r.quality == 0 && std::isfinite(r.value)) {
+            sum_[k] += r.value;
+            ++good_[k];
+        } else if (good_[k] == 0) {
+            out_.value[k] = r.value;
+            out_.quality[k] = r.quality == 0 ? std::uint8_t{3} : r.quality;  // a "good" NaN is a lost reading
+        }
+    }
+    bool any_sample() const { return any_; }
+
+    BinnedChannel finish() {
+        for (std::size_t k = 0; k < sum_.size(); ++k)
+            if (good_[k] > 0) {
+                out_.value[k] = good_[k] == 1 ? sum_[k] : sum_[k] / good_[k];
+                out_.quality[k] = 0;
+            }
+        return std::move(out_);
+    }
+
+private:
+    std::int64_t t0_ns_;
+    double period_s_;
+    std::vector<double> sum_;
+    std::vector<int> good_;
+    BinnedChannel out_;
+    bool any_ = false;
+};
+
+// Good values only, for the analysis columns (a flagged reading never enters a mean).
+std::vector<double> good_values(const BinnedChannel& c) {
+    std::vector<double> out = c.value;
+    for (std::size_t i = 0; i < out.size(); ++i)
+        if (c.quality[i] != 0) out[i] = std::numeric_limits<double>::quiet_NaN();
+    return out;
+}
+
+std::vector<double> mean_of(const std::vector<const BinnedChannel*>& series, std::size_t n) {
+    std::vector<double> out(n, std::numeric_limits<double>::quiet_NaN());
+    for (std::size_t i = 0; i < n; ++i) {
+        double s = 0;
+        int k = 0;
+        for (const auto* c : series)
+            if (c->quality[i] == 0 && std::isfinite(c->value[i])) s += c->value[i], ++k;
+        if (k) out[i] = s / k;
+    }
+    return out;
+}
+
+}  // namespace
+
+analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s) {
+    const auto campaign_id = db.find_campaign(name);
+    if (!campaign_id) throw UserError(fmt::format("{}: no campaign named '{}'", db.path().string(), name));
+    analysis::Campaign c;
+    c.name = name;
+    c.zone_map = analysis::andi35_zone_map();
+    c.instruments = analysis::default_instrument_specs();
+    std::map<std::int64_t, nlohmann::json> conditions;
+    std::map<std::int64_t, int> case_number;
+    for (const auto& cs : db.cases(campaign_id.value())) {
+        conditions[cs.id] = nlohmann::json::parse(cs.conditions_json, nullptr, false);
+        case_number[cs.id] = conditions[cs.id].value("id", static_cast<int>(cs.position + 1));
+    }
+    const std::vector<recorder::ChannelRow> all_channels = db.channels();
+
+    // The finished trials and their time bases (the manikin's start to the trial's end).
+    struct Span {
+        recorder::TrialRow row;
+        std::int64_t start_mono_ns, end_mono_ns, start_utc_ns;
+    };
+    std::vector<Span> spans;
+    for (const auto& t : db.trials(campaign_id.value())) {
+        if (t.state != "done") continue;
+        std::optional<recorder::EventRow> start, end;
+        for (const auto& e : db.events(t.id)) {
+            if (e.kind == "stage" && e.message == "acquiring") start = e;
+            if (e.kind == "stage" && e.message == "stopping") end = e;
+        }
+        if (!start || !end || end->mono_ns <= start->mono_ns) continue;
+        spans.push_back({t, start->mono_ns, end->mono_ns, start->utc_ns});
+    }
+    if (spans.empty()) throw UserError(fmt::format("campaign '{}' has no finished trial yet", name));
+
+    // Every channel with samples in any exported trial gets a column in every trial (a fixed
+    // set, so a script reads each trial alike).
+    std::vector<std::vector<BinnedChannel>> per_trial(spans.size());
+    std::vector<bool> recorded(all_channels.size(), false);
+    // Channel id -> index into all_channels, looked up once per sample: a vector by id (ids are
+    // SQLite rowids from 1, one per channel, so it stays small), not a map.
+    constexpr std::size_t no_channel = static_cast<std::size_t>(-1);
+    std::vector<std::size_t> index_of_id;
+    for (std::size_t k = 0; k < all_channels.size(); ++k) {
+        const auto id = static_cast<std::size_t>(std::max<std::int64_t>(all_channels[k].id, 0));
+        if (id >= index_of_id.size()) index_of_id.resize(id + 1, no_channel);
+        index_of_id[id] = k;
+    }
+    for (std::size_t s = 0; s < spans.size(); ++s) {
+        const auto& sp = spans[s];
+        const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(sp.end_mono_ns - sp.start_mono_ns) * 1e-9 / period_s)) + 1;
+        std::vector<ChannelBinner> binners(all_channels.size(), ChannelBinner(sp.start_mono_ns, n, period_s));
+        db.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {
+            const auto id = static_cast<std::size_t>(r.channel_id);
+            if (r.channel_id >= 0 && id < index_of_id.size() && index_of_id[id] != no_channel)
+                binners[index_of_id[id]].add(r);
+        });
+        for (std::size_t k = 0; k < all_channels.size(); ++k) {
+            if (binners[k].any_sample()) recorded[k] = true;
+            per_trial[s].push_back(binners[k].finish());
+        }
+    }
+    std::vector<std::size_t> exported;  // indexes into all_channels
+    for (std::size_t k = 0; k < all_channels.size(); ++k)
+        if (recorded[k]) {
+            exported.push_back(k);
+            c.channels.push_back({all_channels[k].device_name, all_channels[k].name, all_channels[k].unit});
+        }
+    std::map<std::string, std::size_t> index_of;  // "device/name" -> index into all_channels
+    for (std::size_t k = 0; k < all_channels.size(); ++k) index_of[all_channels[k].device_name + "/" + all_channels[k].name] = k;
+
+    for (std::size_t s = 0; s < spans.size(); ++s) {
+        const auto& sp = spans[s];
+        auto& bins = per_trial[s];
+        const std::size_t n = bins.empty() ? 0 : bins.front().value.size();
+        const auto find = [&](const std::string& key) -> const BinnedChannel* {
+            const auto it = index_of.find(key);
+            return it == index_of.end() || !recorded[it->second] ? nullptr : &bins[it->second];
+        };
+        analysis::Trial trial;
+        const nlohmann::json& cond = conditions[sp.row.case_id];
+        trial.info.case_id = case_number[sp.row.case_id];
+        trial.info.replicate = static_cast<int>(sp.row.replicate);
+        trial.info.id = fmt::format("c{:02d}-r{}", trial.info.case_id, sp.row.replicate);
+        trial.info.file = "trials/" + trial.info.id + ".csv";
+        trial.info.skin_setpoint_c = cond.value("skin_setpoint_c", 35.0);
+        trial.info.wettedness = cond.value("wet", false) ? 1.0 : 0.0;
+        trial.info.chamber_setpoint_temp_c = cond.value("chamber_temp_c", 0.0);
+        trial.info.chamber_setpoint_rh_pct = cond.value("chamber_rh_pct", 0.0);
+        trial.info.started_utc = sp.row.started_utc_ns ? iso_utc(*sp.row.started_utc_ns) : "";
+        trial.info.t0_utc_ns = sp.start_utc_ns;
+        auto& d = trial.data;
+        for (std::size_t i = 0; i < n; ++i) {
+            d.t_s.push_back(static_cast<double>(i) * period_s);
+            d.utc_ns.push_back(sp.start_utc_ns + static_cast<std::int64_t>(std::llround(static_cast<double>(i) * period_s * 1e9)));
+        }
+        // The analysis columns: air and wall as the mean of their instruments (Text S3.2).
+        std::vector<const BinnedChannel*> temps, rhs, walls;
+        for (int k = 1; k <= 8; ++k) {
+            if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_temp_c", k))) temps.push_back(b);
+            if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_rh_pct", k))) rhs.push_back(b);
+            if (const auto* b = find(fmt::format("datalogger/wall_tc_{}.wall_temp_c", k))) walls.push_back(b);
+        }
+        d.air_temp_c = mean_of(temps, n);
+        d.air_rh_pct = mean_of(rhs, n);
+        if (!walls.empty()) d.wall_temp_c = mean_of(walls, n);
+        if (const auto* b = find("windsonic/air_speed_m_s")) d.air_speed_m_s = good_values(*b);
+        const std::vector<double> missing(n, std::numeric_limits<double>::quiet_NaN());
+        for (const auto& z : c.zone_map.zones) {
+            const auto* skin = find(fmt::format("manikin/z{:02d}.skin_temp_c", z.zone));
+            const auto* flux = find(fmt::format("manikin/z{:02d}.heat_flux_w_m2", z.zone));
+            d.skin_temp_c.push_back(skin ? good_values(*skin) : missing);
+            d.heat_flux_w_m2.push_back(flux ? good_values(*flux) : missing);
+        }
+        for (const std::size_t k : exported) {
+            d.channel_values.push_back(std::move(bins[k].value));
+            d.channel_quality.push_back(std::move(bins[k].quality));
+        }
+        c.trials.push_back(std::move(trial));
+    }
+
+    // Provenance: what made these numbers.
+    c.provenance["program"] = std::string("manikind ") + MANIKIND_VERSION;
+    c.provenance["database"] = db.path().filename().string();
+    c.provenance["twin_version"] = db.latest_twin_version().value_or("baseline");
+    const std::int64_t first_start_utc_ns = spans.front().start_utc_ns;
+    std::int64_t config_utc_ns = 0;  // the configuration the daemon ran under at the first trial
+    for (const auto& e : db.events(std::nullopt))
+        if (e.kind == "config" && e.utc_ns <= first_start_utc_ns && e.utc_ns >= config_utc_ns && e.message.starts_with("sha256 ")) {
+            c.provenance["config_sha256"] = e.message.substr(7, 64);
+            config_utc_ns = e.utc_ns;
+        }
+    return c;
+}
+
+void export_campaign(recorder::Database& db, const std::string& name, const std::filesystem::path& folder) {
+    analysis::write_campaign(folder, campaign_from_database(db, name));
+}
+
+}  // namespace manikind

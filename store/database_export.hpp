@@ -1,0 +1,21 @@
+#pragma once
+// From the recorder's database to the interchange format (analysis::Campaign): each finished
+// trial's samples from the manikin's start to the trial's end, binned on a 5-s grid (Text S3.2
+// samples every 5 s), good samples only. Air temperature and humidity are the mean of the EE181
+// probes, wall temperature the mean of the thermocouples, air speed the WindSonic's.
+#include <filesystem>
+#include <string>
+
+#include "analysis/recording.hpp"
+#include "store/database.hpp"
+
+namespace manikind {
+
+// Throws UserError when the campaign is unknown or has no finished trial.
+analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& campaign_name,
+                                          double sample_period_s = 5.0);
+
+// `manikin export`: writes campaign.json and trials/*.csv into `folder`.
+void export_campaign(recorder::Database& db, const std::string& campaign_name, const std::filesystem::path& folder);
+
+}  // namespace manikind
