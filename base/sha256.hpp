@@ -1,5 +1,5 @@
 #pragma once
-// SHA-256 (FIPS 180-4) of a byte string, as lowercase hex: the configuration's fingerprint in
+// SHA-256 (FIPS 180-4, from libcrypto) of a byte string, as lowercase hex: the configuration's fingerprint in
 // exports' provenance, comparable with `sha256sum manikind.toml`. No I/O.
 #include <string>
 #include <string_view>

@@ -24,7 +24,7 @@
 #include "base/toml_input.hpp"
 #include "cli/campaign_source.hpp"
 #include "cli/commands.hpp"
-#include "daemon/control_api.hpp"
+#include "daemon/control_client.hpp"
 #include "store/database_export.hpp"
 #include "store/hdf5_export.hpp"
 #include "store/database.hpp"

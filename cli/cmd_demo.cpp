@@ -21,7 +21,8 @@
 #include "analysis/reconcile/report_output.hpp"
 #include "cli/commands.hpp"
 #include "store/database_export.hpp"
-#include "daemon/lab_daemon.hpp"
+#include "daemon/virtual_run.hpp"
+#include "store/database.hpp"
 #include "base/user_error.hpp"
 #include "analysis/reconcile/twin_store.hpp"
 #include "physics/sign_convention.hpp"
@@ -70,16 +71,15 @@ void add_demo_command(CLI::App& app) {
         const std::time_t now = std::time(nullptr);
         std::strftime(stamp, sizeof stamp, "%Y%m%dT%H%M%SZ", std::gmtime(&now));
         plan.name = std::string("validation-") + stamp;
-        LabDaemon daemon({cfg, true, 1.0});
-        if (const auto why = daemon.start_campaign(plan); !why.empty()) throw UserError(why);
         if (!o->json)
             std::printf("manikind demo: the paper's validation campaign through the daemon on the simulated lab\n"
                         "  %zu cases x %d replicates; every device over its real transport, virtual clock\n",
                         plan.cases.size(), plan.replicates);
-        daemon.run_virtual([&](const std::string& line) {
+        const VirtualRun run = run_virtual_campaign(cfg, plan, [&](const std::string& line) {
             if (!o->json) std::fprintf(stderr, "  %s\n", line.c_str());
         });
-        const auto campaign = campaign_from_database(daemon.db(), plan.name);
+        auto db = recorder::Database::open(run.database);
+        const auto campaign = campaign_from_database(db, plan.name);
         analysis::write_campaign(out / "campaign", campaign);
         int unsteady = 0;
         const auto t_sim = std::chrono::steady_clock::now();
@@ -104,8 +104,8 @@ void add_demo_command(CLI::App& app) {
         }
         (void)unsteady;
         std::printf("  %zu trials recorded in %.1f s of wall time (%.0f h of virtual lab time)\n", campaign.trials.size(),
-                    secs(t0, t_sim), daemon.status_json()["time_s"].get<double>() / 3600.0);
-        std::printf("  database:   %s (campaign '%s')\n", daemon.database_path().string().c_str(), plan.name.c_str());
+                    secs(t0, t_sim), run.lab_time_s / 3600.0);
+        std::printf("  database:   %s (campaign '%s')\n", run.database.string().c_str(), plan.name.c_str());
         std::printf("  recordings: %s\n\n", (out / "campaign").string().c_str());
         // Compact results table: whole body per case with its 95 % CI (manikin analyze has the rest).
         std::printf("Whole-body heat flux per case (%s), mean of the replicates with 95 %% CI:\n", physics::heat_flux_sign);

@@ -25,7 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
-#include "daemon/acquisition.hpp"
+#include "daemon/simulated_lab.hpp"
 #include "daemon/config.hpp"
 #include "store/database.hpp"
 #include "drivers/register_map.hpp"

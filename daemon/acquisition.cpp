@@ -8,66 +8,10 @@
 #include <filesystem>
 #include <unistd.h>
 
-#include "analysis/zone_map.hpp"
 #include "drivers/register_map.hpp"
 #include "base/user_error.hpp"
 
 namespace manikind {
-
-sim::SimLabOptions simulated_lab_options(const config::Config& config) {
-    sim::SimLabOptions o;
-    for (const auto& z : analysis::andi35_zone_map().zones)
-        o.world.zones.push_back({{z.zone, z.segment, z.region, z.area_m2, 35.0}, z.name});
-    o.world.physics.name = "simulated world";
-    for (const auto& e : config.simulation.world_effects) {
-        try {
-            o.world.physics.terms.push_back(sim::parse_effect(e));
-        } catch (const std::exception& ex) {
-            throw UserError(fmt::format("simulation.world_effects: {}", ex.what()));
-        }
-    }
-    o.world.seed = config.simulation.seed;
-    o.world.scatter = config.simulation.scatter;
-    o.manikin_period_s = config.simulation.manikin_period_s;
-    o.world.enclosure_table = sim::table_s3_cases();
-    o.world.watchdog_s = config.safety.watchdog_timeout_s;
-    const auto convert = [](const RegisterMap& map) {
-        std::vector<sim::RegisterDef> defs;
-        for (const auto& r : map.registers) defs.push_back({r.spec, r.unit_id, r.probe});
-        return defs;
-    };
-    o.chamber_registers = convert(register_map_from_setting(config.devices.chamber.register_map, "chamber", config.source_dir));
-    o.datalogger_registers =
-        convert(register_map_from_setting(config.devices.datalogger.register_map, "datalogger", config.source_dir));
-    o.runtime_dir = config.simulation.runtime_dir.empty()
-                        ? std::filesystem::temp_directory_path() / fmt::format("manikind-sim-{}", ::getpid())
-                        : std::filesystem::path(config.simulation.runtime_dir);
-    for (const auto& f : config.simulation.faults) {
-        try {
-            o.faults.push_back(sim::parse_fault(f));
-        } catch (const std::exception& ex) {
-            throw UserError(fmt::format("simulation.faults: {}", ex.what()));
-        }
-    }
-    return o;
-}
-
-std::vector<drivers::ModbusPoint> modbus_points(const RegisterMap& map) {
-    std::vector<drivers::ModbusPoint> points;
-    for (const auto& r : map.registers) {
-        drivers::ModbusPoint p;
-        p.channel = r.spec.name;
-        p.spec = r.spec;
-        p.unit_id = r.unit_id;
-        p.scaling = r.probe;
-        p.valid_min = r.valid_min;
-        p.valid_max = r.valid_max;
-        // Setpoints are written by the daemon; their read-back is the controller's working setpoint.
-        p.poll = !r.spec.writable;
-        points.push_back(std::move(p));
-    }
-    return points;
-}
 
 Acquisition::Acquisition(const config::Config& config, drivers::ManualClock& clock, drivers::SampleSink sink,
                          std::optional<sim::SimLabOptions> lab_options)

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "daemon/config.hpp"
+#include "daemon/simulated_lab.hpp"
 #include "drivers/register_map.hpp"
 #include "daemon/step_worker.hpp"
 #include "drivers/anemometers.hpp"
@@ -27,13 +28,6 @@
 #include "sim/lab/sim_lab.hpp"
 
 namespace manikind {
-
-// The world options of the simulated lab from the configuration: ANDI 35-zone manikin, the
-// baseline physics plus [simulation] world_effects, Table S3 enclosure offsets.
-sim::SimLabOptions simulated_lab_options(const config::Config& config);
-
-// Modbus points from a register map (channel = register name; setpoints are not polled).
-std::vector<drivers::ModbusPoint> modbus_points(const RegisterMap& map);
 
 class Acquisition {
 public:

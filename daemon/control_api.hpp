@@ -20,6 +20,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/control_client.hpp"
 #include "daemon/instance_lock.hpp"
 #include "daemon/lab_daemon.hpp"
 
@@ -79,21 +80,11 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-// The address of a Unix socket path; throws UserError naming `what` when the path is too long
-// for sockaddr_un (107 characters).
-struct sockaddr_un unix_address(const std::string& path, const std::string& what);
-
-// Client side (the `manikin` CLI): sends one request, returns the reply. Throws UserError when
-// the daemon is not reachable, or has not answered within `timeout_s` (saying what it waited for).
-nlohmann::json call_daemon(const std::filesystem::path& socket_path, const nlohmann::json& request,
-                           double timeout_s = 10.0);
-
 // Token handling: when the config sets none, the daemon makes one and writes it beside the socket
 // (<socket>.token, mode 0600) for local clients of the same user. The file is created with
 // O_EXCL|O_NOFOLLOW: never written through a symlink; an existing file is replaced only when it is
 // the daemon user's own and no one else can read it, else the daemon refuses to start, saying why.
 // A configured token must be strong (config::token_problem).
 std::string load_or_create_token(const std::string& configured, const std::filesystem::path& socket_path);
-std::string read_token_file(const std::filesystem::path& socket_path);
 
 }  // namespace manikind

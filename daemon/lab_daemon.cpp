@@ -25,7 +25,7 @@ std::int64_t steady_now_ns() {
 }
 }  // namespace
 
-const char* to_string(Stage s) {
+const char* stage_name(Stage s) {
     switch (s) {
         case Stage::idle: return "idle";
         case Stage::configuring: return "configuring";
@@ -36,25 +36,6 @@ const char* to_string(Stage s) {
         case Stage::computing: return "computing";
     }
     return "unknown";
-}
-
-void SlidingRange::push(std::int64_t t, double v) {
-    while (!maxq_.empty() && maxq_.back().second <= v) maxq_.pop_back();
-    maxq_.emplace_back(t, v);
-    while (!minq_.empty() && minq_.back().second >= v) minq_.pop_back();
-    minq_.emplace_back(t, v);
-    all_.push_back(t);
-}
-
-void SlidingRange::evict_before(std::int64_t t) {
-    while (!maxq_.empty() && maxq_.front().first < t) maxq_.pop_front();
-    while (!minq_.empty() && minq_.front().first < t) minq_.pop_front();
-    while (!all_.empty() && all_.front() < t) all_.pop_front();
-}
-
-double SlidingRange::range() const {
-    if (maxq_.empty()) return std::nan("");
-    return maxq_.front().second - minq_.front().second;
 }
 
 namespace {
@@ -116,7 +97,7 @@ LabDaemon::~LabDaemon() {
     recorder_.reset();
 }
 
-std::int64_t LabDaemon::channel_id(const std::string& device, const std::string& channel) {
+std::int64_t LabDaemon::recorded_channel(const std::string& device, const std::string& channel) {
     const std::string key = device + "/" + channel;
     if (const auto it = channel_ids_.find(key); it != channel_ids_.end()) return it->second;
     // Devices were registered with their kind and transport at start; device_id() would
@@ -221,7 +202,7 @@ void LabDaemon::record_sample_locked(const drivers::Sample& s) {
             it->second = s.mono_ns;
         }
     }
-    recorder::SampleRow row{trial_id_, channel_id(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
+    recorder::SampleRow row{trial_id_, recorded_channel(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
                             static_cast<std::uint8_t>(s.quality)};
     if (!recorder_->push(row)) {
         if (o_.virtual_clock && !storage_full_) {
@@ -275,9 +256,9 @@ void LabDaemon::enter(Stage s, const std::string& why) {
     stage_ = s;
     device_retry_logged_ = false;
     stage_start_ns_ = clock_->mono_ns();
-    event("info", "stage", to_string(s));
+    event("info", "stage", stage_name(s));
     if (!why.empty()) event("info", "stage_reason", why);
-    if (trial_id_) db_.set_trial_state(trial_id_, to_string(s), why, clock_->utc_ns());
+    if (trial_id_) db_.set_trial_state(trial_id_, stage_name(s), why, clock_->utc_ns());
 }
 
 std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
@@ -719,7 +700,7 @@ bool LabDaemon::campaign_active() {
 
 std::string LabDaemon::stage_line() {
     std::lock_guard lk(lock_);
-    return current_ ? fmt::format("{} trial {}", to_string(stage_), trial_id_) : std::string(to_string(stage_));
+    return current_ ? fmt::format("{} trial {}", stage_name(stage_), trial_id_) : std::string(stage_name(stage_));
 }
 
 void LabDaemon::run_virtual(std::function<void(const std::string&)> on_trial, double max_virtual_s) {
@@ -799,7 +780,7 @@ nlohmann::json LabDaemon::status_json() {
     j["campaign"] = plan_ ? nlohmann::json(plan_->name) : nlohmann::json(nullptr);
     j["queued_campaigns"] = nlohmann::json::array();
     for (const auto& p : waiting_) j["queued_campaigns"].push_back(p.name);
-    j["stage"] = to_string(stage_);
+    j["stage"] = stage_name(stage_);
     j["paused"] = paused_;
     j["trials_done"] = trials_done_;
     j["trials_total"] = trials_total_;

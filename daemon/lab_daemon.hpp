@@ -20,6 +20,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "analysis/sliding_range.hpp"
 #include "daemon/acquisition.hpp"
 #include "daemon/campaign_plan.hpp"
 #include "daemon/config.hpp"
@@ -30,25 +31,10 @@
 namespace manikind {
 
 enum class Stage { idle, configuring, chamber_settling, manikin_starting, acquiring, stopping, computing };
-const char* to_string(Stage s);
+const char* stage_name(Stage s);  // as in status, events and the trials table
 
 // Trial quality flags (trials.quality_flags).
 enum TrialFlag : std::int64_t { flag_device_gap = 1, flag_safety_stop = 2, flag_never_steady = 4, flag_dropped_samples = 8 };
-
-// The sliding range (max - min) of one signal over a time window: monotonic deques, O(1) per sample.
-class SlidingRange {
-public:
-    void push(std::int64_t t_ns, double v);
-    void evict_before(std::int64_t t_ns);
-    double range() const;
-    std::int64_t oldest_ns() const { return all_.empty() ? 0 : all_.front(); }
-    bool empty() const { return all_.empty(); }
-    void clear() { maxq_.clear(), minq_.clear(), all_.clear(); }
-
-private:
-    std::deque<std::pair<std::int64_t, double>> maxq_, minq_;
-    std::deque<std::int64_t> all_;
-};
 
 struct DaemonOptions {
     config::Config config;
@@ -143,7 +129,7 @@ private:
     void retry_storage_locked();
     void write_or_defer(std::function<void()> write);
     double stage_elapsed_s() const;
-    std::int64_t channel_id(const std::string& device, const std::string& channel);
+    std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
     double enclosure_air_c() const;
     // The steady-state rule's inputs now: evicts samples older than the window, then measures.
     struct SteadyCheck {
@@ -194,8 +180,8 @@ private:
     std::map<std::string, std::int64_t> channel_ids_;
     std::map<std::string, std::int64_t> idle_logged_ns_;  // channel -> last idle-log reading (mono)
     std::map<std::string, std::int64_t> device_ids_;
-    std::vector<SlidingRange> skin_range_;
-    SlidingRange enclosure_range_;
+    std::vector<analysis::SlidingRange> skin_range_;
+    analysis::SlidingRange enclosure_range_;
     std::int64_t acquiring_since_ns_ = 0;
     std::optional<std::int64_t> steady_since_ns_;
     std::int64_t steady_seen_at_ns_ = 0;

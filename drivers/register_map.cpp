@@ -146,4 +146,21 @@ std::string register_map_text(const std::string& setting, const std::string& dev
     return register_map_source(setting, device, base_dir).text;
 }
 
+std::vector<drivers::ModbusPoint> modbus_points(const RegisterMap& map) {
+    std::vector<drivers::ModbusPoint> points;
+    for (const auto& r : map.registers) {
+        drivers::ModbusPoint p;
+        p.channel = r.spec.name;
+        p.spec = r.spec;
+        p.unit_id = r.unit_id;
+        p.scaling = r.probe;
+        p.valid_min = r.valid_min;
+        p.valid_max = r.valid_max;
+        // Setpoints are written by the daemon; their read-back is the controller's working setpoint.
+        p.poll = !r.spec.writable;
+        points.push_back(std::move(p));
+    }
+    return points;
+}
+
 }  // namespace manikind

@@ -8,6 +8,7 @@
 
 #include <optional>
 
+#include "drivers/modbus_driver.hpp"
 #include "protocol/modbus_registers.hpp"
 #include "protocol/probe_scaling.hpp"
 
@@ -39,5 +40,8 @@ RegisterMap register_map_from_setting(const std::string& setting, const std::str
 // The TOML text behind the same setting (what a trial's set-up records).
 std::string register_map_text(const std::string& setting, const std::string& device,
                               const std::filesystem::path& base_dir);
+
+// Modbus points from a register map (channel = register name; setpoints are not polled).
+std::vector<drivers::ModbusPoint> modbus_points(const RegisterMap& map);
 
 }  // namespace manikind

@@ -25,6 +25,8 @@ packages=(
   libhdf5-dev
   # `manikin archive push`: the PostgreSQL client library (docs/archive.md).
   libpq-dev
+  # SHA-256 of configurations and set-ups: OpenSSL's libcrypto.
+  libssl-dev
 )
 if [ "$with_tests" = yes ]; then
   packages+=(

@@ -10,7 +10,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
-#include "analysis/reconcile/reconcile.hpp"
+#include "analysis/reconcile/candidates.hpp"
+#include "analysis/reconcile/forward_model.hpp"
 
 namespace manikind::analysis::reconcile::evidence {
 

@@ -6,7 +6,7 @@
 #include <fmt/core.h>
 
 #include "analysis/reconcile/noise_model.hpp"
-#include "analysis/reconcile/reconcile.hpp"
+#include "analysis/reconcile/forward_model.hpp"
 #include "physics/psychrometrics.hpp"
 
 namespace manikind::analysis::reconcile {

@@ -1,0 +1,98 @@
+#pragma once
+// What reconcile judges against (docs/reconcile.md): the observed points, the noise model of
+// their case means, and the forward models that predict every point with extra physics terms
+// on top of their base (the twin over recorded cases; whole-body h against a correlation).
+#include <map>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "analysis/recording.hpp"
+#include "physics/twin/twin.hpp"
+
+namespace manikind::analysis::reconcile {
+
+// One observed quantity: a zone (or a whole body) in one case.
+struct Point {
+    int case_id = 0;
+    int zone = 0;                  // 0 for a whole-body point
+    std::string zone_name;
+    std::string region;
+    double q_exp = 0.0;            // W/m² (or W/m²K for h observations)
+    double expanded_u = 0.0;       // U, 95 %
+    double coverage_k = 2.0;       // U = k u
+    std::map<std::string, double> drivers;  // condition variables for locating (dT, dC, RH, ...)
+    double standard_u() const { return expanded_u / coverage_k; }
+};
+
+// Type B specifications of the instruments (campaign.json `instruments`), by channel.
+using Instruments = std::map<std::string, InstrumentSpec>;
+
+// The noise of the observed case means, as a covariance over the points (docs/reconcile.md).
+struct NoiseModel {
+    Eigen::MatrixXd covariance;               // n x n, W²/m⁴ (or the observation's unit squared)
+    Eigen::MatrixXd random_covariance;        // its replicate-scatter part (scales as 1/replicates)
+    std::vector<int> point_replicates;        // replicates behind each point's mean
+    bool from_replicates = false;             // random part estimated from replicate scatter
+    int random_dof = 0;                       // pooled degrees of freedom of that estimate
+    double relative_sd = 0.0;                 // kappa: scatter proportional to |q| (per trial)
+    std::vector<std::pair<std::string, double>> trial_factor_sd;  // shared by one trial's zones (per trial)
+    std::map<int, double> zone_sd_w_m2;       // sigma0 per zone (per trial)
+    double calibration_offset_u_w_m2 = 0.0;   // shared by every point
+    double calibration_gain_u = 0.0;          // relative, shared by every point
+    double air_temp_u_c = 0.0, wall_temp_u_c = 0.0;  // probes' Type B (standard)
+    double probe_shared_fraction = 0.0;       // of that variance, common to every case; the rest per case
+    std::string rh_u_text;                     // per case, e.g. "(1.4 + 0.01 RH)/sqrt(3) %"
+    std::vector<std::string> notes;            // e.g. "one replicate per case: ..."
+};
+
+// Predicts every point with a set of extra terms on top of its base physics.
+class ForwardModel {
+public:
+    virtual ~ForwardModel() = default;
+    virtual const std::vector<Point>& points() const = 0;
+    virtual std::vector<double> predict(const std::vector<physics::twin::Term>& extra) const = 0;
+    virtual bool supports(const std::string& term) const = 0;
+    virtual std::string base_name() const = 0;
+    virtual std::vector<physics::twin::Term> base_terms() const = 0;
+    // The covariance of the observations' errors given the instruments' Type B specs, with the
+    // sensitivities and flux scale of the base physics plus `with` (a candidate being judged).
+    // `probe_shared_fraction`: the part of a probe's Type B variance common to every case.
+    virtual NoiseModel noise_model(const Instruments& instruments, double probe_shared_fraction,
+                                   const std::vector<physics::twin::Term>& with = {}) const = 0;
+};
+
+// One replicate's steady-window means: its own recorded conditions and zone fluxes.
+struct TrialInput {
+    physics::twin::TrialConditions conditions;
+    std::vector<double> q_w_m2;                  // per zone, aligned with the case's zones
+};
+
+// The twin over recorded cases: one point per case and zone.
+struct CaseInput {
+    int case_id = 0;
+    physics::twin::TrialConditions conditions;   // steady-window means
+    std::vector<double> q_exp_w_m2;              // per zone, aligned with conditions.zones
+    std::vector<double> expanded_u_w_m2;
+    std::vector<double> coverage_k;
+    std::vector<std::string> zone_names;
+    std::vector<std::string> sides;              // l, r, c
+    std::vector<double> heights_m;
+    std::vector<TrialInput> trials;              // the replicates used; empty when unknown
+};
+std::unique_ptr<ForwardModel> make_twin_model(std::vector<CaseInput> cases, physics::twin::TwinVersion base);
+
+// Whole-body h observations (the paper's CFD table) against a temperature-only correlation
+// h = a |dT + gamma dC|^n (+ h0); supports humidity_buoyancy and diffusion_floor.
+struct HObservation {
+    int case_id = 0;
+    double air_temp_c = 0.0, air_rh_pct = 0.0, skin_temp_c = 35.0;
+    double h_w_m2k = 0.0, expanded_u_w_m2k = 0.0, coverage_k = 2.0;
+};
+std::unique_ptr<ForwardModel> make_whole_body_h_model(std::vector<HObservation> obs, double a = 1.36,
+                                                      double exponent = 0.3);
+
+}  // namespace manikind::analysis::reconcile

@@ -1,0 +1,25 @@
+#pragma once
+// A whole campaign run through the daemon on the simulated lab, in this process, on the virtual
+// clock: `manikin demo`. With config.hpp, campaign_plan.hpp, control_client.hpp and
+// simulated_lab.hpp this is the daemon's face to the `manikin` program (docs/architecture.md):
+// the CLI sees nothing else of the daemon's insides.
+#include <filesystem>
+#include <functional>
+#include <string>
+
+#include "daemon/campaign_plan.hpp"
+#include "daemon/config.hpp"
+
+namespace manikind {
+
+struct VirtualRun {
+    std::filesystem::path database;  // where the daemon recorded (config.database)
+    double lab_time_s = 0.0;         // virtual time the campaign took
+};
+
+// Starts `plan` on a daemon built from `config` on the simulated lab (virtual clock) and runs it
+// to its end; `on_trial` hears a line per trial. Throws UserError when the plan is refused.
+VirtualRun run_virtual_campaign(const config::Config& config, const CampaignPlan& plan,
+                                const std::function<void(const std::string&)>& on_trial);
+
+}  // namespace manikind
