@@ -130,7 +130,7 @@ void write_trial_csv(const std::filesystem::path& path, const ZoneMap& map, cons
         }
     }
     std::fwrite(out.data(), 1, out.size(), f.get());
-    if (std::fflush(f.get()) != 0 || std::ferror(f.get()))
+    if (std::fflush(f.get()) != 0 || std::ferror(f.get()) || std::fclose(f.release()) != 0)
         throw InputError(path.string(), 0, 0, "", fmt::format("write failed: {}", std::strerror(errno)));
 }
 
@@ -190,9 +190,15 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
         write_trial_csv(csv, campaign.zone_map, campaign.channels, t.data);
     }
     doc["trials"] = trials;
-    std::ofstream out(folder / "campaign.json", std::ios::binary);
-    if (!out) throw InputError((folder / "campaign.json").string(), 0, 0, "", "cannot write");
-    out << doc.dump(2) << '\n';
+    // Every byte checked: a full disk is an error here, not a campaign.json cut short.
+    const auto json_path = folder / "campaign.json";
+    std::FILE* out = std::fopen(json_path.c_str(), "wb");
+    if (!out) throw InputError(json_path.string(), 0, 0, "", fmt::format("cannot write: {}", std::strerror(errno)));
+    const std::string text = doc.dump(2, ' ', false, json::error_handler_t::replace) + '\n';
+    const bool written = std::fwrite(text.data(), 1, text.size(), out) == text.size() && std::fflush(out) == 0;
+    const int err = errno;
+    if (std::fclose(out) != 0 || !written)
+        throw InputError(json_path.string(), 0, 0, "", fmt::format("write failed: {}", std::strerror(written ? errno : err)));
 }
 
 }  // namespace manikind::analysis

@@ -86,8 +86,7 @@ analysis::Campaign read_campaign_source(const CampaignSource& source, const anal
                                 "--lab <id> --campaign <name>");
             return analysis::read_campaign(source.campaign, options);
         }
-        if (!std::filesystem::exists(source.db)) throw UserError(fmt::format("{}: no such database", source.db));
-        auto db = recorder::Database::open(source.db);
+        auto db = recorder::Database::open_read_only(source.db);
         std::string name = source.campaign;
         if (name.empty()) {
             const auto campaigns = db.campaigns();  // by id: the last one is the newest

@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "analysis/analyze.hpp"
+#include "analysis/input_error.hpp"
 #include "daemon/campaign_plan.hpp"
 #include "daemon/config.hpp"
 #include "base/toml_input.hpp"
@@ -26,6 +27,7 @@
 #include "cli/commands.hpp"
 #include "daemon/control_client.hpp"
 #include "store/database_export.hpp"
+#include "store/export_target.hpp"
 #include "store/hdf5_export.hpp"
 #include "store/database.hpp"
 #include "base/user_error.hpp"
@@ -368,8 +370,7 @@ void add_daemon_commands(CLI::App& app) {
         cmd->add_option("--db", *db, "The daemon's database")->capture_default_str();
         cmd->add_flag("--json", *json, "Print one JSON array");
         cmd->callback([db, json] {
-            if (!std::filesystem::exists(*db)) throw UserError(fmt::format("{}: no such database", *db));
-            auto database = recorder::Database::open(*db);
+            auto database = recorder::Database::open_read_only(*db);
             nlohmann::json out = nlohmann::json::array();
             for (const auto& row : database.campaigns()) {
                 // Trials are created as they start, so the total comes from the plan: cases x replicates.
@@ -412,8 +413,7 @@ void add_daemon_commands(CLI::App& app) {
         cmd->add_option("--last-min", *last_min, "Minutes back from the newest reading")->capture_default_str()->check(CLI::PositiveNumber);
         cmd->add_flag("--json", *json, "One JSON object per channel instead of CSV");
         cmd->callback([db, wanted, last_min, json] {
-            if (!std::filesystem::exists(*db)) throw UserError(fmt::format("{}: no such database", *db));
-            auto database = recorder::Database::open(*db);
+            auto database = recorder::Database::open_read_only(*db);
             std::vector<recorder::ChannelRow> chosen;
             for (const auto& ch : database.channels()) {
                 const std::string key = ch.device_name + "/" + ch.name;
@@ -449,7 +449,7 @@ void add_daemon_commands(CLI::App& app) {
     {
         struct ExportOptions {
             std::string db = "manikind.db", campaign, out, format = "csv", archive, lab;
-            bool json = false;
+            bool json = false, force = false;
         };
         auto o = std::make_shared<ExportOptions>();
         auto* cmd = app.add_subcommand("export", "Write a recorded campaign from the database: every channel with its unit and "
@@ -466,30 +466,43 @@ void add_daemon_commands(CLI::App& app) {
             ->check(CLI::IsMember({"csv", "hdf5"}))
             ->capture_default_str();
         cmd->add_flag("--json", o->json, "Print what was written as one JSON object");
+        cmd->add_flag("--force", o->force, "Replace an existing output file, or a folder holding an earlier export (never a "
+                                           "database, a device or a folder with other files)");
         cmd->footer(std::string("The formats are in docs/formats.md (section 1 and \"HDF5\"). Heat flux: ") + analysis::kHeatFluxSign +
                     ".\nExamples:\n  manikin export --db lab.db validation-2026 recordings/validation-2026\n"
                     "  manikin export --db lab.db validation-2026 validation-2026.h5 --format hdf5\n"
                     "  manikin export --archive postgresql://archive.example/manikin --lab lab-3 validation-2026 out");
         cmd->callback([o] {
+            // The output is checked before anything is read: an export never writes over its
+            // input, a database, a device or (without --force) anything at all (issue 30).
+            std::vector<std::filesystem::path> inputs;
+            if (o->archive.empty()) inputs.emplace_back(o->db);
+            ExportTarget target(o->out, o->format == "hdf5" ? ExportShape::file : ExportShape::folder, o->force, inputs);
             auto c = [&] {
                 if (!o->archive.empty()) {
                     if (o->lab.empty()) throw UserError("--archive needs --lab <id>: the lab the campaign was pushed under");
                     return campaign_from_archive(o->archive, o->lab, o->campaign);
                 }
-                if (!std::filesystem::exists(o->db)) throw UserError(fmt::format("{}: no such database", o->db));
-                auto database = recorder::Database::open(o->db);
+                auto database = recorder::Database::open_read_only(o->db);
                 return campaign_from_database(database, o->campaign);
             }();
             c.provenance["exported_utc"] = analysis::iso_utc_ms(
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
             std::size_t rows = 0;
             for (const auto& t : c.trials) rows += t.data.rows();
-            if (o->format == "hdf5") {
-                const auto analysis = analysis::analyze_campaign(c);
-                write_campaign_hdf5(o->out, c, analysis::to_json(analysis));
-            } else {
-                analysis::write_campaign(o->out, c);
+            try {
+                if (o->format == "hdf5") {
+                    const auto analysis = analysis::analyze_campaign(c);
+                    write_campaign_hdf5(target.staging(), c, analysis::to_json(analysis));
+                } else {
+                    analysis::write_campaign(target.staging(), c);
+                }
+            } catch (const analysis::InputError& e) {  // a write failed (a full disk): named, exit 2
+                throw UserError(fmt::format("{}: the export was not written: {}", o->out, e.what()), "write_failed");
+            } catch (const UserError& e) {
+                throw UserError(fmt::format("{}: the export was not written: {}", o->out, e.what()), e.code(), e.status());
             }
+            target.commit();
             if (o->json) {
                 const nlohmann::json doc{{"campaign", o->campaign}, {"format", o->format == "hdf5" ? kHdf5Format : analysis::kRecordingFormat},
                                          {"path", o->out}, {"trials", c.trials.size()}, {"rows", rows},

@@ -39,6 +39,7 @@
 
 #include "daemon/control_api.hpp"
 #include "daemon/instance_lock.hpp"
+#include "base/text.hpp"
 #include "base/user_error.hpp"
 
 namespace manikind {
@@ -54,7 +55,7 @@ std::chrono::nanoseconds seconds(double s) {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(s));
 }
 
-std::string error_line(const std::string& why) { return nlohmann::json{{"ok", false}, {"error", why}}.dump() + "\n"; }
+std::string error_line(const std::string& why) { return dump_json(nlohmann::json{{"ok", false}, {"error", why}}) + "\n"; }
 
 // A last word to a client being let go, only if its socket takes it at once: never blocks.
 void say_goodbye(int fd, const std::string& why) {
@@ -188,7 +189,13 @@ struct ControlServer::Impl {
 
     std::string answer(const std::string& line) {
         bool shutdown_now = false;
-        std::string reply = handle_request(daemon, o, line, shutdown_now).dump() + "\n";
+        std::string reply;
+        try {
+            reply = dump_json(handle_request(daemon, o, line, shutdown_now)) + "\n";
+        } catch (const std::exception& e) {  // never out of the server thread: that would end the daemon
+            spdlog::error("control API: a request failed: {}", printable(e.what()));
+            reply = error_line(fmt::format("internal error: {}", printable(e.what())));
+        }
         // Flag before replying: a client that reads "ok" must find the shutdown requested.
         if (shutdown_now) shutdown = true;
         return reply;

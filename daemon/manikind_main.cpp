@@ -141,8 +141,7 @@ int main(int argc, char** argv) {
         std::printf("manikind: %s lab, %s clock; database %s; control socket %s%s\n", cfg.mode.c_str(),
                     virtual_clock ? "virtual" : "real", daemon.database_path().c_str(), api.socket_path.c_str(),
                     api.tcp_port ? fmt::format(" and 127.0.0.1:{}", api.tcp_port).c_str() : "");
-        if (console) std::printf("manikind: console http://%s:%d/\n", cfg.http.listen.rfind("[", 0) == 0 ? "[::1]" : "127.0.0.1",
-                                 console->port());
+        if (console) std::printf("manikind: console %s\n", console->url().c_str());
         std::fflush(stdout);
         ::sd_notifyf(0, "READY=1\nSTATUS=%s lab, control socket %s", cfg.mode.c_str(), api.socket_path.c_str());
         // The watchdog (WatchdogSec=) is fed at a third of its period, and only while the daemon

@@ -16,10 +16,12 @@
 #include <deque>
 #include <list>
 #include <mutex>
+#include <sstream>
 #include <thread>
 
 #include "analysis/zone_map.hpp"
 #include "daemon/console_model.hpp"
+#include "base/text.hpp"
 #include "base/user_error.hpp"
 
 namespace manikind {
@@ -132,6 +134,7 @@ struct WebServer::Impl {
     }
 
     bool host_allowed(const http::request<http::string_body>& req) const {
+        if (req.count(http::field::host) != 1) return false;  // RFC 9112 3.2: exactly one Host
         const auto host = std::string(req[http::field::host]);
         for (const auto& h : allowed_hosts)
             if (host == h) return true;
@@ -162,11 +165,16 @@ struct WebServer::Impl {
         res.keep_alive(req.keep_alive());
         res.body() = std::move(body);
         res.prepare_payload();
+        if (req.method() == http::verb::head) {  // RFC 9110 9.3.2: the GET's headers, no body
+            const auto length = res.body().size();
+            res.body().clear();
+            res.content_length(length);
+        }
         return res;
     }
     http::response<http::string_body> json_reply(const http::request<http::string_body>& req, http::status code,
                                                  const nlohmann::json& j) {
-        return reply(req, code, j.dump(), "application/json");
+        return reply(req, code, dump_json(j), "application/json");
     }
     http::response<http::string_body> error(const http::request<http::string_body>& req, http::status code,
                                             const std::string& why) {
@@ -174,10 +182,16 @@ struct WebServer::Impl {
     }
 
     http::response<http::string_body> handle(const http::request<http::string_body>& req) {
+        if (req.count(http::field::host) != 1)
+            return error(req, http::status::bad_request,
+                         fmt::format("a request carries exactly one Host header, this one {}", req.count(http::field::host)));
         if (!host_allowed(req))
             return error(req, http::status::forbidden,
-                         fmt::format("Host '{}' is not this console's address", std::string(req[http::field::host])));
+                         fmt::format("Host '{}' is not this console's address", printable(std::string(req[http::field::host]))));
         const std::string target(req.target());
+        if (!is_utf8(target))
+            return error(req, http::status::bad_request,
+                         fmt::format("the request's path is not UTF-8: {}", printable(target)));
         const std::string path = target.substr(0, target.find('?'));
         const std::string query = target.find('?') == std::string::npos ? "" : target.substr(target.find('?') + 1);
         if (req.method() == http::verb::post) {
@@ -218,9 +232,54 @@ struct WebServer::Impl {
         return error(req, http::status::not_found, fmt::format("no such page: {}", path));
     }
 
+    // Nothing a request holds may leave the server thread as an exception: that would end the
+    // daemon (std::terminate). A failure is this request's 500, named, and the log's line.
+    http::response<http::string_body> handle_safely(const http::request<http::string_body>& req) {
+        try {
+            return handle(req);
+        } catch (const std::exception& e) {
+            spdlog::error("console: {} {}: {}", std::string(req.method_string()), printable(std::string(req.target())), printable(e.what()));
+            return error(req, http::status::internal_server_error, fmt::format("internal error: {}", printable(e.what())));
+        }
+    }
+
     // --- sessions -----------------------------------------------------------------------
-    struct WsSession : std::enable_shared_from_this<WsSession> {
+    // Every connection, HTTP or WebSocket. `last_progress` is when it last did something useful:
+    // connected, finished a request, or took an update. When every place is taken, the one
+    // that has gone longest without progress (a slow header writer, an idle keep-alive, a
+    // WebSocket that never reads) makes room for the newcomer, as on the control socket.
+    struct Client {
+        steady::time_point last_progress = steady::now();
+        virtual ~Client() = default;
+        virtual void drop() = 0;
+    };
+    std::list<std::weak_ptr<Client>> client_list;
+    std::uint64_t evicted = 0;
+
+    void admit(const std::shared_ptr<Client>& c) {
+        client_list.remove_if([](const std::weak_ptr<Client>& w) { return w.expired(); });
+        client_list.push_back(c);
+    }
+    // Makes room by dropping the client longest without progress; false when there is none.
+    bool evict_longest_idle() {
+        client_list.remove_if([](const std::weak_ptr<Client>& w) { return w.expired(); });
+        std::shared_ptr<Client> oldest;
+        for (const auto& w : client_list)
+            if (auto c = w.lock(); c && (!oldest || c->last_progress < oldest->last_progress)) oldest = c;
+        if (!oldest) return false;
+        client_list.remove_if([&](const std::weak_ptr<Client>& w) { return w.lock() == oldest; });
+        oldest->drop();
+        ++evicted;
+        return true;
+    }
+
+    struct WsSession : Client, std::enable_shared_from_this<WsSession> {
         WsSession(Impl& server, tcp::socket socket) : owner(server), ws(std::move(socket)) {}
+        void drop() override {
+            open = false;
+            beast::error_code ignored;
+            beast::get_lowest_layer(ws).socket().close(ignored);
+        }
         ~WsSession() { --owner.clients; }
         Impl& owner;
         websocket::stream<beast::tcp_stream> ws;
@@ -235,12 +294,14 @@ struct WebServer::Impl {
             timeouts.idle_timeout = seconds(owner.o.idle_timeout_s);
             timeouts.keep_alive_pings = true;
             ws.set_option(timeouts);
-            ws.read_message_max(4096);  // the page sends nothing but pings and close
+            ws.read_message_max(kConsoleWsMaxMessageBytes);
             ws.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
                 if (ec) return;
                 self->open = true;
+                self->last_progress = steady::now();
+                self->owner.admit(self);
                 self->owner.sockets.push_back(self);
-                self->send(std::make_shared<const std::string>(self->owner.update_message().dump()));
+                self->send(std::make_shared<const std::string>(dump_json(self->owner.update_message())));
                 self->read();
             });
         }
@@ -275,13 +336,19 @@ struct WebServer::Impl {
                 }
                 self->outgoing_bytes -= self->outgoing.front()->size();
                 self->outgoing.pop_front();
+                self->last_progress = steady::now();
                 if (!self->outgoing.empty()) self->write();
             });
         }
     };
 
-    struct HttpSession : std::enable_shared_from_this<HttpSession> {
+    struct HttpSession : Client, std::enable_shared_from_this<HttpSession> {
         HttpSession(Impl& server, tcp::socket socket) : owner(server), stream(std::move(socket)) {}
+        void drop() override {
+            beast::error_code ignored;
+            stream.socket().shutdown(tcp::socket::shutdown_both, ignored);
+            stream.socket().close(ignored);
+        }
         ~HttpSession() {
             if (!upgraded) --owner.clients;
         }
@@ -294,7 +361,7 @@ struct WebServer::Impl {
 
         void read() {
             parser.emplace();
-            parser->header_limit(16 * 1024);
+            parser->header_limit(kConsoleHeaderLimitBytes);
             parser->body_limit(owner.api.max_message_bytes);
             stream.expires_after(seconds(owner.o.idle_timeout_s));
             http::async_read(stream, buffer, *parser, [self = shared_from_this()](beast::error_code ec, std::size_t) {
@@ -322,7 +389,7 @@ struct WebServer::Impl {
                 std::make_shared<WsSession>(owner, stream.release_socket())->start(std::move(req));
                 return;
             }
-            respond(owner.handle(req), !req.keep_alive());
+            respond(owner.handle_safely(req), !req.keep_alive());
         }
         void respond(http::response<http::string_body> res, bool close_after) {
             response = std::move(res);
@@ -333,6 +400,7 @@ struct WebServer::Impl {
                     self->stream.socket().shutdown(tcp::socket::shutdown_send, ignored);
                     return;
                 }
+                self->last_progress = steady::now();
                 self->read();
             });
         }
@@ -342,17 +410,16 @@ struct WebServer::Impl {
         acceptor->async_accept([this](beast::error_code ec, tcp::socket socket) {
             if (ec == asio::error::operation_aborted) return;
             if (!ec) {
-                if (clients >= o.max_clients) {
-                    const std::string why = fmt::format("refused: {} console clients are connected\n", o.max_clients);
-                    const std::string busy = fmt::format(
-                        "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nConnection: close\r\n"
-                        "Content-Length: {}\r\n\r\n{}",
-                        why.size(), why);
-                    [[maybe_unused]] auto n = ::send(socket.native_handle(), busy.data(), busy.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
-                } else {
-                    ++clients;
-                    std::make_shared<HttpSession>(*this, std::move(socket))->read();
-                }
+                // At most max_clients connections: a newcomer takes the place of the one longest
+                // without progress, which is closed at once (its descriptor freed), never refused.
+                client_list.remove_if([](const std::weak_ptr<Client>& w) { return w.expired(); });
+                if (client_list.size() >= o.max_clients && evict_longest_idle() && (evicted & (evicted - 1)) == 0)
+                    spdlog::info("console: {} clients connected; the one longest without progress let go for a new one "
+                                 "({} so far)", o.max_clients, evicted);
+                ++clients;
+                auto session = std::make_shared<HttpSession>(*this, std::move(socket));
+                admit(session);
+                session->read();
                 return accept();
             }
             // Out of descriptors or similar: pause instead of spinning.
@@ -380,7 +447,7 @@ struct WebServer::Impl {
         if (sockets.empty()) return;
         auto update = update_message();
         update["oldest_new_sample_utc_ms"] = oldest_sample_utc_ms > 0 ? nlohmann::json(oldest_sample_utc_ms) : nlohmann::json(nullptr);
-        const auto message = std::make_shared<const std::string>(update.dump());
+        const auto message = std::make_shared<const std::string>(dump_json(update));
         for (auto& w : sockets)
             if (auto s = w.lock()) s->send(message);
     }
@@ -409,6 +476,38 @@ WebServer::WebServer(LabDaemon& daemon, ControlOptions api, WebOptions options)
     : impl_(std::make_unique<Impl>(daemon, std::move(api), std::move(options))) {}
 WebServer::~WebServer() { stop(); }
 int WebServer::port() const { return impl_->bound_port; }
+std::string WebServer::url() const {
+    const bool v6 = impl_->o.host.find(':') != std::string::npos;
+    return fmt::format("http://{}{}{}:{}/", v6 ? "[" : "", impl_->o.host, v6 ? "]" : "", impl_->bound_port);
+}
+
+std::string WebServer::answer_raw(const std::string& request_bytes) {
+    Impl& s = *impl_;
+    if (s.allowed_hosts.empty()) s.allowed_hosts = {fmt::format("{}:{}", s.o.host, s.o.port), fmt::format("localhost:{}", s.o.port)};
+    http::request_parser<http::string_body> parser;
+    parser.header_limit(kConsoleHeaderLimitBytes);
+    parser.body_limit(s.api.max_message_bytes);
+    parser.eager(true);
+    beast::error_code ec;
+    std::size_t used = 0;
+    while (used < request_bytes.size() && !parser.is_done()) {
+        const std::size_t n = parser.put(asio::buffer(request_bytes.data() + used, request_bytes.size() - used), ec);
+        if (ec == http::error::need_more) break;
+        if (ec) return {};
+        used += n;
+        if (n == 0) break;
+    }
+    if (!parser.is_done()) {
+        parser.put_eof(ec);
+        if (ec || !parser.is_done()) return {};
+    }
+    auto req = parser.release();
+    if (websocket::is_upgrade(req)) return {};  // the WebSocket has its own path (fuzz_console's second half)
+    const auto res = s.handle_safely(req);
+    std::ostringstream out;
+    out << res;
+    return out.str();
+}
 bool WebServer::shutdown_requested() const { return impl_->shutdown.load(); }
 
 void WebServer::start() {

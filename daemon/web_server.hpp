@@ -20,6 +20,10 @@
 
 namespace manikind {
 
+// The page sends nothing but pings and close: a bigger WebSocket message is refused.
+inline constexpr std::size_t kConsoleWsMaxMessageBytes = 4096;
+inline constexpr std::size_t kConsoleHeaderLimitBytes = 16 * 1024;
+
 struct WebOptions {
     std::string host = "127.0.0.1";      // loopback only: 127.0.0.1, ::1 or localhost
     int port = 8470;                     // 0: an ephemeral port (see WebServer::port())
@@ -39,7 +43,13 @@ public:
     void start();  // throws UserError when it cannot listen
     void stop();
     int port() const;
+    // Where it listens, as a browser is to be pointed at it: "http://127.0.0.2:8470/".
+    std::string url() const;
     bool shutdown_requested() const;
+    // One request's bytes parsed with the server's own limits and answered as the server
+    // answers it: the response's bytes, or "" where the server would close without a reply. For
+    // the fuzz target and tests, on a server that is not started (the server thread owns its state).
+    std::string answer_raw(const std::string& request_bytes);
 
 private:
     struct Impl;

@@ -4,12 +4,15 @@
 
 #include <cerrno>
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <limits>
 #include <unordered_map>
 #include <unordered_set>
@@ -593,6 +596,48 @@ Database Database::open(const std::filesystem::path& path, Durability durability
     return opened;
 }
 
+Database Database::open_read_only(const std::filesystem::path& path) {
+    struct stat st {};
+    if (::stat(path.c_str(), &st) != 0)
+        throw UserError(fmt::format("{}: no such database ({})", path.string(), std::strerror(errno)));
+    if (!S_ISREG(st.st_mode)) throw UserError(fmt::format("{}: not a regular file, so not a manikind database", path.string()));
+    if (st.st_size == 0) throw UserError(fmt::format("{}: an empty file, not a manikind database", path.string()));
+    {
+        std::FILE* f = std::fopen(path.c_str(), "rb");
+        char header[16] = {};
+        const bool read = f && std::fread(header, 1, sizeof header, f) == sizeof header;
+        if (f) std::fclose(f);
+        if (!read || std::memcmp(header, "SQLite format 3", 16) != 0)
+            throw UserError(fmt::format("{}: not an SQLite database, so not a manikind database", path.string()));
+    }
+    auto impl = std::make_unique<Impl>();
+    impl->path = path;
+    if (sqlite3_open_v2(path.c_str(), &impl->db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX, nullptr) != SQLITE_OK)
+        impl->fail("cannot open the database to read");
+    sqlite3_extended_result_codes(impl->db, 1);
+    impl->exec("PRAGMA busy_timeout = 5000", "setting busy_timeout");
+    int tables = 0;
+    {
+        Query q(*impl, "SELECT count(*) FROM sqlite_schema WHERE type = 'table' AND name IN ('campaigns', 'trials', 'samples', 'channels')");
+        q.step();
+        tables = static_cast<int>(q.integer(0));
+    }
+    const int version = user_version(*impl);
+    if (tables != 4 || version < 1)
+        throw UserError(fmt::format("{}: an SQLite database, but not a manikind one (no campaigns, trials, channels and samples "
+                                    "tables): not opened",
+                                    path.string()));
+    if (version > latest_schema_version())
+        throw UserError(fmt::format("{}: recorded by a newer manikind (schema {}; this program reads up to {}): use that "
+                                    "version's manikin",
+                                    path.string(), version, latest_schema_version()));
+    if (version < latest_schema_version())
+        throw UserError(fmt::format("{}: recorded by an older manikind (schema {}; this program reads {}): start manikind on it "
+                                    "once (it upgrades the file, keeping every sample), then read it",
+                                    path.string(), version, latest_schema_version()));
+    return Database(std::move(impl));
+}
+
 const std::filesystem::path& Database::path() const { return impl_->path; }
 
 int Database::schema_version() { return user_version(*impl_); }
@@ -1076,6 +1121,19 @@ std::optional<std::int64_t> Database::newest_idle_utc_ns() {
     Query q(*impl_, "SELECT max(utc_ns) FROM idle_samples");
     q.step();
     return q.optional_integer(0);
+}
+
+std::optional<std::int64_t> Database::newest_utc_ns() {
+    // Three key lookups and a scan of the (small) events table: samples are a rowid range per
+    // trial in trial order, the idle log is keyed by utc_ns first.
+    std::optional<std::int64_t> newest;
+    for (const char* sql : {"SELECT utc_ns FROM samples ORDER BY id DESC LIMIT 1", "SELECT max(utc_ns) FROM idle_samples",
+                            "SELECT max(utc_ns) FROM events"}) {
+        Query q(*impl_, sql);
+        if (!q.step()) continue;
+        if (const auto v = q.optional_integer(0); v && (!newest || *v > *newest)) newest = v;
+    }
+    return newest;
 }
 
 std::int64_t Database::idle_sample_count() {

@@ -154,6 +154,13 @@ public:
     // not a database, cannot be put in WAL mode, or has a schema newer than this program.
     static Database open(const std::filesystem::path& path, Durability durability = Durability::process,
                          std::optional<Journal> journal = std::nullopt);
+    // For commands that only read (campaigns, log, export, analyze, archive push): opened
+    // read-only (SQLite's mode=ro), never created, migrated or switched to another journal, so a
+    // mistyped --db cannot turn another program's file into a manikind database. Refuses, with
+    // UserError naming the path, what is not a manikind database of this program's schema: a
+    // missing or empty file, one that is not SQLite, a database without manikind's tables, one
+    // from an older manikind (the daemon upgrades it when it starts on it) or a newer one.
+    static Database open_read_only(const std::filesystem::path& path);
 
     Database(Database&&) noexcept;
     Database& operator=(Database&&) noexcept;
@@ -241,6 +248,10 @@ public:
     // The idle log (rows pushed with trial_id 0): one channel's readings since a wall time.
     std::vector<SampleRow> idle_samples(std::int64_t channel_id, std::int64_t since_utc_ns);
     std::optional<std::int64_t> newest_idle_utc_ns();  // the idle log's last wall time (a key lookup)
+    // The newest wall time recorded anywhere (the newest trial's last sample, the idle log,
+    // events), or none in an empty database: a simulated lab's virtual clock starts after it, so
+    // a second run never stamps a reading with a time already used.
+    std::optional<std::int64_t> newest_utc_ns();
     std::int64_t idle_sample_count();
     std::vector<EventRow> events(std::optional<std::int64_t> trial_id);  // empty: all events; by mono_ns
     std::optional<ResultRow> latest_result(std::int64_t campaign_id);

@@ -3,7 +3,9 @@
 #include <hdf5.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include <fmt/format.h>
@@ -13,10 +15,23 @@
 namespace manikind {
 namespace {
 
+// Once per process, before the first HDF5 call: errors become UserErrors, not stderr dumps; and
+// no library clean-up at exit. A file whose write failed (a full disk) stays open inside HDF5
+// 1.10, and its exit handler then flushes it again and crashes (rc 139 after the right error
+// message); every file we keep is closed explicitly and checked, so nothing is lost by skipping it.
+void library_setup() {
+    static const bool done = [] {
+        H5dont_atexit();
+        return true;
+    }();
+    (void)done;
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // per thread where the library is thread-safe
+}
+
 // One HDF5 identifier, closed with the function of its kind.
 class Handle {
 public:
-    Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
+    Handle(hid_t id, herr_t (*closer)(hid_t)) : id_(id), close_(closer) {}
     Handle(Handle&& other) noexcept : id_(other.id_), close_(other.close_) { other.id_ = -1; }
     Handle(const Handle&) = delete;
     Handle& operator=(const Handle&) = delete;
@@ -26,6 +41,12 @@ public:
     }
     hid_t get() const { return id_; }
     bool ok() const { return id_ >= 0; }
+    // Closes now and says whether it worked (a file's close writes what is still buffered).
+    bool close() {
+        const hid_t id = id_;
+        id_ = -1;
+        return id < 0 || close_(id) >= 0;
+    }
 
 private:
     hid_t id_;
@@ -111,12 +132,19 @@ public:
     }
 
     void check(bool ok, const std::string& what) const {
-        if (!ok) throw UserError(fmt::format("{}: HDF5 failed {}", path_.string(), what));
+        if (!ok) {
+            const int err = errno;  // HDF5's own stack says only "write failed"; the system says why
+            throw UserError(fmt::format("{}: HDF5 failed {}{}", path_.string(), what,
+                                        err != 0 ? fmt::format(" ({})", std::strerror(err)) : std::string()),
+                            "write_failed");
+        }
     }
+    void close() { check(file_.close(), "closing the file"); }
 
 private:
     static hid_t create(const std::filesystem::path& path) {
-        H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // errors become UserErrors, not stderr dumps
+        library_setup();
+        errno = 0;
         const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
         if (f < 0) throw UserError(fmt::format("{}: cannot create the HDF5 file", path.string()));
         return f;
@@ -219,6 +247,7 @@ void write_file(const std::filesystem::path& path, const analysis::Campaign& c, 
     }
     write_results(w, w.root(), analysis_json);
     w.check(H5Fflush(w.root(), H5F_SCOPE_GLOBAL) >= 0, "flushing");
+    w.close();
 }
 
 // Opens `file` read-only and one dataset in it.
@@ -226,7 +255,7 @@ struct DatasetReader {
     Handle file;
     Handle set;
     DatasetReader(const std::filesystem::path& path, const std::string& name)
-        : file((H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr), H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT)), H5Fclose),
+        : file((library_setup(), H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT)), H5Fclose),
           set(file.ok() ? H5Dopen2(file.get(), name.c_str(), H5P_DEFAULT) : -1, H5Dclose) {
         if (!file.ok()) throw UserError(fmt::format("{}: not an HDF5 file, or unreadable", path.string()));
         if (!set.ok()) throw UserError(fmt::format("{}: no dataset '{}'", path.string(), name));
@@ -286,7 +315,7 @@ std::string hdf5_read_string(const std::filesystem::path& file, const std::strin
 
 std::string hdf5_read_string_attribute(const std::filesystem::path& file, const std::string& object,
                                        const std::string& attribute) {
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    library_setup();
     Handle f(H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
     if (!f.ok()) throw UserError(fmt::format("{}: not an HDF5 file, or unreadable", file.string()));
     Handle attr(H5Aopen_by_name(f.get(), object.c_str(), attribute.c_str(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose);

@@ -7,6 +7,10 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+#include <vector>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -166,6 +170,99 @@ TEST_CASE("export: bad input is refused with the reason and nothing half-written
     const auto parquet = run_manikin("export --db " + db_path.string() + " c " + (out / "y").string() + " --format parquet --json");
     CHECK(parquet.exit_code == 2);  // docs/cli.md: a usage error
     CHECK(nlohmann::json::parse(parquet.out).at("error").at("code").is_string());
+}
+
+// Nothing but the export itself beside `folder`'s given names: no staging file left behind.
+std::vector<std::string> leftovers(const fs::path& folder) {
+    std::vector<std::string> hidden;
+    for (const auto& e : fs::directory_iterator(folder))
+        if (e.path().filename().string().starts_with(".")) hidden.push_back(e.path().filename().string());
+    return hidden;
+}
+
+std::string file_bytes(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), {}};
+}
+
+TEST_CASE("export: an output never destroys an input, a database, a device or an unrelated folder (issue 30)",
+          "[cli][export][hostile]") {
+    const fs::path db_path = recorded_database();
+    auto db = manikind::recorder::Database::open_read_only(db_path);
+    const std::string campaign = only_campaign(db);
+    const fs::path dir = db_path.parent_path() / "export-hostile";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string from = "export --db " + db_path.string() + " " + campaign + " ";
+    const auto db_before = fs::file_size(db_path);
+
+    // The database the export reads, as the HDF5 output, with and without --force.
+    for (const std::string force : {"", " --force"}) {
+        const auto r = run_manikin(from + db_path.string() + " --format hdf5 --json" + force);
+        CHECK(r.exit_code == 2);
+        CHECK(nlohmann::json::parse(r.out).at("error").at("message").get<std::string>().find("reads") != std::string::npos);
+    }
+    CHECK(fs::file_size(db_path) == db_before);
+    CHECK(manikind::recorder::Database::open_read_only(db_path).integrity_check() == "ok");
+    // Another SQLite database: never written over, --force or not.
+    const fs::path other = dir / "other.db";
+    fs::copy_file(db_path, other);
+    const std::string other_bytes = file_bytes(other);
+    CHECK(run_manikin(from + other.string() + " --format hdf5 --force").exit_code == 2);
+    CHECK(file_bytes(other) == other_bytes);
+    // A device: refused, and it stays a device.
+    CHECK(run_manikin(from + "/dev/null --format hdf5 --force").exit_code == 2);
+    CHECK(fs::is_character_file("/dev/null"));
+    // A folder where a file is wanted: refused, nothing left.
+    CHECK(run_manikin(from + dir.string() + " --format hdf5").exit_code == 2);
+    // An existing file: only with --force, and then replaced by a whole export.
+    const fs::path h5 = dir / "out.h5";
+    { std::ofstream(h5) << "a client's report"; }
+    CHECK(run_manikin(from + h5.string() + " --format hdf5").exit_code == 2);
+    CHECK(file_bytes(h5) == "a client's report");
+    CHECK(run_manikin(from + h5.string() + " --format hdf5 --force").exit_code == 0);
+    CHECK(file_bytes(h5).substr(1, 3) == "HDF");
+    // A CSV folder: a new one is written; an earlier export is replaced only with --force; a
+    // folder holding anything else is never replaced.
+    const fs::path csv = dir / "csv";
+    CHECK(run_manikin(from + csv.string()).exit_code == 0);
+    CHECK(run_manikin(from + csv.string()).exit_code == 2);
+    CHECK(run_manikin(from + csv.string() + " --force").exit_code == 0);
+    CHECK(fs::exists(csv / "campaign.json"));
+    const fs::path thesis = dir / "thesis";
+    fs::create_directories(thesis);
+    { std::ofstream(thesis / "chapter1.tex") << "text"; }
+    CHECK(run_manikin(from + thesis.string() + " --force").exit_code == 2);
+    CHECK(file_bytes(thesis / "chapter1.tex") == "text");
+    CHECK(fs::file_size(db_path) == db_before);
+    CHECK(leftovers(dir).empty());
+}
+
+TEST_CASE("read-only commands open a database read-only and refuse a file that is not a manikind database untouched",
+          "[cli][hostile]") {
+    const fs::path dir = recorded_database().parent_path() / "foreign";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const fs::path empty = dir / "empty.db", foreign = dir / "foreign.db", text = dir / "notes.txt";
+    { std::ofstream touch(empty); }
+    { std::ofstream(text) << "not a database\n"; }
+    REQUIRE(std::system(("sqlite3 " + foreign.string() + " 'CREATE TABLE samples_of_paint (colour TEXT)'").c_str()) == 0);
+    const std::string foreign_bytes = file_bytes(foreign);
+    for (const auto& f : {empty, foreign, text}) {
+        for (const std::string& cmd : std::vector<std::string>{"campaigns --db ", "log --db ", "export c " + (dir / "out").string() + " --db ", "analyze --db "}) {
+            const auto r = run_manikin(cmd + f.string() + " --json");
+            CHECK(r.exit_code == 2);
+            CHECK(nlohmann::json::parse(r.out).at("error").at("message").get<std::string>().find("not a") != std::string::npos);
+        }
+    }
+    CHECK(fs::file_size(empty) == 0);
+    CHECK(file_bytes(foreign) == foreign_bytes);
+    CHECK_FALSE(fs::exists(foreign.string() + "-wal"));
+    CHECK_FALSE(fs::exists(dir / "out"));
+    // The lab's own database reads fine read-only, and stays as it was.
+    const auto before = file_bytes(recorded_database());
+    CHECK(run_manikin("campaigns --json --db " + recorded_database().string()).exit_code == 0);
+    CHECK(file_bytes(recorded_database()) == before);
 }
 
 TEST_CASE("SQLite views: trial_table has a row per 5-s step and a column per channel, equal to the CSV export",

@@ -1,0 +1,163 @@
+#include "store/export_target.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <array>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <random>
+
+#include <fmt/format.h>
+
+#include "base/user_error.hpp"
+
+namespace manikind {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+[[noreturn]] void refuse(const fs::path& out, const std::string& why) {
+    throw UserError(fmt::format("{}: {}", out.string(), why), "output_refused");
+}
+
+bool same_file(const struct stat& a, const fs::path& b) {
+    struct stat sb {};
+    return ::stat(b.c_str(), &sb) == 0 && a.st_dev == sb.st_dev && a.st_ino == sb.st_ino;
+}
+
+// An earlier export: campaign.json and trials/, nothing else.
+bool looks_like_export(const fs::path& folder, std::string& stranger) {
+    for (const auto& e : fs::directory_iterator(folder)) {
+        const auto name = e.path().filename().string();
+        if ((name == "campaign.json" && e.is_regular_file()) || (name == "trials" && e.is_directory())) continue;
+        stranger = name;
+        return false;
+    }
+    return fs::exists(folder / "campaign.json");
+}
+
+// fsync of one file or folder; a failure (EIO, a full disk found late) is the export's error.
+void sync_path(const fs::path& p) {
+    const int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw UserError(fmt::format("{}: cannot open to flush: {}", p.string(), std::strerror(errno)), "write_failed");
+    const int rc = ::fsync(fd);
+    const int err = errno;
+    ::close(fd);
+    if (rc != 0 && err != EINVAL)  // EINVAL: a file system that cannot sync (nothing to lose)
+        throw UserError(fmt::format("{}: writing to the disk failed: {}", p.string(), std::strerror(err)), "write_failed");
+}
+
+void sync_tree(const fs::path& p) {
+    if (fs::is_directory(p))
+        for (const auto& e : fs::recursive_directory_iterator(p))
+            if (e.is_regular_file() || e.is_directory()) sync_path(e.path());
+    sync_path(p);
+}
+
+}  // namespace
+
+bool is_sqlite_file(const fs::path& path) {
+    std::FILE* f = std::fopen(path.c_str(), "rb");
+    if (!f) return false;
+    std::array<char, 16> header{};
+    const bool full = std::fread(header.data(), 1, header.size(), f) == header.size();
+    std::fclose(f);
+    return full && std::memcmp(header.data(), "SQLite format 3", 16) == 0;
+}
+
+ExportTarget::ExportTarget(fs::path out, ExportShape shape, bool force, const std::vector<fs::path>& inputs)
+    : out_(std::move(out)), shape_(shape) {
+    if (out_.empty()) refuse(out_, "an empty output path");
+    if (out_.filename().empty() || out_.filename() == "." || out_.filename() == "..") out_ = fs::absolute(out_).lexically_normal();
+    while (!out_.empty() && out_.filename().empty()) out_ = out_.parent_path();  // "out/" -> "out"
+    const char* wanted = shape_ == ExportShape::file ? "a file" : "a folder";
+    struct stat st {};
+    if (::lstat(out_.c_str(), &st) == 0) {
+        for (const auto& in : inputs)
+            for (const char* suffix : {"", "-wal", "-shm", "-journal"})
+                if (same_file(st, in.string() + suffix))
+                    refuse(out_, fmt::format("is the database this export reads ({}): an export never writes over its input",
+                                             in.string() + suffix));
+        if (S_ISLNK(st.st_mode)) refuse(out_, "is a symbolic link: name the real path");
+        if (S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode)) refuse(out_, "is a device, not a file: an export never writes to one");
+        if (S_ISFIFO(st.st_mode) || S_ISSOCK(st.st_mode)) refuse(out_, "is a FIFO or socket, not a file");
+        if (S_ISREG(st.st_mode)) {
+            if (is_sqlite_file(out_)) refuse(out_, "is an SQLite database: an export never writes over one, --force or not");
+            if (shape_ == ExportShape::folder)
+                refuse(out_, "is a file, and a CSV export is a folder (campaign.json and trials/): name a new folder");
+            if (!force) refuse(out_, "exists; --force replaces it with the export");
+            replace_ = true;
+        } else if (S_ISDIR(st.st_mode)) {
+            if (shape_ == ExportShape::file)
+                refuse(out_, "is a folder, and an HDF5 export is one file: name the file, e.g. " +
+                                 (out_ / "campaign.h5").string());
+            std::string stranger;
+            if (fs::is_empty(out_)) {
+                replace_ = true;  // an empty folder named for the export: fill it
+            } else if (!looks_like_export(out_, stranger)) {
+                refuse(out_, stranger.empty() ? "exists and is not an export (no campaign.json): not replaced"
+                                              : fmt::format("holds '{}', which is not part of an export: not replaced, "
+                                                            "--force or not", stranger));
+            } else if (!force) {
+                refuse(out_, "holds an earlier export; --force replaces it");
+            } else {
+                replace_ = true;
+            }
+        } else {
+            refuse(out_, fmt::format("is neither a file nor a folder; {} is wanted", wanted));
+        }
+    } else if (errno != ENOENT) {
+        refuse(out_, fmt::format("cannot be examined: {}", std::strerror(errno)));
+    }
+    const fs::path parent = out_.has_parent_path() ? out_.parent_path() : fs::path(".");
+    std::error_code ec;
+    fs::create_directories(parent, ec);
+    if (ec) refuse(out_, fmt::format("cannot create the folder {}: {}", parent.string(), ec.message()));
+    std::random_device rd;
+    staging_ = parent / fmt::format(".{}.partial-{}-{:08x}", out_.filename().string(), ::getpid(), rd());
+}
+
+ExportTarget::~ExportTarget() {
+    if (committed_) return;
+    std::error_code ignored;
+    fs::remove_all(staging_, ignored);
+}
+
+void ExportTarget::commit() {
+    sync_tree(staging_);
+    const fs::path parent = staging_.parent_path();
+    if (replace_ && shape_ == ExportShape::folder) {
+        // The old export stays whole until the new one has its name.
+        const fs::path old = parent / fmt::format(".{}.replaced-{}", out_.filename().string(), ::getpid());
+        std::error_code ec;
+        fs::rename(out_, old, ec);
+        if (ec) throw UserError(fmt::format("{}: cannot move the earlier export aside: {}", out_.string(), ec.message()), "write_failed");
+        fs::rename(staging_, out_, ec);
+        if (ec) {
+            fs::rename(old, out_);
+            throw UserError(fmt::format("{}: cannot rename the export into place: {}", out_.string(), ec.message()), "write_failed");
+        }
+        fs::remove_all(old, ec);
+    } else {
+        // Checked again at the last moment: what appeared since is not written over.
+        if (!replace_ && ::renameat2(AT_FDCWD, staging_.c_str(), AT_FDCWD, out_.c_str(), RENAME_NOREPLACE) != 0)
+            throw UserError(fmt::format("{}: cannot rename the export into place: {}", out_.string(), std::strerror(errno)),
+                            "write_failed");
+        if (replace_) {
+            if (shape_ == ExportShape::file && is_sqlite_file(out_))
+                refuse(out_, "became an SQLite database while the export was written: not replaced");
+            std::error_code ec;
+            fs::rename(staging_, out_, ec);
+            if (ec) throw UserError(fmt::format("{}: cannot rename the export into place: {}", out_.string(), ec.message()),
+                                    "write_failed");
+        }
+    }
+    committed_ = true;
+    sync_path(parent);
+}
+
+}  // namespace manikind
