@@ -72,6 +72,14 @@ LabDaemon::LabDaemon(DaemonOptions options)
     skin_range_.resize(analysis::andi35_zone_map().size());
     auto sink = [this](const drivers::Sample& s) { on_sample(s); };
     if (o_.config.mode == "simulated") {
+        // Time that does not repeat (issue 30): in real time the simulated lab stamps the wall
+        // clock; on the virtual clock it starts at its fixed date (2026-06-01 09:00 UTC), or a
+        // second after the newest stamp already in this database, so that nothing recorded by
+        // an earlier run is ever met again and dropped as "already stored".
+        std::int64_t start_utc_ns = o_.virtual_clock ? virtual_clock_.utc_ns() : system_clock_.utc_ns();
+        if (const auto newest = db_.newest_utc_ns(); newest && *newest + 1'000'000'000 > start_utc_ns)
+            start_utc_ns = *newest + 1'000'000'000;
+        virtual_clock_.step_utc_ns(start_utc_ns - virtual_clock_.utc_ns());
         clock_ = &virtual_clock_;
         acq_ = std::make_unique<Acquisition>(o_.config, virtual_clock_, sink);
     } else {
@@ -167,8 +175,18 @@ void LabDaemon::on_sample(const drivers::Sample& s) {
         record_sample_locked(s);
     } catch (const recorder::StorageFull& e) {
         storage_stop_locked(e.what());
+    } catch (const recorder::StorageBusy& e) {
+        storage_busy_locked(e.what());
+    } catch (const std::exception& e) {
+        internal_error_locked("sample path", e.what());
     }
 }
+
+namespace {
+// Readings held by the daemon while the recorder's queue is full (a lock held elsewhere): 48 bytes
+// each, so at most ~100 MB, about 3 h of the simulated lab's ~200 channels at 1 Hz.
+constexpr std::size_t kMaxOverflowRows = 2'000'000;
+}  // namespace
 
 void LabDaemon::record_sample_locked(const drivers::Sample& s) {
     const std::string key = s.device + "/" + s.channel;
@@ -204,15 +222,39 @@ void LabDaemon::record_sample_locked(const drivers::Sample& s) {
     }
     recorder::SampleRow row{trial_id_, recorded_channel(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
                             static_cast<std::uint8_t>(s.quality)};
-    if (!recorder_->push(row)) {
-        if (o_.virtual_clock && !storage_full_) {
-            // Virtual time waits for the disk; nothing is dropped (unless the disk is full).
-            if (recorder_->flush()) recorder_->push(row);
-            else storage_stop_locked(recorder_->stats().storage_error);
-        } else {
-            ++dropped_samples_;
-        }
+    // In order: while readings wait in the overflow, a new one waits behind them (the recorder
+    // takes a reading older than one it stored for a re-sent duplicate).
+    const bool waiting = !overflow_.empty();
+    if (!waiting && recorder_->offer(row)) return;
+    if (storage_full_) {  // heating is off; readings while the disk is full are counted, not kept
+        if (!recorder_->push(row)) ++dropped_samples_;  // the recorder counts it dropped too
+        return;
     }
+    if (!waiting && o_.virtual_clock && !storage_busy_) {
+        // Virtual time waits for the disk; nothing is dropped (unless the disk is full).
+        if (recorder_->flush() && recorder_->offer(row)) return;
+        if (const auto rs = recorder_->stats(); rs.storage_full) {
+            storage_stop_locked(rs.storage_error);
+            return;
+        }
+        storage_busy_locked("the recorder cannot commit: the database is locked by another connection");
+    }
+    // The recorder's queue is full (a lock held elsewhere, a slow disk): the reading waits here,
+    // in order, and is handed over at the next ticks. Only past this bound is one dropped.
+    if (overflow_.size() < kMaxOverflowRows) overflow_.push_back(row);
+    else if (!recorder_->push(row)) ++dropped_samples_;
+}
+
+void LabDaemon::drain_overflow_locked() {
+    while (!overflow_.empty() && recorder_->offer(overflow_.front())) overflow_.pop_front();
+}
+
+void LabDaemon::flush_all_locked() {
+    while (!overflow_.empty()) {
+        drain_overflow_locked();
+        if (!overflow_.empty() && !recorder_->flush()) break;  // locked or full: the rest waits for a later tick
+    }
+    recorder_->flush();
 }
 
 double LabDaemon::enclosure_air_c() const {
@@ -258,7 +300,11 @@ void LabDaemon::enter(Stage s, const std::string& why) {
     stage_start_ns_ = clock_->mono_ns();
     event("info", "stage", stage_name(s));
     if (!why.empty()) event("info", "stage_reason", why);
-    if (trial_id_) db_.set_trial_state(trial_id_, stage_name(s), why, clock_->utc_ns());
+    if (trial_id_) {
+        const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
+        const std::string state = stage_name(s);
+        write_or_defer([=, this] { db_.set_trial_state(trial, state, why, utc_ns); });
+    }
 }
 
 std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
@@ -393,7 +439,8 @@ void LabDaemon::safety_stop(const std::string& why) {
     acq_->manikin().set_run(false);
     event("error", "safety", "heating stopped: " + why);
     if (trial_id_) {
-        db_.add_trial_flag(trial_id_, flag_safety_stop);
+        const std::int64_t trial = trial_id_;
+        write_or_defer([=, this] { db_.add_trial_flag(trial, flag_safety_stop); });
         finish_trial("failed", "safety stop: " + why);
     }
     waiting_.clear();
@@ -407,12 +454,15 @@ constexpr std::size_t kMaxDeferredWrites = 100000;
 }  // namespace
 
 void LabDaemon::write_or_defer(std::function<void()> write) {
-    if (!storage_full_) {
+    // In order: while anything waits, what comes after waits behind it.
+    if (!storage_full_ && !storage_busy_ && deferred_writes_.empty()) {
         try {
             write();
             return;
         } catch (const recorder::StorageFull& e) {
             storage_stop_locked(e.what());
+        } catch (const recorder::StorageBusy& e) {
+            storage_busy_locked(e.what());
         }
     }
     if (deferred_writes_.size() < kMaxDeferredWrites) deferred_writes_.push_back(std::move(write));
@@ -449,6 +499,35 @@ void LabDaemon::storage_stop_locked(const std::string& why) {
     stage_ = Stage::idle;
 }
 
+// Another program (or a reader) held the database's write lock past the busy timeout: the write
+// waits, in order with everything after it, and is made at a later tick; acquisition and the
+// trial go on. Said once per episode, counted in status (storage.deferred_writes, busy_waits).
+void LabDaemon::storage_busy_locked(const std::string& why) {
+    ++storage_busy_waits_;
+    if (storage_busy_) return;
+    storage_busy_ = true;  // first: the event below waits in line rather than meeting the lock again
+    event("error", "database_locked", fmt::format("the database is locked ({}); the daemon's writes wait in order and "
+                                                  "are made when it is free: nothing is lost", why));
+}
+
+// Each tick with writes waiting on a lock: make them in order; stop at the first still refused.
+void LabDaemon::retry_deferred_locked() {
+    while (!deferred_writes_.empty()) {
+        try {
+            deferred_writes_.front()();
+        } catch (const recorder::StorageBusy&) {
+            ++storage_busy_waits_;
+            return;
+        }
+        deferred_writes_.pop_front();
+    }
+    if (storage_busy_ && overflow_.empty() && !recorder_->stats().locked) {
+        storage_busy_ = false;
+        event("warn", "database_locked", fmt::format("the database is free again: every waiting write made ({} waits)",
+                                                     storage_busy_waits_));
+    }
+}
+
 // Each tick while the disk is full: once the recorder commits again, write what waited, in order.
 void LabDaemon::retry_storage_locked() {
     if (recorder_->stats().storage_full) return;  // the recorder retries each second (and at each flush)
@@ -467,10 +546,16 @@ void LabDaemon::retry_storage_locked() {
 }
 
 void LabDaemon::finish_trial(const std::string& state, const std::string& reason) {
-    flush_recorder();
-    db_.set_trial_state(trial_id_, state, reason, clock_->utc_ns());
-    if (dropped_samples_) db_.add_trial_flag(trial_id_, flag_dropped_samples);
-    db_.refresh_trial_table();  // a column for every channel this trial recorded
+    flush_all_locked();
+    {
+        const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
+        const bool dropped = dropped_samples_ != 0;
+        write_or_defer([=, this] {
+            db_.set_trial_state(trial, state, reason, utc_ns);
+            if (dropped) db_.add_trial_flag(trial, flag_dropped_samples);
+            db_.refresh_trial_table();  // a column for every channel this trial recorded
+        });
+    }
     trial_summaries_.push_back(fmt::format("case {} replicate {}: {}{}", current_->c.id, current_->replicate, state,
                                            reason.empty() ? "" : " (" + reason + ")"));
     trial_id_ = 0;
@@ -505,7 +590,10 @@ void LabDaemon::start_interim_results() {
     });
 }
 
-void LabDaemon::flush_recorder() { recorder_->flush(); }
+void LabDaemon::flush_recorder() {
+    std::lock_guard lk(lock_);
+    flush_all_locked();
+}
 
 void LabDaemon::finish_campaign(const std::string& state) {
     queue_.clear();
@@ -517,13 +605,15 @@ void LabDaemon::finish_campaign(const std::string& state) {
             auto j = analysis::to_json(result);
             j["interim"] = false;
             j["twin_parity"] = twin_parity_json(result);
-            db_.store_result(campaign_id_, j.dump(), clock_->utc_ns());
+            write_or_defer([=, this, campaign = campaign_id_, text = j.dump(), utc_ns = clock_->utc_ns()] {
+                db_.store_result(campaign, text, utc_ns);
+            });
             event("info", "results", fmt::format("'{}': results stored", plan_->name));
         } catch (const std::exception& e) {
             event("error", "results", std::string("could not compute results: ") + e.what());
         }
     }
-    db_.set_campaign_state(campaign_id_, state);
+    write_or_defer([=, this, campaign = campaign_id_] { db_.set_campaign_state(campaign, state); });
     event("info", "campaign", fmt::format("'{}' {}", plan_->name, state));
     plan_.reset();
     paused_ = false;
@@ -558,9 +648,29 @@ void LabDaemon::tick_locked() {
             if (const auto rs = recorder_->stats(); rs.storage_full) storage_stop_locked(rs.storage_error);
         }
         if (storage_full_) retry_storage_locked();
+        else {
+            drain_overflow_locked();
+            if (storage_busy_ || !deferred_writes_.empty()) retry_deferred_locked();
+        }
         advance_locked();
     } catch (const recorder::StorageFull& e) {
         storage_stop_locked(e.what());
+    } catch (const recorder::StorageBusy& e) {
+        storage_busy_locked(e.what());  // this step is tried again at the next tick
+    } catch (const std::exception& e) {
+        // Nothing leaves the thread (std::terminate would end recording and control): a bug or
+        // bad data stops heating and ends the campaign, with an alarm saying what happened.
+        internal_error_locked("trial state machine", e.what());
+    }
+}
+
+void LabDaemon::internal_error_locked(const std::string& where, const std::string& what) {
+    spdlog::critical("internal error in the {}: {}", where, what);
+    try {
+        safety_stop(fmt::format("internal error in the {}: {}", where, what));
+    } catch (const std::exception& e) {
+        if (acq_) acq_->manikin().set_run(false);
+        spdlog::critical("stopping safely after that failed too: {}", e.what());
     }
 }
 
@@ -575,7 +685,7 @@ void LabDaemon::advance_locked() {
             gap_since_ns_[st.name] = now;
             event("warn", "gap", fmt::format("{} lost ({}){}", st.name, st.connected ? "stale" : "disconnected",
                                              st.last_error.empty() ? "" : ": " + st.last_error));
-            if (trial_id_) db_.add_trial_flag(trial_id_, flag_device_gap);
+            if (trial_id_) write_or_defer([=, this, trial = trial_id_] { db_.add_trial_flag(trial, flag_device_gap); });
         } else if (!down && it != gap_since_ns_.end()) {
             event("info", "gap", fmt::format("{} back after {:.0f} s", st.name, static_cast<double>(now - it->second) * 1e-9));
             gap_since_ns_.erase(it);
@@ -598,10 +708,12 @@ void LabDaemon::advance_locked() {
                 finish_campaign("done");
                 return;
             }
+            // Created before the queue lets go of it: a locked database leaves it queued for the next tick.
+            const std::int64_t trial = db_.create_trial(campaign_id_, queue_.front().case_id, queue_.front().replicate);
             current_ = queue_.front();
             queue_.pop_front();
-            trial_id_ = db_.create_trial(campaign_id_, current_->case_id, current_->replicate);
-            db_.set_trial_setup(trial_id_, setup_id_);
+            trial_id_ = trial;
+            write_or_defer([=, this, setup = setup_id_] { db_.set_trial_setup(trial, setup); });
             dropped_samples_ = 0;
             enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
             [[fallthrough]];
@@ -655,7 +767,7 @@ void LabDaemon::advance_locked() {
             if (steady && !steady_since_ns_) {
                 steady_since_ns_ = now - static_cast<std::int64_t>(window_s * 1e9);
                 steady_seen_at_ns_ = now;
-                db_.set_trial_steady(trial_id_, *steady_since_ns_);
+                write_or_defer([=, this, trial = trial_id_, since = *steady_since_ns_] { db_.set_trial_steady(trial, since); });
                 event("info", "steady", fmt::format("every zone within {:.3f} °C over the last {:.0f} min", worst, window_s / 60));
             } else if (!steady && steady_since_ns_) {
                 steady_since_ns_.reset();
@@ -665,7 +777,7 @@ void LabDaemon::advance_locked() {
             if (elapsed >= plan_->trial_duration_s && steady && now - steady_seen_at_ns_ >= 60'000'000'000LL) {
                 enter(Stage::stopping, "trial duration reached, steady");
             } else if (elapsed > plan_->acquire_timeout_s) {
-                db_.add_trial_flag(trial_id_, flag_never_steady);
+                write_or_defer([=, this, trial = trial_id_] { db_.add_trial_flag(trial, flag_never_steady); });
                 enter(Stage::stopping, fmt::format("timeout: not steady after {:.0f} min (worst zone {:.3f} °C)",
                                                    plan_->acquire_timeout_s / 60, worst));
             }
@@ -715,7 +827,7 @@ void LabDaemon::run_virtual(std::function<void(const std::string&)> on_trial, do
         }
         if (!plan_) break;
     }
-    recorder_->flush();
+    flush_recorder();
 }
 
 void LabDaemon::start_realtime() {
@@ -752,6 +864,7 @@ void LabDaemon::stop() {
         std::lock_guard lk(lock_);
         try {
             if (storage_full_) retry_storage_locked();
+            else if (!deferred_writes_.empty()) retry_deferred_locked();
             if (trial_id_) finish_trial("interrupted", "daemon stopped");
             if (plan_ && campaign_id_) {
                 db_.set_campaign_state(campaign_id_, "interrupted");
@@ -767,7 +880,12 @@ void LabDaemon::stop() {
         acq_->manikin().set_run(false);
         acq_->stop();
     }
-    if (recorder_) recorder_->flush();
+    std::lock_guard lk(lock_);
+    if (recorder_) flush_all_locked();
+    if (!storage_full_ && !deferred_writes_.empty()) retry_deferred_locked();
+    if (!deferred_writes_.empty() || !overflow_.empty())
+        spdlog::error("stopping with {} of the daemon's writes and {} readings not stored: the database is still locked",
+                      deferred_writes_.size(), overflow_.size());
 }
 
 nlohmann::json LabDaemon::status_json() {
@@ -845,6 +963,9 @@ nlohmann::json LabDaemon::status_json() {
                      {"locked", rs.locked},
                      {"locked_commits", rs.locked_commits}};
     j["storage"] = {{"full", storage_full_},
+                    {"locked", storage_busy_},
+                    {"busy_waits", storage_busy_waits_},
+                    {"readings_waiting", overflow_.size()},
                     {"error", storage_error_},
                     {"deferred_writes", deferred_writes_.size()},
                     {"full_disk_commits", rs.full_disk_commits}};

@@ -127,6 +127,11 @@ private:
     // is raised; what the daemon could not write waits in deferred_writes_ until space returns.
     void storage_stop_locked(const std::string& why);
     void retry_storage_locked();
+    void storage_busy_locked(const std::string& why);
+    void drain_overflow_locked();
+    void flush_all_locked();  // the overflow, then the recorder: everything accepted is stored
+    void retry_deferred_locked();
+    void internal_error_locked(const std::string& where, const std::string& what);
     void write_or_defer(std::function<void()> write);
     double stage_elapsed_s() const;
     std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
@@ -171,6 +176,9 @@ private:
     std::string storage_error_;
     std::deque<std::function<void()>> deferred_writes_;  // in order; bounded by kMaxDeferredWrites
     std::uint64_t deferred_writes_lost_ = 0;
+    std::deque<recorder::SampleRow> overflow_;  // readings waiting for room in the recorder's queue, in order
+    bool storage_busy_ = false;             // a write waits on a lock held past the busy timeout
+    std::uint64_t storage_busy_waits_ = 0;  // how often a write found the database locked
     std::uint64_t dropped_when_full_ = 0;                  // recorder drops when the disk filled
     std::optional<std::string> last_campaign_;
     std::vector<std::string> trial_summaries_;

@@ -105,13 +105,17 @@ void Recorder::open_crash_ring(Database& db) {
 }
 
 bool Recorder::push(const SampleRow& row) noexcept {
+    if (offer(row)) return true;
+    std::lock_guard lock(mutex_);
+    ++stats_.dropped;
+    return false;
+}
+
+bool Recorder::offer(const SampleRow& row) noexcept {
     std::size_t depth = 0;
     {
         std::lock_guard lock(mutex_);
-        if (queue_.size() >= options_.queue_capacity) {
-            ++stats_.dropped;
-            return false;
-        }
+        if (queue_.size() >= options_.queue_capacity) return false;
         queue_.push_back(row);  // within the reserved capacity: no allocation
         if (ring_) ring_->append(row);
         ++stats_.accepted;

@@ -79,6 +79,9 @@ public:
     // Never waits for the writer: a short critical section and no allocation. False (and
     // dropped + 1) when the queue is full.
     bool push(const SampleRow& row) noexcept;
+    // The same, for a caller that keeps a refused row and offers it again (the daemon's
+    // overflow): a refusal is not counted as dropped.
+    bool offer(const SampleRow& row) noexcept;
     // Returns true when every row accepted before the call is committed (or lost after retries);
     // false, after one more attempt, while the disk is full or the database locked elsewhere
     // (the rows stay queued).

@@ -383,3 +383,49 @@ TEST_CASE("a chamber that refuses setpoints for 4 min delays the trial instead o
         CHECK(f.daemon().start_campaign(manikind::test::quick_plan("outage")).find("is complete") != std::string::npos);
     }
 }
+
+TEST_CASE("a restarted simulated lab never stamps a time already used: nothing recorded is dropped as a duplicate",
+          "[daemon][idle][restart]") {
+    // Issue 30: every run on the virtual clock began at 2026-06-01 09:00 UTC, so a second run's
+    // idle log met the first run's keys and ~208 k readings were dropped as "already stored".
+    const auto dir = std::filesystem::temp_directory_path() / ("manikind-restart-" + std::to_string(::getpid()));
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    auto config = manikind::config::default_config();
+    config.database = dir / "lab.db";
+    config.simulation.runtime_dir = (dir / "sim").string();
+    config.log_level = "error";
+    config.idle_log_period_s = 10.0;
+    std::int64_t first_count = 0, first_newest = 0, run_count = 0;
+    for (int run = 0; run < 3; ++run) {
+        manikind::LabDaemon daemon(manikind::DaemonOptions{config, true, 1.0});
+        auto& db = daemon.db();
+        const auto before = db.idle_sample_count();
+        const auto newest_before = db.newest_utc_ns();
+        for (int i = 0; i < 120; ++i) daemon.step_virtual(1.0);
+        daemon.flush_recorder();
+        const auto added = db.idle_sample_count() - before;
+        CHECK(added > 0);
+        if (run == 0) {
+            first_count = added;
+            first_newest = *db.newest_utc_ns();
+        } else {
+            CHECK(added == first_count);  // the same readings as the first run, none dropped
+            REQUIRE(newest_before.has_value());
+            // Every reading of this run is later than everything before it.
+            std::int64_t chamber_pv = -1;
+            for (const auto& ch : db.channels())
+                if (ch.device_name == "chamber" && ch.name == "air_temp_pv_c") chamber_pv = ch.id;
+            REQUIRE(chamber_pv > 0);
+            const auto rows = db.idle_samples(chamber_pv, *newest_before + 1);
+            CHECK(rows.size() >= 11);
+            CHECK(*db.newest_utc_ns() > first_newest);
+        }
+        run_count += added;
+    }
+    {
+        auto db = manikind::recorder::Database::open_read_only(config.database);
+        CHECK(db.idle_sample_count() == run_count);
+    }
+    std::filesystem::remove_all(dir);
+}
