@@ -498,6 +498,7 @@ std::string WebServer::answer_raw(const std::string& request_bytes) {
         if (n == 0) break;
     }
     if (!parser.is_done()) {
+        if (!parser.got_some()) return {};  // nothing arrived: the server waits, then closes
         parser.put_eof(ec);
         if (ec || !parser.is_done()) return {};
     }

@@ -18,32 +18,24 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/control_api.hpp"
-#include "daemon/lab_daemon.hpp"
 #include "daemon/web_server.hpp"
 #include "fuzz/fuzz_check.hpp"
+#include "fuzz/idle_daemon.hpp"
 
-namespace fs = std::filesystem;
 namespace beast = boost::beast;
 
 namespace {
 
-// One daemon and console per process, deliberately never destroyed (as fuzz_control_request).
+// One console per process on the idle daemon, deliberately never destroyed (never started: the
+// fuzzer calls its request handler directly).
 manikind::WebServer& idle_console() {
     static manikind::WebServer* console = [] {
-        const fs::path dir = fs::temp_directory_path() / ("manikind-fuzz-console-" + std::to_string(::getpid()));
-        fs::create_directories(dir);
-        auto config = manikind::config::default_config();
-        config.database = dir / "fuzz.db";
-        config.simulation.runtime_dir = (dir / "sim").string();
-        config.log_level = "off";
-        config.recorder_crash_ring_dir = dir.string();
-        auto* daemon = new manikind::LabDaemon(manikind::DaemonOptions{config, true, 1.0});
         manikind::ControlOptions api;
         api.token = "fuzz-token-7Hq2Lx9Vb4Rk";
         api.max_message_bytes = 4096;
         manikind::WebOptions web;
         web.port = 8470;
-        return new manikind::WebServer(*daemon, api, web);
+        return new manikind::WebServer(manikind::fuzz::idle_daemon("fuzz-console", "off"), api, web);
     }();
     return *console;
 }

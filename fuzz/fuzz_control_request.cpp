@@ -10,31 +10,12 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/control_api.hpp"
-#include "daemon/lab_daemon.hpp"
+#include "fuzz/idle_daemon.hpp"
 #include "fuzz/fuzz_check.hpp"
-
-namespace fs = std::filesystem;
 
 namespace {
 
 constexpr const char* kToken = "fuzz-token-7Hq2Lx9Vb4Rk";
-
-// One daemon per process, deliberately never destroyed: its threads outlive the inputs.
-manikind::LabDaemon& idle_daemon() {
-    static manikind::LabDaemon* daemon = [] {
-        const fs::path dir = fs::temp_directory_path() / ("manikind-fuzz-control-" + std::to_string(::getpid()));
-        fs::create_directories(dir);
-        auto config = manikind::config::default_config();
-        config.database = dir / "fuzz.db";
-        config.simulation.runtime_dir = (dir / "sim").string();
-        config.log_level = "error";
-        // Never destroyed, so its recorder never removes its crash ring: keep the ring in this
-        // run's own directory, not in /dev/shm where it would outlive the run.
-        config.recorder_crash_ring_dir = dir.string();
-        return new manikind::LabDaemon(manikind::DaemonOptions{config, true, 1.0});
-    }();
-    return *daemon;
-}
 
 }  // namespace
 
@@ -49,7 +30,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     options.token = kToken;
     options.max_message_bytes = 4096;
     bool shutdown_requested = false;
-    const auto reply = manikind::handle_request(idle_daemon(), options, line, shutdown_requested);
+    const auto reply = manikind::handle_request(manikind::fuzz::idle_daemon("fuzz-control"), options, line, shutdown_requested);
     FUZZ_CHECK(reply.is_object() && reply.contains("ok") && reply["ok"].is_boolean());
     FUZZ_CHECK(reply["ok"] == true || reply.contains("error"));
     return 0;
