@@ -103,6 +103,13 @@ struct WebServer::Impl {
     console::ChamberHistory history;
     std::vector<std::string> allowed_hosts;  // Host header values this server answers to
 
+    // "127.0.0.1:8470", "[::1]:8470": how a browser names this server (URL and Host header).
+    std::string authority(int port) const {
+        const bool v6 = o.host.find(':') != std::string::npos;
+        return fmt::format("{}{}{}:{}", v6 ? "[" : "", o.host, v6 ? "]" : "", port);
+    }
+    void allow_hosts_for(int port) { allowed_hosts = {authority(port), fmt::format("localhost:{}", port)}; }
+
     // --- what the page reads ------------------------------------------------------------
     nlohmann::json status() {
         auto s = daemon.status_json();
@@ -476,14 +483,11 @@ WebServer::WebServer(LabDaemon& daemon, ControlOptions api, WebOptions options)
     : impl_(std::make_unique<Impl>(daemon, std::move(api), std::move(options))) {}
 WebServer::~WebServer() { stop(); }
 int WebServer::port() const { return impl_->bound_port; }
-std::string WebServer::url() const {
-    const bool v6 = impl_->o.host.find(':') != std::string::npos;
-    return fmt::format("http://{}{}{}:{}/", v6 ? "[" : "", impl_->o.host, v6 ? "]" : "", impl_->bound_port);
-}
+std::string WebServer::url() const { return fmt::format("http://{}/", impl_->authority(impl_->bound_port)); }
 
 std::string WebServer::answer_raw(const std::string& request_bytes) {
     Impl& s = *impl_;
-    if (s.allowed_hosts.empty()) s.allowed_hosts = {fmt::format("{}:{}", s.o.host, s.o.port), fmt::format("localhost:{}", s.o.port)};
+    if (s.allowed_hosts.empty()) s.allow_hosts_for(s.o.port);
     http::request_parser<http::string_body> parser;
     parser.header_limit(kConsoleHeaderLimitBytes);
     parser.body_limit(s.api.max_message_bytes);
@@ -524,8 +528,7 @@ void WebServer::start() {
     if (!ec) s.acceptor->listen(asio::socket_base::max_listen_connections, ec);
     if (ec) throw UserError(fmt::format("console: cannot listen on {}:{}: {}", s.o.host, s.o.port, ec.message()));
     s.bound_port = s.acceptor->local_endpoint().port();
-    const std::string host = address.is_v6() ? "[" + s.o.host + "]" : s.o.host;
-    s.allowed_hosts = {fmt::format("{}:{}", host, s.bound_port), fmt::format("localhost:{}", s.bound_port)};
+    s.allow_hosts_for(s.bound_port);
     s.push_timer.emplace(*s.io);
     s.tick_timer.emplace(*s.io);
     s.accept_retry.emplace(*s.io);

@@ -596,20 +596,23 @@ Database Database::open(const std::filesystem::path& path, Durability durability
     return opened;
 }
 
+bool is_sqlite_file(const std::filesystem::path& path) {
+    std::FILE* f = std::fopen(path.c_str(), "rb");
+    if (!f) return false;
+    std::array<char, 16> header{};
+    const bool full = std::fread(header.data(), 1, header.size(), f) == header.size();
+    std::fclose(f);
+    return full && std::memcmp(header.data(), "SQLite format 3", 16) == 0;
+}
+
 Database Database::open_read_only(const std::filesystem::path& path) {
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0)
         throw UserError(fmt::format("{}: no such database ({})", path.string(), std::strerror(errno)));
     if (!S_ISREG(st.st_mode)) throw UserError(fmt::format("{}: not a regular file, so not a manikind database", path.string()));
     if (st.st_size == 0) throw UserError(fmt::format("{}: an empty file, not a manikind database", path.string()));
-    {
-        std::FILE* f = std::fopen(path.c_str(), "rb");
-        char header[16] = {};
-        const bool read = f && std::fread(header, 1, sizeof header, f) == sizeof header;
-        if (f) std::fclose(f);
-        if (!read || std::memcmp(header, "SQLite format 3", 16) != 0)
-            throw UserError(fmt::format("{}: not an SQLite database, so not a manikind database", path.string()));
-    }
+    if (!is_sqlite_file(path))
+        throw UserError(fmt::format("{}: not an SQLite database, so not a manikind database", path.string()));
     auto impl = std::make_unique<Impl>();
     impl->path = path;
     if (sqlite3_open_v2(path.c_str(), &impl->db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX, nullptr) != SQLITE_OK)
@@ -1126,9 +1129,8 @@ std::optional<std::int64_t> Database::newest_idle_utc_ns() {
 std::optional<std::int64_t> Database::newest_utc_ns() {
     // Three key lookups and a scan of the (small) events table: samples are a rowid range per
     // trial in trial order, the idle log is keyed by utc_ns first.
-    std::optional<std::int64_t> newest;
-    for (const char* sql : {"SELECT utc_ns FROM samples ORDER BY id DESC LIMIT 1", "SELECT max(utc_ns) FROM idle_samples",
-                            "SELECT max(utc_ns) FROM events"}) {
+    std::optional<std::int64_t> newest = newest_idle_utc_ns();
+    for (const char* sql : {"SELECT utc_ns FROM samples ORDER BY id DESC LIMIT 1", "SELECT max(utc_ns) FROM events"}) {
         Query q(*impl_, sql);
         if (!q.step()) continue;
         if (const auto v = q.optional_integer(0); v && (!newest || *v > *newest)) newest = v;

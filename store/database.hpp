@@ -145,6 +145,9 @@ enum class Durability { process, power };
 // WAL's 2.3x), but a commit waits for running reads and a read for a running commit.
 enum class Journal { wal, rollback };
 
+// True when the file at `path` begins with SQLite's 16-byte header ("SQLite format 3\0").
+bool is_sqlite_file(const std::filesystem::path& path);
+
 class Database {
 public:
     // Opens (creating if absent) and migrates to the latest schema. `journal`: the mode to put

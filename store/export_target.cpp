@@ -4,15 +4,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <array>
 #include <cerrno>
-#include <cstdio>
 #include <cstring>
 #include <random>
 
 #include <fmt/format.h>
 
 #include "base/user_error.hpp"
+#include "store/database.hpp"
 
 namespace manikind {
 
@@ -60,15 +59,6 @@ void sync_tree(const fs::path& p) {
 
 }  // namespace
 
-bool is_sqlite_file(const fs::path& path) {
-    std::FILE* f = std::fopen(path.c_str(), "rb");
-    if (!f) return false;
-    std::array<char, 16> header{};
-    const bool full = std::fread(header.data(), 1, header.size(), f) == header.size();
-    std::fclose(f);
-    return full && std::memcmp(header.data(), "SQLite format 3", 16) == 0;
-}
-
 ExportTarget::ExportTarget(fs::path out, ExportShape shape, bool force, const std::vector<fs::path>& inputs)
     : out_(std::move(out)), shape_(shape) {
     if (out_.empty()) refuse(out_, "an empty output path");
@@ -86,7 +76,7 @@ ExportTarget::ExportTarget(fs::path out, ExportShape shape, bool force, const st
         if (S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode)) refuse(out_, "is a device, not a file: an export never writes to one");
         if (S_ISFIFO(st.st_mode) || S_ISSOCK(st.st_mode)) refuse(out_, "is a FIFO or socket, not a file");
         if (S_ISREG(st.st_mode)) {
-            if (is_sqlite_file(out_)) refuse(out_, "is an SQLite database: an export never writes over one, --force or not");
+            if (recorder::is_sqlite_file(out_)) refuse(out_, "is an SQLite database: an export never writes over one, --force or not");
             if (shape_ == ExportShape::folder)
                 refuse(out_, "is a file, and a CSV export is a folder (campaign.json and trials/): name a new folder");
             if (!force) refuse(out_, "exists; --force replaces it with the export");
@@ -148,7 +138,7 @@ void ExportTarget::commit() {
             throw UserError(fmt::format("{}: cannot rename the export into place: {}", out_.string(), std::strerror(errno)),
                             "write_failed");
         if (replace_) {
-            if (shape_ == ExportShape::file && is_sqlite_file(out_))
+            if (shape_ == ExportShape::file && recorder::is_sqlite_file(out_))
                 refuse(out_, "became an SQLite database while the export was written: not replaced");
             std::error_code ec;
             fs::rename(staging_, out_, ec);

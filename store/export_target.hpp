@@ -39,7 +39,4 @@ private:
     bool committed_ = false;
 };
 
-// True when the file at `path` begins with SQLite's 16-byte header ("SQLite format 3\0").
-bool is_sqlite_file(const std::filesystem::path& path);
-
 }  // namespace manikind
