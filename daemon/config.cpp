@@ -262,6 +262,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*rec, "recorder", "commit_interval_s", c.recorder_commit_interval_s, 0.05, 60.0, "s");
         r.text(*rec, "recorder", "crash_ring_dir", c.recorder_crash_ring_dir);
         r.text(*rec, "recorder", "journal", c.recorder_journal, {"wal", "rollback"});
+        r.number(*rec, "recorder", "lock_timeout_s", c.recorder_lock_timeout_s, 0.001, 600.0, "s");
     }
     if (const auto* a = r.table(root, "", "archive")) {
         r.text(*a, "archive", "postgresql", c.archive.postgresql);

@@ -118,6 +118,10 @@ struct Config {
     // [recorder] crash_ring_dir: shared memory holding the samples not yet committed, so a killed
     // daemon loses none (store/crash_ring.hpp); "" runs without.
     std::string recorder_crash_ring_dir = "/dev/shm";
+    // [recorder] lock_timeout_s: how long one write waits for a lock another program holds on the
+    // database before the writer counts it locked, raises database_locked and tries again each
+    // second (everything waits in order meanwhile; nothing is lost).
+    double recorder_lock_timeout_s = 5.0;
     SafetyLimits safety;
     SteadyStateRule steady_state;
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)

@@ -46,6 +46,16 @@ recorder::Durability durability_of(const config::Config& c) {
 recorder::Journal journal_of(const config::Config& c) {
     return c.recorder_journal == "rollback" ? recorder::Journal::rollback : recorder::Journal::wal;
 }
+
+recorder::RecorderOptions recorder_options_of(const config::Config& c) {
+    recorder::RecorderOptions o;
+    o.durability = durability_of(c);
+    o.journal = journal_of(c);
+    o.max_batch_delay = std::chrono::milliseconds(std::llround(c.recorder_commit_interval_s * 1000.0));
+    o.lock_timeout = std::chrono::milliseconds(std::max<long long>(1, std::llround(c.recorder_lock_timeout_s * 1000.0)));
+    o.crash_ring_dir = c.recorder_crash_ring_dir;
+    return o;
+}
 }  // namespace
 
 LabDaemon::LabDaemon(DaemonOptions options)
@@ -53,22 +63,21 @@ LabDaemon::LabDaemon(DaemonOptions options)
       db_path_(o_.config.database.is_relative() && !o_.config.source_dir.empty() ? o_.config.source_dir / o_.config.database
                                                                                  : o_.config.database),
       db_lock_(InstanceLock::acquire(db_path_, "database")),
-      db_(recorder::Database::open(db_path_, durability_of(o_.config), journal_of(o_.config))) {
+      // The recorder opens (creates, upgrades) the file; then the daemon's read-only connection.
+      recorder_(std::make_unique<recorder::Recorder>(db_path_, recorder_options_of(o_.config))),
+      db_(recorder::Database::open_read_only(db_path_)) {
     last_tick_steady_ns_ = steady_now_ns();
-    const int interrupted = db_.mark_interrupted_trials(system_clock_.utc_ns());
-    const int campaigns_interrupted = db_.mark_interrupted_campaigns();
-    if (interrupted > 0 || campaigns_interrupted > 0)
-        db_.add_event(std::nullopt, 0, system_clock_.utc_ns(), "warn", "restart",
-                      fmt::format("{} trial(s) and {} campaign(s) were running when the daemon stopped; marked "
-                                  "interrupted (start the same campaign again to continue it)",
-                                  interrupted, campaigns_interrupted));
-    recorder::RecorderOptions recorder_options;
-    recorder_options.durability = durability_of(o_.config);
-    recorder_options.journal = journal_of(o_.config);
-    recorder_options.max_batch_delay =
-        std::chrono::milliseconds(std::llround(o_.config.recorder_commit_interval_s * 1000.0));
-    recorder_options.crash_ring_dir = o_.config.recorder_crash_ring_dir;
-    recorder_ = std::make_unique<recorder::Recorder>(db_path_, recorder_options);
+    const auto [interrupted, campaigns_interrupted] = recorder_->call([&](recorder::Database& db) {
+        const int trials = db.mark_interrupted_trials(system_clock_.utc_ns());
+        return std::pair{trials, db.mark_interrupted_campaigns()};
+    });
+    if (interrupted > 0 || campaigns_interrupted > 0) {
+        const std::string message = fmt::format("{} trial(s) and {} campaign(s) were running when the daemon stopped; "
+                                                "marked interrupted (start the same campaign again to continue it)",
+                                                interrupted, campaigns_interrupted);
+        const std::int64_t utc_ns = system_clock_.utc_ns();
+        write([=](recorder::Database& db) { db.add_event(std::nullopt, 0, utc_ns, "warn", "restart", message); });
+    }
     skin_range_.resize(analysis::andi35_zone_map().size());
     auto sink = [this](const drivers::Sample& s) { on_sample(s); };
     if (o_.config.mode == "simulated") {
@@ -88,15 +97,18 @@ LabDaemon::LabDaemon(DaemonOptions options)
         o_.virtual_clock = false;
     }
     acq_->start();
-    for (const auto& st : acq_->status())
-        device_ids_[st.name] = db_.device_id(st.name, st.name == "manikin" ? "can" : (st.name == "chamber" || st.name == "datalogger") ? "modbus" : "serial",
-                      st.transport);
+    for (const auto& st : acq_->status()) {
+        const std::string kind = st.name == "manikin" ? "can" : (st.name == "chamber" || st.name == "datalogger") ? "modbus" : "serial";
+        device_ids_[st.name] = recorder_->call([&](recorder::Database& db) { return db.device_id(st.name, kind, st.transport); });
+    }
     event("info", "daemon", fmt::format("started ({} lab, database {})", o_.config.mode, db_path_.string()));
     // Exports name the configuration their trials ran under by this fingerprint (provenance).
     if (!o_.config.source_sha256.empty())
         event("info", "config", fmt::format("sha256 {} {}", o_.config.source_sha256, o_.config.source_name));
     // Every trial of this run names its set-up: lab, chamber, manikin, calibration, configuration.
-    setup_id_ = db_.record_setup(setup_of(o_.config), clock_->utc_ns());
+    const auto setup = setup_of(o_.config);
+    const std::int64_t setup_utc_ns = clock_->utc_ns();
+    setup_id_ = recorder_->call([&](recorder::Database& db) { return db.record_setup(setup, setup_utc_ns); });
 }
 
 LabDaemon::~LabDaemon() {
@@ -111,8 +123,12 @@ std::int64_t LabDaemon::recorded_channel(const std::string& device, const std::s
     // Devices were registered with their kind and transport at start; device_id() would
     // overwrite those, so look the id up rather than calling it again.
     const auto dev = device_ids_.find(device);
-    const std::int64_t device_id = dev != device_ids_.end() ? dev->second : db_.device_id(device, "unknown", "");
-    const std::int64_t id = db_.channel_id(device_id, channel, drivers::unit_of_channel(channel));
+    // Asked of the writer (the database's one writer); throws StorageBusy/Full/Fault at once while
+    // it waits on storage (the caller keeps the reading: record_sample_locked).
+    const std::int64_t id = recorder_->call([&](recorder::Database& db) {
+        const std::int64_t device_id = dev != device_ids_.end() ? dev->second : db.device_id(device, "unknown", "");
+        return db.channel_id(device_id, channel, drivers::unit_of_channel(channel));
+    });
     channel_ids_[key] = id;
     return id;
 }
@@ -121,7 +137,7 @@ void LabDaemon::event(const std::string& severity, const std::string& kind, cons
     const std::optional<std::int64_t> trial = trial_id_ ? std::optional<std::int64_t>(trial_id_) : std::nullopt;
     const std::int64_t mono_ns = clock_ ? clock_->mono_ns() : 0;
     const std::int64_t utc_ns = clock_ ? clock_->utc_ns() : system_clock_.utc_ns();
-    write_or_defer([=, this] { db_.add_event(trial, mono_ns, utc_ns, severity, kind, message); });
+    write([=](recorder::Database& db) { db.add_event(trial, mono_ns, utc_ns, severity, kind, message); });
     if (severity == "error") spdlog::error("{}: {}", kind, message);
     else if (severity == "warn") spdlog::warn("{}: {}", kind, message);
     else spdlog::debug("{}: {}", kind, message);
@@ -156,8 +172,9 @@ std::string LabDaemon::acknowledge_alarm(std::int64_t id) {
         if (al.id == id) {
             if (!al.acknowledged) {
                 al.acknowledged = true;
-                db_.add_event(std::nullopt, clock_->mono_ns(), clock_->utc_ns(), "info", "alarm_ack",
-                              fmt::format("alarm {} acknowledged: {}", id, al.message));
+                const std::int64_t mono_ns = clock_->mono_ns(), utc_ns = clock_->utc_ns();
+                const std::string message = fmt::format("alarm {} acknowledged: {}", id, al.message);
+                write([=](recorder::Database& db) { db.add_event(std::nullopt, mono_ns, utc_ns, "info", "alarm_ack", message); });
             }
             return {};
         }
@@ -175,8 +192,6 @@ void LabDaemon::on_sample(const drivers::Sample& s) {
         record_sample_locked(s);
     } catch (const recorder::StorageFull& e) {
         storage_stop_locked(e.what());
-    } catch (const recorder::StorageBusy& e) {
-        storage_busy_locked(e.what());
     } catch (const std::exception& e) {
         internal_error_locked("sample path", e.what());
     }
@@ -220,8 +235,39 @@ void LabDaemon::record_sample_locked(const drivers::Sample& s) {
             it->second = s.mono_ns;
         }
     }
-    recorder::SampleRow row{trial_id_, recorded_channel(s.device, s.channel), s.mono_ns, s.utc_ns, s.value,
-                            static_cast<std::uint8_t>(s.quality)};
+    std::int64_t channel_id = 0;
+    // A channel not yet in the database while storage waits (locked, full, failing): the reading
+    // waits with its name and is recorded once the channel can be added (retry_unnamed_locked).
+    const bool named = channel_ids_.count(key) != 0;
+    if (!named && !unnamed_.empty()) {
+        hold_unnamed_locked(s);
+        return;
+    }
+    if (!storage_allows_locked([&] { channel_id = recorded_channel(s.device, s.channel); })) {
+        hold_unnamed_locked(s);
+        return;
+    }
+    recorder::SampleRow row{trial_id_, channel_id, s.mono_ns, s.utc_ns, s.value, static_cast<std::uint8_t>(s.quality)};
+    offer_row_locked(row);
+}
+
+void LabDaemon::hold_unnamed_locked(const drivers::Sample& s) {
+    if (unnamed_.size() < kMaxOverflowRows) unnamed_.emplace_back(s, trial_id_);
+    else ++dropped_samples_;
+}
+
+// Each tick: the held readings whose channel can now be added go on, in the order they came.
+void LabDaemon::retry_unnamed_locked() {
+    while (!unnamed_.empty()) {
+        const auto& [s, trial] = unnamed_.front();
+        std::int64_t channel_id = 0;
+        if (!storage_allows_locked([&] { channel_id = recorded_channel(s.device, s.channel); })) return;
+        offer_row_locked({trial, channel_id, s.mono_ns, s.utc_ns, s.value, static_cast<std::uint8_t>(s.quality)});
+        unnamed_.pop_front();
+    }
+}
+
+void LabDaemon::offer_row_locked(const recorder::SampleRow& row) {
     // In order: while readings wait in the overflow, a new one waits behind them (the recorder
     // takes a reading older than one it stored for a re-sent duplicate).
     const bool waiting = !overflow_.empty();
@@ -237,7 +283,7 @@ void LabDaemon::record_sample_locked(const drivers::Sample& s) {
             storage_stop_locked(rs.storage_error);
             return;
         }
-        storage_busy_locked("the recorder cannot commit: the database is locked by another connection");
+        watch_storage_locked();
     }
     // The recorder's queue is full (a lock held elsewhere, a slow disk): the reading waits here,
     // in order, and is handed over at the next ticks. Only past this bound is one dropped.
@@ -249,12 +295,14 @@ void LabDaemon::drain_overflow_locked() {
     while (!overflow_.empty() && recorder_->offer(overflow_.front())) overflow_.pop_front();
 }
 
-void LabDaemon::flush_all_locked() {
+bool LabDaemon::flush_all_locked() {
+    // The writer tries what waits at its head first: its state then says whether new channels can be added.
+    if (!unnamed_.empty() && recorder_->flush()) retry_unnamed_locked();
     while (!overflow_.empty()) {
         drain_overflow_locked();
         if (!overflow_.empty() && !recorder_->flush()) break;  // locked or full: the rest waits for a later tick
     }
-    recorder_->flush();
+    return recorder_->flush() && overflow_.empty() && unnamed_.empty();
 }
 
 double LabDaemon::enclosure_air_c() const {
@@ -303,7 +351,7 @@ void LabDaemon::enter(Stage s, const std::string& why) {
     if (trial_id_) {
         const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
         const std::string state = stage_name(s);
-        write_or_defer([=, this] { db_.set_trial_state(trial, state, why, utc_ns); });
+        write([=](recorder::Database& db) { db.set_trial_state(trial, state, why, utc_ns); });
     }
 }
 
@@ -316,6 +364,13 @@ std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
     if ((plan_ && plan_->name == plan.name) ||
         std::any_of(waiting_.begin(), waiting_.end(), [&](const CampaignPlan& p) { return p.name == plan.name; }))
         return fmt::format("a campaign named '{}' is already running or queued", plan.name);
+    // What the daemon reads back must include every write it made: the recorder makes them first.
+    if (!flush_all_locked()) {
+        watch_storage_locked();
+        return fmt::format("the database {} cannot be written now ({}); the daemon's writes wait in order; start the "
+                           "campaign again when the alarm clears",
+                           db_path_.string(), recorder_->stats().storage_error);
+    }
     // One already in the database is continued, if it is the same plan and not complete.
     if (const auto existing = db_.find_campaign(plan.name)) {
         const auto campaigns = db_.campaigns();
@@ -345,31 +400,53 @@ std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
         event("info", "campaign", fmt::format("'{}' queued behind '{}' ({} waiting)", plan.name, plan_->name, waiting_.size()));
         return {};
     }
-    begin_campaign(plan);
+    try {
+        begin_campaign(plan);
+    } catch (const recorder::StorageBusy& e) {
+        return fmt::format("the database is locked ({}); start the campaign again when the alarm clears", e.what());
+    } catch (const recorder::StorageFull& e) {
+        return fmt::format("the disk is full ({}); start the campaign again when space is freed", e.what());
+    } catch (const recorder::StorageFault& e) {
+        return fmt::format("the file system fails ({}); start the campaign again when the alarm clears", e.what());
+    }
     return {};
 }
 
+// Throws StorageBusy/Full/Fault, having changed nothing, when the campaign cannot be written now.
 void LabDaemon::begin_campaign(const CampaignPlan& plan) {
-    queue_.clear();
     std::vector<std::pair<PlannedCase, std::int64_t>> cases;
     std::set<std::pair<std::int64_t, std::int64_t>> done;  // (case row, replicate) finished before
     const auto existing = db_.find_campaign(plan.name);
+    std::int64_t campaign_id = 0;
     if (existing) {
         // Continuing (start_campaign checked it is the same plan): finished trials are kept; an
         // interrupted, aborted or failed one stays in the database with its reason (the analysis
         // reads done trials only) and is run again.
-        campaign_id_ = *existing;
-        const auto stored = db_.cases(campaign_id_);
+        campaign_id = *existing;
+        const auto stored = db_.cases(campaign_id);
         for (std::size_t i = 0; i < plan.cases.size() && i < stored.size(); ++i) cases.emplace_back(plan.cases[i], stored[i].id);
-        for (const auto& t : db_.trials(campaign_id_))
+        for (const auto& t : db_.trials(campaign_id))
             if (t.state == "done") done.insert({t.case_id, t.replicate});
+        recorder_->call([&](recorder::Database& db) { db.set_campaign_state(campaign_id, "running"); });
     } else {
-        campaign_id_ = db_.create_campaign(plan.name, campaign_definition_json(plan).dump());
-        int position = 0;
-        for (const auto& c : plan.cases)
-            cases.emplace_back(c, db_.add_case(campaign_id_, fmt::format("case {}", c.id), case_conditions_json(c).dump(),
-                                               position++));
+        // One call: the campaign and its cases are made together, or (storage waiting) not at all.
+        std::vector<std::int64_t> case_ids;
+        campaign_id = recorder_->call([&](recorder::Database& db) {
+            std::int64_t id = 0;
+            case_ids.clear();
+            db.atomically([&] {
+                id = db.create_campaign(plan.name, campaign_definition_json(plan).dump());
+                int position = 0;
+                for (const auto& c : plan.cases)
+                    case_ids.push_back(db.add_case(id, fmt::format("case {}", c.id), case_conditions_json(c).dump(), position++));
+                db.set_campaign_state(id, "running");
+            });
+            return id;
+        });
+        for (std::size_t i = 0; i < plan.cases.size(); ++i) cases.emplace_back(plan.cases[i], case_ids.at(i));
     }
+    campaign_id_ = campaign_id;
+    queue_.clear();
     for (int r = 1; r <= plan.replicates; ++r)
         for (const auto& [c, id] : cases)
             if (!done.count({id, r})) queue_.push_back({c, id, r});
@@ -378,7 +455,6 @@ void LabDaemon::begin_campaign(const CampaignPlan& plan) {
     plan_ = plan;
     safety_tripped_ = false;
     last_campaign_ = plan.name;
-    db_.set_campaign_state(campaign_id_, "running");
     if (existing)
         event("info", "campaign", fmt::format("'{}' continued: {} of {} trials done before, {} to run", plan.name,
                                               trials_done_, trials_total_, queue_.size()));
@@ -440,33 +516,20 @@ void LabDaemon::safety_stop(const std::string& why) {
     event("error", "safety", "heating stopped: " + why);
     if (trial_id_) {
         const std::int64_t trial = trial_id_;
-        write_or_defer([=, this] { db_.add_trial_flag(trial, flag_safety_stop); });
+        write([=](recorder::Database& db) { db.add_trial_flag(trial, flag_safety_stop); });
         finish_trial("failed", "safety stop: " + why);
     }
     waiting_.clear();
     if (plan_) finish_campaign("aborted");
 }
 
-namespace {
-// What the daemon holds for the database while the disk is full: events and state changes are
-// small, and an hour of 1-Hz gap events is 3600; past this the oldest wait, the newest are counted.
-constexpr std::size_t kMaxDeferredWrites = 100000;
-}  // namespace
-
-void LabDaemon::write_or_defer(std::function<void()> write) {
-    // In order: while anything waits, what comes after waits behind it.
-    if (!storage_full_ && !storage_busy_ && deferred_writes_.empty()) {
-        try {
-            write();
-            return;
-        } catch (const recorder::StorageFull& e) {
-            storage_stop_locked(e.what());
-        } catch (const recorder::StorageBusy& e) {
-            storage_busy_locked(e.what());
-        }
-    }
-    if (deferred_writes_.size() < kMaxDeferredWrites) deferred_writes_.push_back(std::move(write));
-    else ++deferred_writes_lost_;
+void LabDaemon::write(recorder::Recorder::Job job) {
+    // Made now, as before the daemon goes on (a kill -9 right after loses nothing it said it did);
+    // while storage waits (locked, full, failing) the recorder keeps it in line, in order, and
+    // makes it when it can. Only past its bound (100,000 writes waiting) is one refused, and
+    // counted (status storage.writes_lost).
+    if (storage_allows_locked([&] { recorder_->call(job); })) return;
+    if (!recorder_->post(std::move(job))) spdlog::error("a write to the database was refused: {} already wait", 100000);
 }
 
 void LabDaemon::storage_stop_locked(const std::string& why) {
@@ -474,6 +537,7 @@ void LabDaemon::storage_stop_locked(const std::string& why) {
     storage_full_ = true;
     storage_error_ = why;
     dropped_when_full_ = recorder_->stats().dropped;
+    jobs_lost_when_full_ = recorder_->stats().jobs_lost;
     if (acq_) acq_->manikin().set_run(false);  // no heating that cannot be recorded
     const std::string running = plan_ ? fmt::format(" '{}' interrupted (start it again to continue);", plan_->name) : "";
     event("error", "disk_full",
@@ -481,7 +545,7 @@ void LabDaemon::storage_stop_locked(const std::string& why) {
     if (trial_id_) {
         const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
         const std::string reason = "disk full";
-        write_or_defer([=, this] { db_.set_trial_state(trial, "interrupted", reason, utc_ns); });
+        write([=](recorder::Database& db) { db.set_trial_state(trial, "interrupted", reason, utc_ns); });
         trial_summaries_.push_back(fmt::format("case {} replicate {}: interrupted (disk full)", current_->c.id,
                                                current_->replicate));
         trial_id_ = 0;
@@ -490,7 +554,7 @@ void LabDaemon::storage_stop_locked(const std::string& why) {
     }
     if (plan_) {
         const std::int64_t campaign = campaign_id_;
-        write_or_defer([=, this] { db_.set_campaign_state(campaign, "interrupted"); });
+        write([=](recorder::Database& db) { db.set_campaign_state(campaign, "interrupted"); });
         plan_.reset();
     }
     queue_.clear();
@@ -500,48 +564,66 @@ void LabDaemon::storage_stop_locked(const std::string& why) {
 }
 
 // Another program (or a reader) held the database's write lock past the busy timeout: the write
-// waits, in order with everything after it, and is made at a later tick; acquisition and the
-// trial go on. Said once per episode, counted in status (storage.deferred_writes, busy_waits).
+// waits in the recorder's line, in order with everything after it, and is made when the lock is
+// gone; acquisition and the trial go on. Said once per episode, counted in status.
 void LabDaemon::storage_busy_locked(const std::string& why) {
     ++storage_busy_waits_;
     if (storage_busy_) return;
-    storage_busy_ = true;  // first: the event below waits in line rather than meeting the lock again
+    storage_busy_ = true;
     event("error", "database_locked", fmt::format("the database is locked ({}); the daemon's writes wait in order and "
                                                   "are made when it is free: nothing is lost", why));
 }
 
-// Each tick with writes waiting on a lock: make them in order; stop at the first still refused.
-void LabDaemon::retry_deferred_locked() {
-    while (!deferred_writes_.empty()) {
-        try {
-            deferred_writes_.front()();
-        } catch (const recorder::StorageBusy&) {
-            ++storage_busy_waits_;
-            return;
-        }
-        deferred_writes_.pop_front();
+// Runs a call to the writer; false (the alarm for that kind raised) when storage refused it.
+bool LabDaemon::storage_allows_locked(const std::function<void()>& call) {
+    try {
+        call();
+        return true;
+    } catch (const recorder::StorageBusy& e) {
+        storage_busy_locked(e.what());
+    } catch (const recorder::StorageFull& e) {
+        storage_stop_locked(e.what());
+    } catch (const recorder::StorageFault& e) {
+        storage_fault_locked(e.what());
     }
-    if (storage_busy_ && overflow_.empty() && !recorder_->stats().locked) {
+    return false;
+}
+
+void LabDaemon::storage_fault_locked(const std::string& why) {
+    if (storage_fault_) return;
+    storage_fault_ = true;
+    event("error", "storage_error", fmt::format("the file system fails the database's writes ({}); readings and writes "
+                                                "wait in memory, tried again each second: nothing is lost", why));
+}
+
+// Each tick: the recorder's state (it retries each second) raises and clears the alarms for a
+// lock held elsewhere and for a failing file system; a full disk has its own path (storage_stop_locked).
+void LabDaemon::watch_storage_locked() {
+    const auto rs = recorder_->stats();
+    if (rs.locked) storage_busy_locked(rs.storage_error);
+    if (rs.io_error) storage_fault_locked(rs.storage_error);
+    const bool clear = !rs.locked && !rs.io_error && overflow_.empty() && unnamed_.empty() && rs.jobs_waiting == 0;
+    if (storage_busy_ && clear) {
         storage_busy_ = false;
         event("warn", "database_locked", fmt::format("the database is free again: every waiting write made ({} waits)",
                                                      storage_busy_waits_));
     }
+    if (storage_fault_ && clear) {
+        storage_fault_ = false;
+        event("warn", "storage_error", "the file system writes again: every waiting write made");
+    }
 }
 
-// Each tick while the disk is full: once the recorder commits again, write what waited, in order.
+// Each tick while the disk is full: once the recorder commits again, say so.
 void LabDaemon::retry_storage_locked() {
-    if (recorder_->stats().storage_full) return;  // the recorder retries each second (and at each flush)
-    while (!deferred_writes_.empty()) {
-        deferred_writes_.front()();  // throws StorageFull while there is still no room
-        deferred_writes_.pop_front();
-    }
-    storage_full_ = false;
     const auto rs = recorder_->stats();
+    if (rs.storage_full || rs.jobs_waiting > 0) return;  // the recorder retries each second (and at each flush)
+    storage_full_ = false;
     event("warn", "disk_full",
           fmt::format("space is back: recording resumed; {} readings were dropped while the disk was full{}",
                       rs.dropped - dropped_when_full_,
-                      deferred_writes_lost_ ? fmt::format(", {} events not kept", deferred_writes_lost_) : ""));
-    deferred_writes_lost_ = 0;
+                      rs.jobs_lost > jobs_lost_when_full_ ? fmt::format(", {} events not kept", rs.jobs_lost - jobs_lost_when_full_)
+                                                          : ""));
     storage_error_.clear();
 }
 
@@ -550,10 +632,10 @@ void LabDaemon::finish_trial(const std::string& state, const std::string& reason
     {
         const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
         const bool dropped = dropped_samples_ != 0;
-        write_or_defer([=, this] {
-            db_.set_trial_state(trial, state, reason, utc_ns);
-            if (dropped) db_.add_trial_flag(trial, flag_dropped_samples);
-            db_.refresh_trial_table();  // a column for every channel this trial recorded
+        write([=](recorder::Database& db) {
+            db.set_trial_state(trial, state, reason, utc_ns);
+            if (dropped) db.add_trial_flag(trial, flag_dropped_samples);
+            db.refresh_trial_table();  // a column for every channel this trial recorded
         });
     }
     trial_summaries_.push_back(fmt::format("case {} replicate {}: {}{}", current_->c.id, current_->replicate, state,
@@ -577,12 +659,15 @@ void LabDaemon::start_interim_results() {
     interim_done_ = false;
     interim_thread_ = std::thread([this, name = plan_->name, campaign_id = campaign_id_, utc = clock_->utc_ns()] {
         try {
-            auto db = recorder::Database::open(db_path_);
+            // Read back after the recorder has made every write so far (the trial just done);
+            // read-only: the recorder stays the one writer and stores the result.
+            if (!recorder_->flush()) throw UserError("the database cannot be written now; the next trial's results will catch up");
+            auto db = recorder::Database::open_read_only(db_path_);
             const auto result = analysis::analyze_campaign(campaign_from_database(db, name));
             auto j = analysis::to_json(result);
             j["interim"] = true;
             j["twin_parity"] = twin_parity_json(result);
-            db.store_result(campaign_id, j.dump(), utc);
+            recorder_->post([campaign_id, text = j.dump(), utc](recorder::Database& w) { w.store_result(campaign_id, text, utc); });
         } catch (const std::exception& e) {
             spdlog::warn("interim results for '{}': {}", name, e.what());
         }
@@ -596,6 +681,12 @@ void LabDaemon::flush_recorder() {
 }
 
 void LabDaemon::finish_campaign(const std::string& state) {
+    // The results read every trial back: the recorder makes the writes waiting first. While it
+    // cannot (locked, full, failing), the campaign stays open and the next tick tries again.
+    if (state == "done" && !flush_all_locked()) {
+        watch_storage_locked();
+        return;
+    }
     queue_.clear();
     if (state == "done") {
         stage_ = Stage::computing;
@@ -605,24 +696,20 @@ void LabDaemon::finish_campaign(const std::string& state) {
             auto j = analysis::to_json(result);
             j["interim"] = false;
             j["twin_parity"] = twin_parity_json(result);
-            write_or_defer([=, this, campaign = campaign_id_, text = j.dump(), utc_ns = clock_->utc_ns()] {
-                db_.store_result(campaign, text, utc_ns);
+            write([=, campaign = campaign_id_, text = j.dump(), utc_ns = clock_->utc_ns()](recorder::Database& db) {
+                db.store_result(campaign, text, utc_ns);
             });
             event("info", "results", fmt::format("'{}': results stored", plan_->name));
         } catch (const std::exception& e) {
             event("error", "results", std::string("could not compute results: ") + e.what());
         }
     }
-    write_or_defer([=, this, campaign = campaign_id_] { db_.set_campaign_state(campaign, state); });
+    write([=, campaign = campaign_id_](recorder::Database& db) { db.set_campaign_state(campaign, state); });
     event("info", "campaign", fmt::format("'{}' {}", plan_->name, state));
     plan_.reset();
     paused_ = false;
     stage_ = Stage::idle;
-    if (!waiting_.empty()) {
-        const CampaignPlan next = waiting_.front();
-        waiting_.pop_front();
-        begin_campaign(next);
-    }
+    // The next campaign queued begins at the next tick (advance_locked).
 }
 
 namespace {
@@ -649,14 +736,17 @@ void LabDaemon::tick_locked() {
         }
         if (storage_full_) retry_storage_locked();
         else {
+            retry_unnamed_locked();
             drain_overflow_locked();
-            if (storage_busy_ || !deferred_writes_.empty()) retry_deferred_locked();
+            watch_storage_locked();
         }
         advance_locked();
     } catch (const recorder::StorageFull& e) {
         storage_stop_locked(e.what());
     } catch (const recorder::StorageBusy& e) {
         storage_busy_locked(e.what());  // this step is tried again at the next tick
+    } catch (const recorder::StorageFault&) {
+        watch_storage_locked();  // likewise
     } catch (const std::exception& e) {
         // Nothing leaves the thread (std::terminate would end recording and control): a bug or
         // bad data stops heating and ends the campaign, with an alarm saying what happened.
@@ -685,7 +775,7 @@ void LabDaemon::advance_locked() {
             gap_since_ns_[st.name] = now;
             event("warn", "gap", fmt::format("{} lost ({}){}", st.name, st.connected ? "stale" : "disconnected",
                                              st.last_error.empty() ? "" : ": " + st.last_error));
-            if (trial_id_) write_or_defer([=, this, trial = trial_id_] { db_.add_trial_flag(trial, flag_device_gap); });
+            if (trial_id_) write([=, trial = trial_id_](recorder::Database& db) { db.add_trial_flag(trial, flag_device_gap); });
         } else if (!down && it != gap_since_ns_.end()) {
             event("info", "gap", fmt::format("{} back after {:.0f} s", st.name, static_cast<double>(now - it->second) * 1e-9));
             gap_since_ns_.erase(it);
@@ -700,6 +790,12 @@ void LabDaemon::advance_locked() {
                 safety_stop(fmt::format("watchdog: {} silent for more than safety.watchdog_timeout_s = {} s", dev, limit_s));
         }
     }
+    // A campaign queued behind the one that ended: begun once its writes can be made (begin_campaign
+    // throws, changing nothing, while storage waits; this is tried again at the next tick).
+    if (!plan_ && !waiting_.empty() && !storage_full_ && flush_all_locked()) {
+        begin_campaign(waiting_.front());
+        waiting_.pop_front();
+    }
     if (!plan_ || paused_) return;
     const double elapsed = stage_elapsed_s();
     switch (stage_) {
@@ -709,11 +805,19 @@ void LabDaemon::advance_locked() {
                 return;
             }
             // Created before the queue lets go of it: a locked database leaves it queued for the next tick.
-            const std::int64_t trial = db_.create_trial(campaign_id_, queue_.front().case_id, queue_.front().replicate);
+            const auto& next = queue_.front();
+            const std::int64_t campaign = campaign_id_, setup = setup_id_;
+            const std::int64_t trial = recorder_->call([&](recorder::Database& db) {
+                std::int64_t id = 0;
+                db.atomically([&] {
+                    id = db.create_trial(campaign, next.case_id, next.replicate);
+                    db.set_trial_setup(id, setup);
+                });
+                return id;
+            });
             current_ = queue_.front();
             queue_.pop_front();
             trial_id_ = trial;
-            write_or_defer([=, this, setup = setup_id_] { db_.set_trial_setup(trial, setup); });
             dropped_samples_ = 0;
             enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
             [[fallthrough]];
@@ -767,7 +871,7 @@ void LabDaemon::advance_locked() {
             if (steady && !steady_since_ns_) {
                 steady_since_ns_ = now - static_cast<std::int64_t>(window_s * 1e9);
                 steady_seen_at_ns_ = now;
-                write_or_defer([=, this, trial = trial_id_, since = *steady_since_ns_] { db_.set_trial_steady(trial, since); });
+                write([=, trial = trial_id_, since = *steady_since_ns_](recorder::Database& db) { db.set_trial_steady(trial, since); });
                 event("info", "steady", fmt::format("every zone within {:.3f} °C over the last {:.0f} min", worst, window_s / 60));
             } else if (!steady && steady_since_ns_) {
                 steady_since_ns_.reset();
@@ -777,7 +881,7 @@ void LabDaemon::advance_locked() {
             if (elapsed >= plan_->trial_duration_s && steady && now - steady_seen_at_ns_ >= 60'000'000'000LL) {
                 enter(Stage::stopping, "trial duration reached, steady");
             } else if (elapsed > plan_->acquire_timeout_s) {
-                write_or_defer([=, this, trial = trial_id_] { db_.add_trial_flag(trial, flag_never_steady); });
+                write([=, trial = trial_id_](recorder::Database& db) { db.add_trial_flag(trial, flag_never_steady); });
                 enter(Stage::stopping, fmt::format("timeout: not steady after {:.0f} min (worst zone {:.3f} °C)",
                                                    plan_->acquire_timeout_s / 60, worst));
             }
@@ -807,7 +911,7 @@ void LabDaemon::step_wall_clock_virtual(std::int64_t dt_ns) {
 
 bool LabDaemon::campaign_active() {
     std::lock_guard lk(lock_);
-    return plan_.has_value();
+    return plan_.has_value() || !waiting_.empty();  // one queued begins at the next tick
 }
 
 std::string LabDaemon::stage_line() {
@@ -825,7 +929,7 @@ void LabDaemon::run_virtual(std::function<void(const std::string&)> on_trial, do
             if (on_trial) on_trial(fmt::format("[{}/{}] {}", reported + 1, trials_total_, trial_summaries_[reported]));
             ++reported;
         }
-        if (!plan_) break;
+        if (!plan_ && waiting_.empty()) break;
     }
     flush_recorder();
 }
@@ -861,19 +965,14 @@ void LabDaemon::stop() {
     {
         // SIGTERM (or any stop) mid-campaign: the running trial and the campaign end
         // "interrupted" now, not at the next start; starting the same plan continues it.
+        // Posted to the recorder like every write; if storage still waits at the end, the next
+        // start marks what was running interrupted (mark_interrupted_trials).
         std::lock_guard lk(lock_);
-        try {
-            if (storage_full_) retry_storage_locked();
-            else if (!deferred_writes_.empty()) retry_deferred_locked();
-            if (trial_id_) finish_trial("interrupted", "daemon stopped");
-            if (plan_ && campaign_id_) {
-                db_.set_campaign_state(campaign_id_, "interrupted");
-                event("warn", "campaign", fmt::format("'{}' interrupted: the daemon stopped (start it again to continue)", plan_->name));
-                plan_.reset();
-            }
-        } catch (const recorder::StorageFull& e) {
-            // The next start marks what was running interrupted (mark_interrupted_trials).
-            spdlog::error("stopping with the disk full: {} writes not made ({})", deferred_writes_.size() + 1, e.what());
+        if (trial_id_) finish_trial("interrupted", "daemon stopped");
+        if (plan_ && campaign_id_) {
+            write([campaign = campaign_id_](recorder::Database& db) { db.set_campaign_state(campaign, "interrupted"); });
+            event("warn", "campaign", fmt::format("'{}' interrupted: the daemon stopped (start it again to continue)", plan_->name));
+            plan_.reset();
         }
     }
     if (acq_) {
@@ -881,11 +980,13 @@ void LabDaemon::stop() {
         acq_->stop();
     }
     std::lock_guard lk(lock_);
-    if (recorder_) flush_all_locked();
-    if (!storage_full_ && !deferred_writes_.empty()) retry_deferred_locked();
-    if (!deferred_writes_.empty() || !overflow_.empty())
-        spdlog::error("stopping with {} of the daemon's writes and {} readings not stored: the database is still locked",
-                      deferred_writes_.size(), overflow_.size());
+    if (recorder_ && !flush_all_locked()) {
+        const auto rs = recorder_->stats();
+        spdlog::error("stopping with {} of the daemon's writes and {} readings not stored yet ({}): tried {} more times "
+                      "as the recorder closes",
+                      rs.jobs_waiting, rs.queue_depth + overflow_.size() + unnamed_.size(), rs.storage_error,
+                      recorder::RecorderOptions{}.max_commit_attempts);
+    }
 }
 
 nlohmann::json LabDaemon::status_json() {
@@ -965,9 +1066,13 @@ nlohmann::json LabDaemon::status_json() {
     j["storage"] = {{"full", storage_full_},
                     {"locked", storage_busy_},
                     {"busy_waits", storage_busy_waits_},
-                    {"readings_waiting", overflow_.size()},
+                    {"readings_waiting", overflow_.size() + unnamed_.size()},
                     {"error", storage_error_},
-                    {"deferred_writes", deferred_writes_.size()},
+                    {"deferred_writes", rs.jobs_waiting},
+                    {"io_error", rs.io_error},
+                    {"io_error_commits", rs.io_error_commits},
+                    {"writes_failed", rs.jobs_failed},
+                    {"writes_lost", rs.jobs_lost},
                     {"full_disk_commits", rs.full_disk_commits}};
     j["safety_tripped"] = safety_tripped_;
     j["measured"] = measured_json_locked();
@@ -1031,6 +1136,7 @@ nlohmann::json LabDaemon::live_json() {
 
 std::optional<nlohmann::json> LabDaemon::latest_results_json(const std::string& campaign) {
     std::lock_guard lk(lock_);
+    flush_all_locked();  // the results just stored are read back (storage waiting: the last ones made)
     const auto id = db_.find_campaign(campaign);
     if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), campaign));
     const auto r = db_.latest_result(*id);

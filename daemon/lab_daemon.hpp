@@ -94,7 +94,12 @@ public:
     std::uint64_t accepted_rows() const { return recorder_->stats().accepted; }
     double virtual_time_s() const { return static_cast<double>(clock_->mono_ns()) * 1e-9; }
 
-    recorder::Database& db() { return db_; }
+    // The daemon's read-only connection (tests read through it; every write goes to the recorder).
+    // Flushed first, so that it sees every write the daemon has made.
+    recorder::Database& db() {
+        flush_recorder();
+        return db_;
+    }
     const config::Config& config() const { return o_.config; }
     // Returns when every sample recorded so far is committed (exports and tests read after it).
     void flush_recorder();
@@ -113,6 +118,9 @@ private:
     };
     void on_sample(const drivers::Sample& s);
     void record_sample_locked(const drivers::Sample& s);
+    void offer_row_locked(const recorder::SampleRow& row);
+    void hold_unnamed_locked(const drivers::Sample& s);
+    void retry_unnamed_locked();
     void tick_locked();     // advance_locked(), surviving a full disk
     void advance_locked();  // gaps, watchdog, then one step of the trial state machine
     void enter(Stage s, const std::string& why = {});
@@ -124,15 +132,18 @@ private:
     void safety_stop(const std::string& why);
     void setpoint_refused(const std::string& what, const std::string& detail);
     // A full disk: heating stops, the trial and campaign end interrupted (continuable), an alarm
-    // is raised; what the daemon could not write waits in deferred_writes_ until space returns.
+    // is raised; the daemon's writes wait in the recorder's line until space returns.
     void storage_stop_locked(const std::string& why);
     void retry_storage_locked();
     void storage_busy_locked(const std::string& why);
+    void storage_fault_locked(const std::string& why);
+    bool storage_allows_locked(const std::function<void()>& call);
     void drain_overflow_locked();
-    void flush_all_locked();  // the overflow, then the recorder: everything accepted is stored
-    void retry_deferred_locked();
+    bool flush_all_locked();  // the overflow, then the recorder: true when everything accepted is stored
+    void watch_storage_locked();  // raises and clears database_locked / storage_error from the recorder's state
     void internal_error_locked(const std::string& where, const std::string& what);
-    void write_or_defer(std::function<void()> write);
+    // Every write goes to the recorder, the database's one writer (store/recorder.hpp), in order.
+    void write(recorder::Recorder::Job job);
     double stage_elapsed_s() const;
     std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
     double enclosure_air_c() const;
@@ -148,9 +159,9 @@ private:
 
     DaemonOptions o_;
     std::filesystem::path db_path_;
-    InstanceLock db_lock_;   // before db_: a second daemon must not touch the database at all
-    recorder::Database db_;
-    std::unique_ptr<recorder::Recorder> recorder_;
+    InstanceLock db_lock_;   // first: a second daemon must not touch the database at all
+    std::unique_ptr<recorder::Recorder> recorder_;  // the one writer: every write goes through it
+    recorder::Database db_;  // read-only: what the daemon reads back (campaigns to continue, results)
     drivers::ManualClock virtual_clock_;
     drivers::SystemClock system_clock_;
     const drivers::Clock* clock_ = nullptr;
@@ -174,10 +185,13 @@ private:
     bool device_retry_logged_ = false;  // this stage's setpoint refusal was logged once
     bool storage_full_ = false;
     std::string storage_error_;
-    std::deque<std::function<void()>> deferred_writes_;  // in order; bounded by kMaxDeferredWrites
-    std::uint64_t deferred_writes_lost_ = 0;
+    std::uint64_t jobs_lost_when_full_ = 0;
     std::deque<recorder::SampleRow> overflow_;  // readings waiting for room in the recorder's queue, in order
+    // Readings of a channel not yet in the database while it could not be added (locked, full):
+    // kept with their device/channel and added at a later tick, then recorded in order.
+    std::deque<std::pair<drivers::Sample, std::int64_t>> unnamed_;  // (reading, trial id then)
     bool storage_busy_ = false;             // a write waits on a lock held past the busy timeout
+    bool storage_fault_ = false;            // a write waits on a failing file system (I/O error)
     std::uint64_t storage_busy_waits_ = 0;  // how often a write found the database locked
     std::uint64_t dropped_when_full_ = 0;                  // recorder drops when the disk filled
     std::optional<std::string> last_campaign_;

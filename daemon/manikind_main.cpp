@@ -201,6 +201,17 @@ int main(int argc, char** argv) {
         if (console) console->stop();
         server.stop();
         daemon.stop();
+        {
+            // What this run recorded, in its own count: a lab (and the soak test) checks nothing was lost.
+            const auto st = daemon.status_json();
+            const auto& r = st["recorder"];
+            const auto n = [](const nlohmann::json& v) { return static_cast<unsigned long long>(v.get<std::uint64_t>()); };
+            std::printf("manikind: stopped: %llu readings accepted, %llu stored, %llu re-sent duplicates, %llu dropped, "
+                        "%llu lost; %llu writes waiting\n",
+                        n(r["accepted"]), n(r["committed"]), n(r["duplicates"]), n(r["dropped_queue_full"]),
+                        n(r["lost_after_retries"]), n(st["storage"]["deferred_writes"]));
+            std::fflush(stdout);
+        }
         // What the last seconds committed goes now if the archive answers within 10 s; else at
         // the next start (nothing is lost either way).
         if (forwarder) forwarder->finish(std::chrono::seconds(10));

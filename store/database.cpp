@@ -367,11 +367,16 @@ struct Database::Impl {
     }
 
     [[noreturn]] void fail(std::string_view what) const {
-        if (db && ((sqlite3_errcode(db) & 0xff) == SQLITE_FULL || sqlite3_system_errno(db) == ENOSPC))
-            throw StorageFull(fmt::format("{}: {}: {}", path.string(), what, sqlite3_errmsg(db)));
-        if (db && ((sqlite3_errcode(db) & 0xff) == SQLITE_BUSY || (sqlite3_errcode(db) & 0xff) == SQLITE_LOCKED))
-            throw StorageBusy(fmt::format("{}: {}: {}", path.string(), what, sqlite3_errmsg(db)));
-        throw UserError(fmt::format("{}: {}: {}", path.string(), what, db ? sqlite3_errmsg(db) : "out of memory"));
+        if (!db) throw UserError(fmt::format("{}: {}: out of memory", path.string(), what));
+        fail_with(sqlite3_errcode(db), sqlite3_system_errno(db), what, sqlite3_errmsg(db));
+    }
+    // The exception for an SQLite error: the storage kinds the recorder waits out, else UserError.
+    [[noreturn]] void fail_with(int code, int sys_errno, std::string_view what, const std::string& message) const {
+        const std::string text = fmt::format("{}: {}: {}", path.string(), what, message);
+        if ((code & 0xff) == SQLITE_FULL || sys_errno == ENOSPC) throw StorageFull(text);
+        if ((code & 0xff) == SQLITE_BUSY || (code & 0xff) == SQLITE_LOCKED) throw StorageBusy(text);
+        if ((code & 0xff) == SQLITE_IOERR) throw StorageFault(text);
+        throw UserError(text);
     }
 
     void exec(const char* sql, std::string_view what) {
@@ -769,12 +774,25 @@ void Database::refresh_trial_table() {
     // A savepoint, not BEGIN: a caller may already be inside a transaction.
     impl_->exec("SAVEPOINT trial_table", "replacing the view trial_table");
     if (sqlite3_exec(impl_->db, "DROP VIEW IF EXISTS trial_table", nullptr, nullptr, nullptr) != SQLITE_OK ||
-        sqlite3_exec(impl_->db, wanted.c_str(), nullptr, nullptr, nullptr) != SQLITE_OK) {
+        sqlite3_exec(impl_->db, wanted.c_str(), nullptr, nullptr, nullptr) != SQLITE_OK ||
+        sqlite3_exec(impl_->db, "RELEASE trial_table", nullptr, nullptr, nullptr) != SQLITE_OK) {
+        const int code = sqlite3_errcode(impl_->db), sys_errno = sqlite3_system_errno(impl_->db);
         const std::string message = sqlite3_errmsg(impl_->db);
         sqlite3_exec(impl_->db, "ROLLBACK TO trial_table; RELEASE trial_table", nullptr, nullptr, nullptr);
-        throw UserError(fmt::format("{}: replacing the view trial_table: {}", impl_->path.string(), message));
+        impl_->fail_with(code, sys_errno, "replacing the view trial_table", message);
     }
-    impl_->exec("RELEASE trial_table", "replacing the view trial_table");
+}
+
+void Database::atomically(const std::function<void()>& body) {
+    // A savepoint: nests inside a caller's transaction, and is one transaction on its own.
+    impl_->exec("SAVEPOINT atomically", "starting a transaction");
+    try {
+        body();
+        if (sqlite3_exec(impl_->db, "RELEASE atomically", nullptr, nullptr, nullptr) != SQLITE_OK) impl_->fail("committing");
+    } catch (...) {
+        sqlite3_exec(impl_->db, "ROLLBACK TO atomically; RELEASE atomically", nullptr, nullptr, nullptr);
+        throw;
+    }
 }
 
 std::int64_t Database::channel_id(std::int64_t device_id, const std::string& name, const std::string& unit) {

@@ -7,7 +7,8 @@
 // the one writer, and busy_timeout makes writers queue instead of failing.
 //
 // Every SQLite failure throws manikind::UserError naming the file and SQLite's message; a
-// full disk throws StorageFull (a UserError), which the recorder and the daemon survive.
+// full disk throws StorageFull, a lock held past the busy timeout StorageBusy, an I/O error
+// StorageFault (all UserErrors), which the recorder and the daemon survive.
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -43,6 +44,14 @@ public:
 class StorageBusy : public UserError {
 public:
     explicit StorageBusy(const std::string& message) : UserError(message, "database_locked") {}
+};
+
+// The file system failed a read or write (SQLITE_IOERR: an unplugged disk, a dropped network
+// share, a medium error). Nothing of the failed transaction is stored; like a full disk it may
+// clear (the disk comes back), so the recorder keeps the rows and tries again.
+class StorageFault : public UserError {
+public:
+    explicit StorageFault(const std::string& message) : UserError(message, "storage_error") {}
 };
 
 // Sample quality codes stored in samples.quality.
@@ -209,6 +218,9 @@ public:
     // The analysts' view trial_table has a column per channel; rebuilt when the channels changed
     // (open calls it, the daemon when a trial ends; a no-op when current).
     void refresh_trial_table();
+    // Runs `body` (calls on this Database) as one transaction: all of its writes, or (it threw)
+    // none. Nests inside another.
+    void atomically(const std::function<void()>& body);
 
     // Samples in one transaction (the Recorder's writer calls this; other callers may too).
     // A row whose (trial_id, channel_id, mono_ns) is already stored is skipped, keeping the

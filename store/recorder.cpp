@@ -6,6 +6,7 @@
 #include <optional>
 #include <utility>
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 namespace manikind::recorder {
@@ -121,27 +122,63 @@ bool Recorder::offer(const SampleRow& row) noexcept {
         ++stats_.accepted;
         ++stats_.queue_depth;
         depth = queue_.size();
+        if (depth == 1) first_row_at_ = Clock::now();
     }
     // Wake the writer only on the transitions it waits for, not per row.
     if (depth == 1 || depth == wake_rows_) wake_writer_.notify_one();
     return true;
 }
 
+bool Recorder::post(Job job) {
+    {
+        std::lock_guard lock(mutex_);
+        if (writer_gone_ || jobs_.size() >= options_.max_jobs) {
+            ++stats_.jobs_lost;
+            return false;
+        }
+        jobs_.push_back({std::move(job), nullptr, 0});
+        ++jobs_posted_;
+        stats_.jobs_waiting = jobs_.size();
+    }
+    wake_writer_.notify_one();
+    return true;
+}
+
+void Recorder::run_call(const Job& fn) {
+    auto reply = std::make_shared<std::promise<void>>();
+    auto answer = reply->get_future();
+    {
+        std::lock_guard lock(mutex_);
+        if (writer_gone_) throw UserError(fmt::format("{}: the recorder's writer has stopped", path_.string()), "storage_error");
+        // The writer waits on storage: say so now rather than queue behind the writes that wait.
+        if (stats_.storage_full) throw StorageFull(stats_.storage_error);
+        if (stats_.locked) throw StorageBusy(stats_.storage_error);
+        if (stats_.io_error) throw StorageFault(stats_.storage_error);
+        // The caller waits on `answer` before returning, so `fn` outlives the job.
+        jobs_.push_back({[&fn](Database& db) { fn(db); }, reply, 0});
+        ++jobs_posted_;
+        stats_.jobs_waiting = jobs_.size();
+    }
+    wake_writer_.notify_one();
+    answer.get();  // rethrows what fn threw
+}
+
 bool Recorder::flush() {
     std::unique_lock lock(mutex_);
     const std::uint64_t target = stats_.accepted;
-    if (resolved_ >= target) return true;
+    const std::uint64_t jobs_target = jobs_posted_;
+    if (resolved_ >= target && jobs_resolved_ >= jobs_target) return true;
     const std::uint64_t attempts_before = commit_attempts_;
     ++flush_waiters_;
     wake_writer_.notify_one();
-    // A full disk or a lock held elsewhere: one more attempt is enough to know (waiting for
-    // space, or for an analyst to close a transaction, could take hours).
+    // A full disk, a lock held elsewhere or a failing file system: one more attempt is enough to
+    // know (waiting for space, or for an analyst to close a transaction, could take hours).
     progress_.wait(lock, [&] {
-        return resolved_ >= target || writer_gone_ ||
-               ((stats_.storage_full || stats_.locked) && commit_attempts_ > attempts_before);
+        return (resolved_ >= target && jobs_resolved_ >= jobs_target) || writer_gone_ ||
+               ((stats_.storage_full || stats_.locked || stats_.io_error) && commit_attempts_ > attempts_before);
     });
     --flush_waiters_;
-    return resolved_ >= target;
+    return resolved_ >= target && jobs_resolved_ >= jobs_target;
 }
 
 RecorderStats Recorder::stats() const {
@@ -159,7 +196,120 @@ void Recorder::run(Database& db) {
     }
     std::lock_guard lock(mutex_);
     writer_gone_ = true;
+    fail_calls_locked(std::make_exception_ptr(UserError(fmt::format("{}: the recorder's writer has stopped", path_.string()),
+                                                        "storage_error")));
     progress_.notify_all();
+}
+
+Recorder::Attempt Recorder::attempt(const std::function<void()>& write) {
+    Attempt a;
+    try {
+        write();
+        a.done = true;
+    } catch (const StorageFull& e) {
+        a.full = e.what();
+        a.error = std::current_exception();
+    } catch (const StorageBusy& e) {
+        a.locked = e.what();
+        a.error = std::current_exception();
+    } catch (const StorageFault& e) {
+        a.fault = e.what();
+        a.error = std::current_exception();
+    } catch (...) {
+        a.error = std::current_exception();
+    }
+    return a;
+}
+
+// The storage state is what the latest sample commit or posted write met: those are tried again
+// each second, so it stays fresh. A call() is tried once, so its failure only counts.
+void Recorder::note_attempt_locked(const Attempt& a, bool sets_state) {
+    ++commit_attempts_;
+    if (a.full) ++stats_.full_disk_commits;
+    if (a.locked) ++stats_.locked_commits;
+    if (a.fault) ++stats_.io_error_commits;
+    if (!sets_state && !a.done) return;
+    stats_.storage_full = a.full.has_value();
+    stats_.locked = a.locked.has_value();
+    stats_.io_error = a.fault.has_value();
+    if (const auto& w = a.waiting()) stats_.storage_error = *w;
+}
+
+namespace {
+// Said once per episode, outside the lock: a slow stderr must not hold up push().
+void log_transition(const std::string& path, bool done, const std::optional<std::string>& full,
+                    const std::optional<std::string>& locked, const std::optional<std::string>& fault, bool was_full, bool was_locked, bool was_fault) {
+    if (full && !was_full) spdlog::error("recorder: disk full; readings and writes kept in memory until space returns: {}", *full);
+    if (done && was_full) spdlog::warn("recorder: space is back, recording resumed");
+    if (locked && !was_locked)
+        spdlog::error("recorder: the database is locked by another connection (a write, or with journal = rollback a "
+                      "read transaction left open); readings and writes kept in memory until it lets go: {}", *locked);
+    if (done && was_locked) spdlog::warn("recorder: the lock was released, recording resumed");
+    if (fault && !was_fault)
+        spdlog::error("recorder: {}: the file system failed a write; readings and writes kept in memory, tried again "
+                      "each second: {}", path, *fault);
+    if (done && was_fault) spdlog::warn("recorder: the file system writes again, recording resumed");
+}
+}  // namespace
+
+// Writes waiting for storage fail a call() at once (its caller tries again later); posted
+// writes stay in line.
+void Recorder::fail_calls_locked(const std::exception_ptr& why) {
+    for (auto it = jobs_.begin(); it != jobs_.end();) {
+        if (it->reply) {
+            it->reply->set_exception(why);
+            it = jobs_.erase(it);
+            ++jobs_resolved_;
+        } else {
+            ++it;
+        }
+    }
+    stats_.jobs_waiting = jobs_.size();
+}
+
+bool Recorder::run_jobs(Database& db, std::unique_lock<std::mutex>& lock) {
+    while (!jobs_.empty()) {
+        PendingJob job = std::move(jobs_.front());
+        jobs_.pop_front();
+        const bool was_full = stats_.storage_full, was_locked = stats_.locked, was_fault = stats_.io_error;
+        const bool stopping = stop_;
+        lock.unlock();
+        const Attempt a = attempt([&] { job.run(db); });
+        if (!job.reply || a.done) log_transition(path_.string(), a.done, a.full, a.locked, a.fault, was_full, was_locked, was_fault);
+        const bool waits = a.waiting().has_value() && !job.reply;
+        const bool give_up = waits && stopping && job.attempts + 1 >= options_.max_commit_attempts;
+        if (give_up) spdlog::error("recorder: a write (event or state) discarded at shutdown after {} attempts: {}",
+                                   job.attempts + 1, *a.waiting());
+        if (!a.done && !a.waiting() && !job.reply) {
+            try {
+                std::rethrow_exception(a.error);
+            } catch (const std::exception& e) {
+                spdlog::error("recorder: a write (event or state) failed and is not kept: {}", e.what());
+            } catch (...) {
+                spdlog::error("recorder: a write (event or state) failed and is not kept");
+            }
+        }
+        lock.lock();
+        note_attempt_locked(a, !job.reply);
+        if (waits && !give_up) {
+            if (stopping) ++job.attempts;
+            jobs_.push_front(std::move(job));  // first in line when storage is back
+            fail_calls_locked(a.error);
+            progress_.notify_all();
+            return false;
+        }
+        if (job.reply) {
+            if (a.done) job.reply->set_value();
+            else job.reply->set_exception(a.error);
+        }
+        if (a.done) ++stats_.jobs_done;
+        else if (give_up) ++stats_.jobs_lost;
+        else if (!job.reply) ++stats_.jobs_failed;
+        ++jobs_resolved_;
+        stats_.jobs_waiting = jobs_.size();
+        progress_.notify_all();
+    }
+    return true;
 }
 
 void Recorder::write_loop(Database& db) {
@@ -168,80 +318,64 @@ void Recorder::write_loop(Database& db) {
     batch.reserve(options_.queue_capacity);
     std::size_t done = 0;  // rows of batch committed or lost
     int attempts = 0;      // failed attempts at the current chunk
-    Clock::time_point taken_at = Clock::now();
 
     std::unique_lock lock(mutex_);
     for (;;) {
         if (done == batch.size()) {
             batch.clear();
             done = 0;
+            // Other writes first: they are few and small, and a call() has a caller waiting.
+            if (!jobs_.empty()) {
+                if (!run_jobs(db, lock))
+                    wake_writer_.wait_for(lock, options_.full_disk_retry, [&] { return stop_ || flush_waiters_ > 0; });
+                continue;
+            }
             if (queue_.empty()) {
                 if (stop_) return;
-                wake_writer_.wait(lock, [&] { return stop_ || !queue_.empty(); });
-                if (queue_.empty()) continue;
-                taken_at = Clock::now();  // the first row just arrived
+                wake_writer_.wait(lock, [&] { return stop_ || !queue_.empty() || !jobs_.empty(); });
+                continue;
             }
-            // Every row now queued arrived after taken_at, so none waits longer than the delay.
-            wake_writer_.wait_until(lock, taken_at + options_.max_batch_delay, [&] {
-                return stop_ || flush_waiters_ > 0 || queue_.size() >= wake_rows_;
+            // Every row now queued arrived after first_row_at_, so none waits longer than the delay.
+            const auto deadline = first_row_at_ + options_.max_batch_delay;
+            wake_writer_.wait_until(lock, deadline, [&] {
+                return stop_ || flush_waiters_ > 0 || queue_.size() >= wake_rows_ || !jobs_.empty();
             });
+            if (!jobs_.empty() && !stop_ && flush_waiters_ == 0 && queue_.size() < wake_rows_ && Clock::now() < deadline)
+                continue;  // a write came first: make it, then go on waiting for rows
             std::swap(queue_, batch);  // both keep their reserved capacity
-            taken_at = Clock::now();
         }
+        const bool was_full = stats_.storage_full, was_locked = stats_.locked, was_fault = stats_.io_error;
+        const bool stopping = stop_;
         lock.unlock();
 
         const std::size_t n = std::min(chunk_rows, batch.size() - done);
         const auto t0 = Clock::now();
-        bool committed = false;
         std::size_t duplicates = 0;
-        std::optional<std::string> full;    // the disk is full: say so, and wait for space
-        std::optional<std::string> locked;  // another connection holds the lock: likewise, for it
-        try {
-            duplicates = db.insert_samples(std::span<const SampleRow>(batch.data() + done, n));
-            committed = true;
-        } catch (const StorageFull& e) {
-            full = e.what();
-        } catch (const StorageBusy& e) {
-            locked = e.what();
-        } catch (const std::exception& e) {
-            spdlog::error("recorder: commit of {} rows failed (attempt {} of {}): {}", n, attempts + 1,
-                          options_.max_commit_attempts, e.what());
-        }
+        const Attempt a = attempt([&] { duplicates = db.insert_samples(std::span<const SampleRow>(batch.data() + done, n)); });
         const double commit_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        bool was_full = false, was_locked = false, stopping = false;
-        {
-            std::lock_guard peek(mutex_);
-            was_full = stats_.storage_full;
-            was_locked = stats_.locked;
-            stopping = stop_;
+        log_transition(path_.string(), a.done, a.full, a.locked, a.fault, was_full, was_locked, was_fault);
+        const std::optional<std::string>& waiting = a.waiting();
+        if (!a.done && (!waiting || stopping)) {
+            try {
+                std::rethrow_exception(a.error);
+            } catch (const std::exception& e) {
+                spdlog::error("recorder: commit of {} rows failed{} (attempt {} of {}): {}", n, stopping ? " at shutdown" : "",
+                              attempts + 1, options_.max_commit_attempts, e.what());
+            } catch (...) {
+                spdlog::error("recorder: commit of {} rows failed (attempt {} of {})", n, attempts + 1,
+                              options_.max_commit_attempts);
+            }
+            ++attempts;
         }
-        if (full && !was_full) spdlog::error("recorder: disk full, {} rows kept in memory until space returns: {}", n, *full);
-        if (committed && was_full) spdlog::warn("recorder: space is back, recording resumed");
-        if (locked && !was_locked)
-            spdlog::error("recorder: the database is locked by another connection (a write, or with journal = rollback a "
-                          "read transaction left open); {} rows kept in memory until it lets go: {}", n, *locked);
-        if (committed && was_locked) spdlog::warn("recorder: the lock was released, recording resumed");
-        const std::optional<std::string>& waiting = full ? full : locked;
-        if (waiting && stopping) {
-            spdlog::error("recorder: commit of {} rows failed at shutdown (attempt {} of {}): {}", n, attempts + 1,
-                          options_.max_commit_attempts, *waiting);
-        }
-        if (!committed && (!waiting || stopping)) ++attempts;
-        const bool give_up = !committed && attempts >= options_.max_commit_attempts;
+        const bool give_up = !a.done && attempts >= options_.max_commit_attempts;
         // Logged before taking the lock: a slow stderr must not hold up push().
         if (duplicates > 0) spdlog::warn("recorder: {} rows skipped, already stored (re-sent readings?)", duplicates);
         if (give_up) spdlog::error("recorder: {} rows discarded after {} failed commits", n, attempts);
 
         lock.lock();
-        ++commit_attempts_;
-        stats_.storage_full = full.has_value();
-        if (full) {
-            stats_.storage_error = *full;
-            ++stats_.full_disk_commits;
-        }
-        stats_.locked = locked.has_value();
-        if (locked) ++stats_.locked_commits;
-        if (committed) {
+        note_attempt_locked(a, true);
+        if (waiting) fail_calls_locked(a.error);
+        if (a.done) {
             stats_.committed += n - duplicates;
             stats_.duplicates += duplicates;
             ++stats_.batches;

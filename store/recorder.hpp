@@ -1,14 +1,26 @@
 #pragma once
-// Asynchronous sample writer: acquisition threads push() rows, a writer thread with its own
+// The recording's one writer: acquisition threads push() rows, a writer thread with its own
 // SQLite connection commits them in batches. push() never waits for the disk; when the queue
 // is full the row is dropped and counted, so a stalled disk shows up as a number, not as a
 // late sample on the manikin's control loop.
+//
+// Every other write (events, trial and campaign states, results, devices) goes through the same
+// thread and connection: post() for those the caller need not wait for, call() for those whose
+// answer it needs (an id). One writer means no lock contention inside the daemon; a lock held by
+// another program, a full disk or an I/O error makes every write wait, in order, counted, and
+// never lost or fatal (issue 30).
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
+#include <deque>
+#include <exception>
 #include <filesystem>
+#include <functional>
+#include <future>
+#include <memory>
 #include <mutex>
+#include <type_traits>
 #include <optional>
 #include <string>
 #include <thread>
@@ -44,6 +56,9 @@ struct RecorderOptions {
     // shared memory, stored by the next Recorder if this process dies. Empty: no ring, and a
     // crash loses what is not committed ([recorder] crash_ring_dir).
     std::filesystem::path crash_ring_dir = "/dev/shm";
+    // Writes other than samples waiting for the writer (post()); past this one is refused and
+    // counted in jobs_lost. An hour of 1-Hz events held up by a lock is 3600.
+    std::size_t max_jobs = 100000;
 };
 
 struct RecorderStats {
@@ -61,6 +76,12 @@ struct RecorderStats {
     std::uint64_t full_disk_commits = 0;  // commits that failed for want of space
     bool locked = false;               // the latest commit found the database locked by another connection
     std::uint64_t locked_commits = 0;  // commits that failed so
+    bool io_error = false;             // the latest commit failed with an I/O error (SQLITE_IOERR)
+    std::uint64_t io_error_commits = 0;
+    std::uint64_t jobs_done = 0;       // post()ed and call()ed writes made
+    std::uint64_t jobs_failed = 0;     // post()ed writes that failed for another reason (logged: a bug, not storage)
+    std::uint64_t jobs_lost = 0;       // post() refused (max_jobs waiting), or given up at shutdown
+    std::size_t jobs_waiting = 0;      // post()ed, not yet made
     std::uint64_t recovered = 0;       // samples a crashed predecessor left in the crash ring, stored at start
     std::string crash_ring;            // the ring's file; empty when running without one
     std::string journal;               // SQLite's journal mode on the file: "wal" or "truncate" (rollback)
@@ -82,13 +103,51 @@ public:
     // The same, for a caller that keeps a refused row and offers it again (the daemon's
     // overflow): a refusal is not counted as dropped.
     bool offer(const SampleRow& row) noexcept;
-    // Returns true when every row accepted before the call is committed (or lost after retries);
-    // false, after one more attempt, while the disk is full or the database locked elsewhere
-    // (the rows stay queued).
+    using Job = std::function<void(Database&)>;
+    // A write made by the writer thread on its connection, after the rows it has in hand, in the
+    // order posted. A lock held elsewhere, a full disk or an I/O error: it waits at the head of
+    // the line and is tried again (counted in the stats), never dropped while the program runs.
+    // Any other failure is logged and counted in jobs_failed. False when max_jobs already wait.
+    bool post(Job job);
+    // Runs `fn` on the writer thread and returns its result, or throws what it threw. While the
+    // writer waits on a lock, a full disk or an I/O error, it throws StorageBusy / StorageFull /
+    // StorageFault at once rather than queueing: a caller that needs an answer (an id) tries
+    // again later instead of being held for as long as the lock lasts.
+    template <class F>
+    std::invoke_result_t<F, Database&> call(F&& fn) {
+        using R = std::invoke_result_t<F, Database&>;
+        if constexpr (std::is_void_v<R>) {
+            run_call([&](Database& db) { fn(db); });
+        } else {
+            std::optional<R> result;
+            run_call([&](Database& db) { result.emplace(fn(db)); });
+            return std::move(*result);
+        }
+    }
+    // Returns true when every row accepted and every write posted before the call is made (or
+    // lost after retries); false, after one more attempt, while the disk is full, the database
+    // locked elsewhere or the file system failing (they stay queued).
     bool flush();
     RecorderStats stats() const;
 
 private:
+    struct PendingJob {
+        Job run;
+        std::shared_ptr<std::promise<void>> reply;  // set for call(): its caller waits on it
+        int attempts = 0;                           // failed attempts at shutdown
+    };
+    // How one attempt at a write went, for the stats and the log.
+    struct Attempt {
+        bool done = false;
+        std::optional<std::string> full, locked, fault;  // a wait-and-retry failure, by kind
+        std::exception_ptr error;                        // what it threw, if anything
+        const std::optional<std::string>& waiting() const { return full ? full : locked ? locked : fault; }
+    };
+    static Attempt attempt(const std::function<void()>& write);
+    void note_attempt_locked(const Attempt& a, bool sets_state);
+    void run_call(const Job& fn);
+    bool run_jobs(Database& db, std::unique_lock<std::mutex>& lock);  // false: the head waits for storage
+    void fail_calls_locked(const std::exception_ptr& why);
     void open_crash_ring(Database& db);  // and store what a predecessor left in it
     void run(Database& db);
     void write_loop(Database& db);
@@ -104,6 +163,9 @@ private:
     RecorderStats stats_;                  // queue_depth kept up to date under mutex_
     std::uint64_t resolved_ = 0;           // committed + duplicates + lost: accepted rows done so far
     std::uint64_t commit_attempts_ = 0;    // every attempt, for flush() to wait for the next one
+    std::chrono::steady_clock::time_point first_row_at_{};  // when the queue last went from empty to one row
+    std::deque<PendingJob> jobs_;          // posted and called writes, in order
+    std::uint64_t jobs_posted_ = 0, jobs_resolved_ = 0;
     int flush_waiters_ = 0;
     bool stop_ = false;
     bool writer_gone_ = false;

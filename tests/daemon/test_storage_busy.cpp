@@ -38,9 +38,9 @@ private:
 
 TEST_CASE("storage: a database locked by another program makes the daemon's writes wait, never lost, never fatal",
           "[daemon][storage][busy]") {
-    DaemonFixture f;
+    // A short wait for the lock, so that the writer meets it within the test's few seconds.
+    DaemonFixture f([](manikind::config::Config& c) { c.recorder_lock_timeout_s = 0.005; });
     auto& d = f.daemon();
-    d.db().set_busy_timeout(std::chrono::milliseconds(5));
     REQUIRE(d.start_campaign(manikind::test::quick_plan("locked")).empty());
     d.step_virtual(1.0);  // the trial is created and configured
     REQUIRE(d.status_json().contains("trial"));
