@@ -1,4 +1,5 @@
 #include "archive/background.hpp"
+#include "base/guarded.hpp"
 
 #include <algorithm>
 #include <exception>
@@ -25,7 +26,7 @@ BackgroundForwarder::BackgroundForwarder(ForwardingOptions options, ForwardingNo
     : o_(std::move(options)), notice_(std::move(notice)) {
     PgConnection::check_conninfo(o_.conninfo);
     if (o_.lab_id.empty()) throw UserError("archive: a lab id is needed to forward (archive.lab_id)");
-    thread_ = std::thread([this] { run(); });
+    thread_ = std::thread([this] { run_guarded("archive forwarding", [this] { run(); }); });
 }
 
 BackgroundForwarder::~BackgroundForwarder() { stop(); }

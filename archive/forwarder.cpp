@@ -34,7 +34,7 @@ public:
         if (!std::filesystem::is_regular_file(path, ec))
             throw UserError(fmt::format("{}: no such database", path.string()));
         sqlite3* db = nullptr;
-        const int rc = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr);
+        const int rc = recorder::open_sqlite_read_only(path, &db);  // read-only media too
         owner_.reset(db);  // closed on every way out, a throw from this constructor included
         db_ = db;
         if (rc != SQLITE_OK) fail("cannot open");

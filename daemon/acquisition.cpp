@@ -1,4 +1,5 @@
 #include "daemon/acquisition.hpp"
+#include "base/guarded.hpp"
 
 #include <boost/asio/executor_work_guard.hpp>
 #include <boost/asio/post.hpp>
@@ -146,26 +147,33 @@ void Acquisition::start_realtime(double speed) {
         chamber_->set_poll_period(poll_period_s_ / speed);
         datalogger_->set_poll_period(poll_period_s_ / speed);
     }
+    // Readings between two pacing steps get distinct, increasing stamps (drivers/clock.hpp).
+    if (manual_clock_) manual_clock_->set_pace(speed);
     chamber_->start_worker();
     datalogger_->start_worker();
     io_thread_ = std::thread([this] {
         auto guard = boost::asio::make_work_guard(io_);
-        while (!stop_) io_.run_for(std::chrono::milliseconds(200));
+        // A driver's handler that throws (a frame no check foresaw) is lost; reading goes on.
+        run_guarded("acquisition i/o", [this] {
+            while (!stop_) io_.run_for(std::chrono::milliseconds(200));
+        });
     });
     // Checks (and the simulated lab, if any) on a paced thread.
     pacer_thread_ = std::thread([this, speed] {
-        const double tick_s = 0.1;
-        auto next = std::chrono::steady_clock::now();
-        drivers::SystemClock sys;
-        while (!stop_) {
-            next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(tick_s));
-            if (lab_) {
-                lab_->step(tick_s * speed);
-                if (manual_clock_) manual_clock_->advance_s(tick_s * speed);
+        run_guarded("simulated lab pacing", [&] {
+            const double tick_s = 0.1;
+            auto next = std::chrono::steady_clock::now();
+            drivers::SystemClock sys;
+            while (!stop_) {
+                next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(tick_s));
+                if (lab_) {
+                    lab_->step(tick_s * speed);
+                    if (manual_clock_) manual_clock_->advance_s(tick_s * speed);
+                }
+                boost::asio::post(io_, [this, now = manual_clock_ ? manual_clock_->mono_ns() : sys.mono_ns()] { checks(now); });
+                std::this_thread::sleep_until(next);
             }
-            boost::asio::post(io_, [this, now = manual_clock_ ? manual_clock_->mono_ns() : sys.mono_ns()] { checks(now); });
-            std::this_thread::sleep_until(next);
-        }
+        });
     });
 }
 

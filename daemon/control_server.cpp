@@ -38,6 +38,7 @@
 #include <thread>
 
 #include "daemon/control_api.hpp"
+#include "base/guarded.hpp"
 #include "daemon/instance_lock.hpp"
 #include "base/text.hpp"
 #include "base/user_error.hpp"
@@ -407,7 +408,7 @@ void ControlServer::start() {
     s.accept_retry_timer.emplace(s.io);
     for (auto& a : s.acceptors) s.accept(*a);
     s.sweep();
-    s.thread = std::thread([&s] { s.io.run(); });
+    s.thread = std::thread([&s] { run_guarded("control socket", [&s] { s.io.run(); }); });
 }
 
 void ControlServer::stop() {

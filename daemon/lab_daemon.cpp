@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "base/guarded.hpp"
 #include "analysis/analyze.hpp"
 #include "analysis/zone_map.hpp"
 #include "store/database_export.hpp"
@@ -670,6 +671,8 @@ void LabDaemon::start_interim_results() {
             recorder_->post([campaign_id, text = j.dump(), utc](recorder::Database& w) { w.store_result(campaign_id, text, utc); });
         } catch (const std::exception& e) {
             spdlog::warn("interim results for '{}': {}", name, e.what());
+        } catch (...) {
+            spdlog::warn("interim results for '{}': an exception that is not a std::exception", name);
         }
         interim_done_ = true;
     });
@@ -751,6 +754,8 @@ void LabDaemon::tick_locked() {
         // Nothing leaves the thread (std::terminate would end recording and control): a bug or
         // bad data stops heating and ends the campaign, with an alarm saying what happened.
         internal_error_locked("trial state machine", e.what());
+    } catch (...) {
+        internal_error_locked("trial state machine", "an exception that is not a std::exception");
     }
 }
 
@@ -1074,6 +1079,8 @@ nlohmann::json LabDaemon::status_json() {
                     {"writes_failed", rs.jobs_failed},
                     {"writes_lost", rs.jobs_lost},
                     {"full_disk_commits", rs.full_disk_commits}};
+    // Exceptions that escaped a thread's body and were survived (base/guarded.hpp): 0 unless a bug.
+    j["threads"] = {{"exceptions_survived", escaped_exceptions().load()}};
     j["safety_tripped"] = safety_tripped_;
     j["measured"] = measured_json_locked();
     for (const auto& [name, section] : status_sections_) j[name] = section();

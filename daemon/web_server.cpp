@@ -1,4 +1,5 @@
 #include "daemon/web_server.hpp"
+#include "base/guarded.hpp"
 
 #include <sys/socket.h>
 
@@ -540,7 +541,7 @@ void WebServer::start() {
     });
     s.accept();
     s.tick();
-    s.thread = std::thread([&s] { s.io->run(); });
+    s.thread = std::thread([&s] { run_guarded("console", [&s] { s.io->run(); }); });
 }
 
 void WebServer::stop() {

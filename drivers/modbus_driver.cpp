@@ -1,4 +1,5 @@
 #include "drivers/modbus_driver.hpp"
+#include "base/guarded.hpp"
 
 #include <fmt/format.h>
 
@@ -255,13 +256,15 @@ std::vector<Sample> ModbusDriver::read_all() {
 void ModbusDriver::start_worker() {
     worker_stop_ = false;
     worker_ = std::thread([this] {
-        std::unique_lock lk(worker_lock_);
-        while (!worker_stop_) {
-            lk.unlock();
-            poll();
-            lk.lock();
-            worker_cv_.wait_for(lk, std::chrono::duration<double>(options_.poll_period_s), [this] { return worker_stop_; });
-        }
+        run_guarded("Modbus poll", [this] {
+            std::unique_lock lk(worker_lock_);
+            while (!worker_stop_) {
+                lk.unlock();
+                poll();
+                lk.lock();
+                worker_cv_.wait_for(lk, std::chrono::duration<double>(options_.poll_period_s), [this] { return worker_stop_; });
+            }
+        });
     });
 }
 

@@ -44,6 +44,8 @@ if [ "$with_tests" = yes ]; then
     clang libclang-rt-14-dev llvm
     # A real PostgreSQL 15 server, started per test by tests/archive/ (initdb, pg_ctl).
     postgresql
+    # The load generator of the daemon's soak under load (tests/soak/).
+    stress-ng
   )
 fi
 missing=()

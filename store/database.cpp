@@ -601,6 +601,27 @@ Database Database::open(const std::filesystem::path& path, Durability durability
     return opened;
 }
 
+int open_sqlite_read_only(const std::filesystem::path& path, sqlite3** db) {
+    int rc = sqlite3_open_v2(path.c_str(), db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX, nullptr);
+    if (rc != SQLITE_OK) return rc;
+    // The open is lazy: the first read finds out whether the WAL index can be had.
+    rc = sqlite3_exec(*db, "SELECT count(*) FROM sqlite_schema", nullptr, nullptr, nullptr);
+    if ((rc & 0xff) != SQLITE_CANTOPEN) return SQLITE_OK;  // another failure shows at the caller's own first read
+    std::error_code ec;
+    const auto folder = path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+    if (std::filesystem::exists(path.string() + "-wal", ec) || ::access(folder.c_str(), W_OK) == 0) return rc;
+    // Nothing can write here, and everything is in the file: read it as the immutable file it is.
+    std::string uri = "file:";
+    for (const char c : std::filesystem::absolute(path, ec).string()) {
+        if (c == '%' || c == '?' || c == '#') uri += fmt::format("%{:02X}", static_cast<unsigned char>(c));
+        else uri += c;
+    }
+    uri += "?immutable=1";
+    sqlite3_close_v2(*db);
+    *db = nullptr;
+    return sqlite3_open_v2(uri.c_str(), db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_URI, nullptr);
+}
+
 bool is_sqlite_file(const std::filesystem::path& path) {
     std::FILE* f = std::fopen(path.c_str(), "rb");
     if (!f) return false;
@@ -620,8 +641,7 @@ Database Database::open_read_only(const std::filesystem::path& path) {
         throw UserError(fmt::format("{}: not an SQLite database, so not a manikind database", path.string()));
     auto impl = std::make_unique<Impl>();
     impl->path = path;
-    if (sqlite3_open_v2(path.c_str(), &impl->db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX, nullptr) != SQLITE_OK)
-        impl->fail("cannot open the database to read");
+    if (open_sqlite_read_only(path, &impl->db) != SQLITE_OK) impl->fail("cannot open the database to read");
     sqlite3_extended_result_codes(impl->db, 1);
     impl->exec("PRAGMA busy_timeout = 5000", "setting busy_timeout");
     int tables = 0;

@@ -23,6 +23,8 @@
 
 #include "base/user_error.hpp"
 
+struct sqlite3;
+
 namespace manikind::recorder {
 
 // A trial's samples are the rowid range [trial_id << 36, (trial_id + 1) << 36) of `samples`
@@ -156,6 +158,13 @@ enum class Journal { wal, rollback };
 
 // True when the file at `path` begins with SQLite's 16-byte header ("SQLite format 3\0").
 bool is_sqlite_file(const std::filesystem::path& path);
+
+// Opens an SQLite file read-only for a caller that reads it through the C API (archive push),
+// as Database::open_read_only does: SQLITE_OPEN_READONLY, and for a WAL-mode file that SQLite
+// cannot open so (its -shm cannot be made: read-only media, a folder this user cannot write)
+// and that has no -wal file, hence no writer and nothing outside the file, immutable=1. Returns
+// SQLite's code; *db is set (and must be closed) either way.
+int open_sqlite_read_only(const std::filesystem::path& path, sqlite3** db);
 
 class Database {
 public:

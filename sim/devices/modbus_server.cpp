@@ -1,4 +1,5 @@
 #include "sim/devices/modbus_server.hpp"
+#include "base/guarded.hpp"
 
 #include <arpa/inet.h>
 #include <modbus/modbus.h>
@@ -58,7 +59,7 @@ void VirtualModbusServer::start(int port) {
     port_ = ntohs(addr.sin_port);
     if (::pipe(wake_pipe_) != 0) throw std::runtime_error(name_ + ": pipe failed");
     stopping_ = false;
-    thread_ = std::thread([this] { serve(); });
+    thread_ = std::thread([this] { run_guarded("simulated Modbus server", [this] { serve(); }); });
 }
 
 void VirtualModbusServer::stop() {
