@@ -18,6 +18,7 @@ enum class ExitStatus : int {
     unreachable = 3,   // the daemon is not reachable or did not answer in time
     refused = 4,       // the daemon or the [safety] / register-map limits refused the request
     negative = 5,      // the command ran and its verdict is negative (a check found problems)
+    not_done = 6,      // a campaign waited for ended aborted, failed or interrupted, or with a trial not done
 };
 
 class UserError : public std::runtime_error {
@@ -37,6 +38,10 @@ public:
     // `details`: the full verdict (e.g. selfcheck's table), for --json.
     static UserError check_failed(const std::string& message, nlohmann::json details = nullptr) {
         return UserError(message, "check_failed", ExitStatus::negative, std::move(details));
+    }
+    // `details`: the campaign's outcome (state, trials by state).
+    static UserError campaign_not_done(const std::string& message, nlohmann::json details = nullptr) {
+        return UserError(message, "campaign_not_done", ExitStatus::not_done, std::move(details));
     }
 
     const std::string& code() const { return code_; }

@@ -193,8 +193,13 @@ void add_daemon_commands(CLI::App& app) {
         auto file = std::make_shared<std::string>();
         auto* run = campaign->add_subcommand("run", "Queue a campaign: a TOML file (cases x replicates), or builtin:table-s3");
         run->add_option("file", *file, "Campaign file (see config/campaign-example.toml) or builtin:table-s3")->required();
+        auto wait = std::make_shared<bool>(false);
+        run->add_flag("--wait", *wait, "Wait for the campaign to end; exit 0 when every trial is done, 6 when it ended "
+                                       "aborted, failed or interrupted");
         add_conn_options(run, *c, true);
-        run->callback([c, file] {
+        run->footer("With --wait: exit status 0 when the campaign ended done with every planned trial done, 6 when it ended "
+                    "otherwise (docs/cli.md); the daemon must stay reachable meanwhile (status 3 if it goes away).");
+        run->callback([c, file, wait] {
             nlohmann::json req{{"cmd", "start_campaign"}};
             if (*file == "builtin:table-s3") {
                 req["builtin"] = "table-s3";
@@ -208,8 +213,30 @@ void add_daemon_commands(CLI::App& app) {
                 req["source"] = *file;
             }
             call(*c, req, true);
-            if (c->json) std::printf("{\"ok\":true}\n");
-            else std::printf("campaign queued; follow it with `manikin trial watch`\n");
+            if (!*wait) {
+                if (c->json) std::printf("{\"ok\":true}\n");
+                else std::printf("campaign queued; follow it with `manikin trial watch`\n");
+                return;
+            }
+            // The name the daemon knows it by: the plan's, parsed here as the daemon parsed it.
+            const std::string name = req.contains("name") ? req["name"].get<std::string>()
+                                                          : parse_campaign_plan(req["plan_toml"].get<std::string>(), *file).name;
+            if (!c->json) std::printf("campaign '%s' queued; waiting for it to end\n", name.c_str());
+            std::fflush(stdout);
+            nlohmann::json outcome;
+            for (;;) {
+                outcome = call(*c, {{"cmd", "campaign_outcome"}, {"campaign", name}}, false)["outcome"];
+                if (!outcome.value("active", false)) break;
+                std::this_thread::sleep_for(std::chrono::seconds(2));  // a person's pace: trials last an hour
+            }
+            const bool ok = outcome.value("ok", false);
+            if (c->json) std::printf("%s\n", nlohmann::json{{"ok", ok}, {"outcome", outcome}}.dump().c_str());
+            if (!ok)
+                throw UserError::campaign_not_done(
+                    fmt::format("campaign '{}' ended {} (trials: {})", name, outcome.value("state", "?"),
+                                outcome.contains("trials") ? outcome["trials"].dump() : "{}"),
+                    outcome);
+            if (!c->json) std::printf("campaign '%s' done: every trial done\n", name.c_str());
         });
         {
             auto check_file = std::make_shared<std::string>(), config_file = std::make_shared<std::string>();
@@ -235,6 +262,12 @@ void add_daemon_commands(CLI::App& app) {
                 }();
                 if (const auto why = check_plan_against_limits(plan, cfg.safety); !why.empty())
                     throw UserError::check_failed(fmt::format("{}: {}", *check_file, why));
+                // The limits themselves must fit the manikin, or every case trips whatever it asks.
+                std::vector<std::string> limit_problems;
+                config::check_limits_fit_devices(cfg, limit_problems);
+                if (!limit_problems.empty()) throw UserError::check_failed(limit_problems.front());
+                if (const auto why = check_plan_against_devices(plan, cfg); !why.empty())
+                    throw UserError::check_failed(fmt::format("{}: {}", *check_file, why));
                 if (*json) {
                     nlohmann::json cases = nlohmann::json::array();
                     for (const auto& pc : plan.cases)
@@ -242,21 +275,35 @@ void add_daemon_commands(CLI::App& app) {
                                          {"skin_setpoint_c", pc.skin_setpoint_c}, {"wet", pc.wet},
                                          {"sweat_rate_g_m2_h", pc.sweat_rate_g_m2_h}});
                     std::printf("%s\n", nlohmann::json{{"ok", true}, {"name", plan.name}, {"replicates", plan.replicates},
-                                                        {"trial_duration_s", plan.trial_duration_s}, {"cases", cases}}
+                                                        {"trial_duration_s", plan.trial_duration_s},
+                                                        {"settle_window_s", plan.settle_window_s},
+                                                        {"settle_timeout_s", plan.settle_timeout_s}, {"cases", cases}}
                                                 .dump(2)
                                                 .c_str());
                 } else {
-                    std::printf("%s: ok: campaign '%s', %zu case(s) x %d replicate(s) = %zu trials of %.0f min\n",
-                                check_file->c_str(), plan.name.c_str(), plan.cases.size(), plan.replicates,
-                                plan.cases.size() * static_cast<std::size_t>(plan.replicates), plan.trial_duration_s / 60.0);
+                    // Settling dominates a lab day: each trial waits for the enclosure first.
+                    const std::size_t trials = plan.cases.size() * static_cast<std::size_t>(plan.replicates);
+                    std::printf("%s: ok: campaign '%s', %zu case(s) x %d replicate(s) = %zu trials of %.0f min, each after "
+                                "chamber settling (at least %.0f min, at most %.0f min): %.1f h or more in all\n",
+                                check_file->c_str(), plan.name.c_str(), plan.cases.size(), plan.replicates, trials,
+                                plan.trial_duration_s / 60.0, plan.settle_window_s / 60.0, plan.settle_timeout_s / 60.0,
+                                static_cast<double>(trials) * (plan.trial_duration_s + plan.settle_window_s) / 3600.0);
                 }
             });
         }
         for (const char* name : {"abort", "pause", "resume"}) {
             auto* sub = campaign->add_subcommand(name, fmt::format("{} the running campaign", name));
             add_conn_options(sub, *c, true);
-            sub->callback([c, name] {
-                call(*c, {{"cmd", name}}, true);
+            auto reason = std::make_shared<std::string>();
+            if (std::string(name) == "abort") {
+                sub->add_option("--reason", *reason, "Why (recorded in the event log with your user name)");
+                sub->footer("Stops heating, ends the running trial and the campaign (and the queue), and puts the chamber "
+                            "and manikin in [standby].");
+            }
+            sub->callback([c, name, reason] {
+                nlohmann::json req{{"cmd", name}};
+                if (!reason->empty()) req["reason"] = *reason;
+                call(*c, req, true);
                 std::printf("%s\n", c->json ? "{\"ok\":true}" : "done");
             });
         }

@@ -12,6 +12,8 @@
 #include "base/toml_input.hpp"
 #include "base/user_error.hpp"
 #include "sim/campaign/campaign_generator.hpp"
+#include "analysis/zone_map.hpp"
+#include "physics/twin/twin.hpp"
 
 namespace manikind {
 
@@ -42,12 +44,25 @@ std::vector<std::string> plan_differences(const CampaignPlan& plan, const nlohma
     return out;
 }
 
+// Table S3's measured enclosure for these chamber setpoints (within 0.5 °C and 1 %), else the
+// setpoints: what chamber settling waits for when the plan does not say.
+EnclosureTarget enclosure_target(const PlannedCase& c) {
+    EnclosureTarget t{c.chamber_temp_c, c.chamber_rh_pct};
+    for (const auto& s3 : sim::table_s3_cases())
+        if (std::abs(s3.chamber_temp_c - c.chamber_temp_c) <= 0.5 && std::abs(s3.chamber_rh_pct - c.chamber_rh_pct) <= 1.0) {
+            t = {s3.air_temp_c, s3.air_rh_pct};
+            break;
+        }
+    return {c.enclosure_temp_c.value_or(t.air_c), c.enclosure_rh_pct.value_or(t.rh_pct)};
+}
+
 CampaignPlan table_s3_plan(const std::string& name) {
     CampaignPlan p;
     p.name = name;
-    for (const auto& c : sim::table_s3_cases())
+    for (const auto& c : sim::table_s3_cases()) {
         p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
-                           c.wettedness > 0.5 ? 300.0 : 0.0});
+                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt});
+    }
     return p;
 }
 
@@ -92,7 +107,8 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
     const toml::table root = toml_input::parse(text, source);
     auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
     refuse_unknown_keys(root,
-                        {"name", "replicates", "trial_duration_min", "settle_window_min", "settle_band_c", "builtin_cases", "cases"},
+                        {"name", "replicates", "trial_duration_min", "settle_window_min", "settle_band_c", "settle_tolerance_c",
+                         "settle_tolerance_rh_pct", "settle_timeout_min", "builtin_cases", "cases"},
                         source, "");
     auto number = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
         const auto* n = t.get(key);
@@ -123,6 +139,9 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
     p.trial_duration_s = 60.0 * number(root, "trial_duration_min", 75, 1, 24 * 60);
     p.settle_window_s = 60.0 * number(root, "settle_window_min", 10, 0, 600);
     p.settle_band_c = number(root, "settle_band_c", 0.3, 0.01, 10);
+    p.settle_tolerance_c = number(root, "settle_tolerance_c", 0.5, 0.05, 10);
+    p.settle_tolerance_rh_pct = number(root, "settle_tolerance_rh_pct", 5.0, 0.5, 50);
+    p.settle_timeout_s = 60.0 * number(root, "settle_timeout_min", 180, 1, 24 * 60);
     if (const auto* b = root.get("builtin_cases")) {
         if (!b->is_string() || b->as_string()->get() != "table-s3")
             throw UserError(fmt::format("{}: builtin_cases: the only built-in list is \"table-s3\"", where(*b)));
@@ -134,7 +153,8 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
         for (const auto& node : *arr) {
             const auto* t = node.as_table();
             if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
-            refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h"},
+            refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h",
+                                     "enclosure_temp_c", "enclosure_rh_pct"},
                                 source, "cases.");
             PlannedCase c;
             c.id = whole(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6);
@@ -153,6 +173,8 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
                 c.wet = w->as_boolean()->get();
             }
             c.sweat_rate_g_m2_h = number(*t, "sweat_rate_g_m2_h", c.wet ? 300 : 0, 0, 510);
+            if (t->get("enclosure_temp_c")) c.enclosure_temp_c = number(*t, "enclosure_temp_c", 0, -40, 80);
+            if (t->get("enclosure_rh_pct")) c.enclosure_rh_pct = number(*t, "enclosure_rh_pct", 0, 0, 100);
             if (!c.wet && c.sweat_rate_g_m2_h > 0)
                 throw UserError(fmt::format("{}: cases.sweat_rate_g_m2_h: {} g/m²/h on a dry case (wet = false); set "
                                             "wet = true, or leave the rate out",
@@ -182,6 +204,35 @@ std::string check_plan_against_limits(const CampaignPlan& plan, const config::Sa
         if (c.skin_setpoint_c < l.min_skin_temp_c || c.skin_setpoint_c > l.max_skin_temp_c)
             return fmt::format("case {}: skin_setpoint_c {} is outside the safety limits {}..{} °C (safety.min/max_skin_temp_c)",
                                c.id, c.skin_setpoint_c, l.min_skin_temp_c, l.max_skin_temp_c);
+    }
+    return {};
+}
+
+std::string check_plan_against_devices(const CampaignPlan& plan, const config::Config& config) {
+    const double rating = config.devices.manikin_max_heater_power_w_m2;
+    const double limit = config.safety.max_heater_power_w_m2;
+    for (const auto& c : plan.cases) {
+        physics::twin::TrialConditions t;
+        t.air_temp_c = c.chamber_temp_c;
+        t.air_rh_pct = c.chamber_rh_pct;
+        t.wettedness = c.wet ? 1.0 : 0.0;
+        for (const auto& z : analysis::andi35_zone_map().zones)
+            t.zones.push_back({z.zone, z.segment, z.region, z.area_m2, c.skin_setpoint_c});
+        double worst_w_m2 = 0.0;
+        int worst_zone = 0;
+        for (const auto& f : physics::twin::predict(physics::twin::TwinVersion{}, t))
+            if (f.q_total_w_m2 > worst_w_m2) worst_w_m2 = f.q_total_w_m2, worst_zone = f.zone;
+        const std::string why = fmt::format("holding {} °C skin {} at {} °C, {} % RH needs about {:.0f} W/m² in zone {} "
+                                            "(the baseline twin's steady loss in still air)",
+                                            c.skin_setpoint_c, c.wet ? "wet" : "dry", c.chamber_temp_c, c.chamber_rh_pct,
+                                            worst_w_m2, worst_zone);
+        if (worst_w_m2 > rating)
+            return fmt::format("case {}: {}, more than the heaters' rating of {} W/m² "
+                               "(devices.manikin.max_heater_power_w_m2): that zone would never reach its setpoint",
+                               c.id, why, rating);
+        if (worst_w_m2 > limit)
+            return fmt::format("case {}: {}, above safety.max_heater_power_w_m2 = {} W/m²: heating would stop "
+                               "once the zone settled", c.id, why, limit);
     }
     return {};
 }

@@ -225,6 +225,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         if (const auto* t = r.table(*d, "devices", "manikin")) {
             r.text(*t, "devices.manikin", "interface", dc.manikin_interface);
             r.text(*t, "devices.manikin", "capture", dc.manikin_capture);
+            r.number(*t, "devices.manikin", "max_heater_power_w_m2", dc.manikin_max_heater_power_w_m2, 10.0, 2000.0, "W/m²");
         }
         r.number(*d, "devices", "modbus_timeout_s", dc.modbus_timeout_s, 0.01, 30.0, "s");
         r.number(*d, "devices", "poll_period_s", dc.poll_period_s, 0.05, 3600.0, "s");
@@ -257,6 +258,10 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*a, "api", "idle_timeout_s", c.api.idle_timeout_s, 1, 86400, "s");
     }
     if (const auto* h = r.table(root, "", "http")) r.text(*h, "http", "listen", c.http.listen);
+    if (const auto* s = r.table(root, "", "standby")) {
+        r.number(*s, "standby", "chamber_temp_c", c.standby.chamber_temp_c, -40.0, 100.0, "°C");
+        r.number(*s, "standby", "chamber_rh_pct", c.standby.chamber_rh_pct, 0.0, 100.0, "%");
+    }
     if (const auto* rec = r.table(root, "", "recorder")) {
         r.text(*rec, "recorder", "durability", c.recorder_durability, {"process", "power"});
         r.number(*rec, "recorder", "commit_interval_s", c.recorder_commit_interval_s, 0.05, 60.0, "s");

@@ -23,7 +23,7 @@ struct SafetyLimits {
     double max_skin_temp_c = 45.0;         // manikin surface setpoint ceiling
     double min_skin_temp_c = 20.0;
     double max_heater_temp_c = 50.0;
-    double max_heater_power_w_m2 = 500.0;
+    double max_heater_power_w_m2 = 650.0;  // at or above the heaters' rating: a reading the hardware cannot make
     double min_chamber_temp_c = 5.0;
     double max_chamber_temp_c = 55.0;
     double min_chamber_rh_pct = 5.0;
@@ -58,6 +58,10 @@ struct DeviceConfig {
     double csat3b_baud = 115200;     // CSAT3B RS-485/USB default
     std::string manikin_interface = "can0";
     std::string manikin_capture;     // record every bus frame to this candump -l log (empty: off)
+    // [devices.manikin] max_heater_power_w_m2: the heaters' rated output, which every cold start
+    // reaches (the zone loop saturates). [safety] max_heater_power_w_m2 below it would trip on
+    // every start, so config check refuses that. The simulated manikin's heaters saturate here.
+    double manikin_max_heater_power_w_m2 = 600.0;
     double modbus_timeout_s = 0.5;
     double poll_period_s = 1.0;
     double stale_after_s = 3.0;
@@ -80,6 +84,14 @@ struct ApiConfig {
     std::string token;                       // empty: the daemon makes one and writes <socket>.token (0600)
     double max_clients = 64;                 // simultaneous control connections (the longest idle makes room)
     double idle_timeout_s = 120;             // a client silent this long is disconnected
+};
+
+// [standby]: where the chamber and manikin are put when a campaign ends (done, aborted, or by a
+// safety stop) or is aborted: heating off, the chamber at a mild setpoint (checked against
+// [safety]). A lab leaves the enclosure so between campaigns, not at the last case's 44 °C.
+struct StandbyConfig {
+    double chamber_temp_c = 23.0;
+    double chamber_rh_pct = 45.0;
 };
 
 // The operator console (web page, WebSocket, /metrics): off unless `listen` is set.
@@ -127,6 +139,7 @@ struct Config {
     std::map<std::string, InstrumentSpec> instruments;  // keyed by channel (air_temp_c, ...)
     DeviceConfig devices;
     SimulationConfig simulation;
+    StandbyConfig standby;
     ApiConfig api;
     HttpConfig http;
     ArchiveConfig archive;
@@ -162,6 +175,9 @@ Config load_config(const std::filesystem::path& path);
 // can read. One message per problem, each naming file:line:column and the key; empty: fine.
 // `manikin config check` and manikind both call this, so the two never disagree.
 std::vector<std::string> validate(const Config& c);
+// The part of validate() about [safety] and [standby] against the configured devices (also run
+// by `manikin campaign check`): appends one line per problem.
+void check_limits_fit_devices(const Config& c, std::vector<std::string>& problems);
 
 // Throws manikind::UserError with every problem validate() finds, one per line.
 void require_valid(const Config& c);

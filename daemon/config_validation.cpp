@@ -124,6 +124,37 @@ void check_real_mode(const Config& c, std::vector<std::string>& problems) {
     require("api.token", c.api.token, "the API token (make one with `manikin config token`)");
 }
 
+}  // namespace
+
+// Limits that fit the hardware (issue 31): a limit the configured devices reach in normal
+// operation trips at once; standby must be a setpoint the daemon may send.
+void check_limits_fit_devices(const Config& c, std::vector<std::string>& problems) {
+    const auto& l = c.safety;
+    const double rating = c.devices.manikin_max_heater_power_w_m2;
+    if (l.max_heater_power_w_m2 < rating)
+        problems.push_back(fmt::format(
+            "{}: safety.max_heater_power_w_m2 = {} W/m² is below the manikin's heater rating "
+            "(devices.manikin.max_heater_power_w_m2 = {} W/m²): every cold start drives the heaters to their rating, so "
+            "the first seconds of every trial would stop heating and abort the campaign. Set it at or above {} W/m² (the "
+            "heaters cannot exceed their rating: the limit then catches a reading the hardware cannot make), or give the "
+            "manikin's true rating",
+            where_of(c, "safety.max_heater_power_w_m2"), l.max_heater_power_w_m2, rating, rating));
+    if (l.min_skin_temp_c >= l.max_skin_temp_c)
+        problems.push_back(fmt::format("{}: safety.min_skin_temp_c = {} °C is not below max_skin_temp_c = {} °C",
+                                       where_of(c, "safety.min_skin_temp_c"), l.min_skin_temp_c, l.max_skin_temp_c));
+    const auto& sb = c.standby;
+    if (sb.chamber_temp_c < l.min_chamber_temp_c || sb.chamber_temp_c > l.max_chamber_temp_c)
+        problems.push_back(fmt::format("{}: standby.chamber_temp_c = {} °C is outside the safety limits {}..{} °C",
+                                       where_of(c, "standby.chamber_temp_c"), sb.chamber_temp_c, l.min_chamber_temp_c,
+                                       l.max_chamber_temp_c));
+    if (sb.chamber_rh_pct < l.min_chamber_rh_pct || sb.chamber_rh_pct > l.max_chamber_rh_pct)
+        problems.push_back(fmt::format("{}: standby.chamber_rh_pct = {} % is outside the safety limits {}..{} %",
+                                       where_of(c, "standby.chamber_rh_pct"), sb.chamber_rh_pct, l.min_chamber_rh_pct,
+                                       l.max_chamber_rh_pct));
+}
+
+namespace {
+
 void check_token(const Config& c, std::vector<std::string>& problems) {
     if (c.api.token.empty()) return;  // the daemon makes one (<socket>.token, 0600)
     if (const auto why = token_problem(c.api.token); !why.empty())
@@ -210,6 +241,7 @@ std::vector<std::string> validate(const Config& c) {
     if (c.mode == "real") check_real_mode(c, problems);
     check_token(c, problems);
     check_archive(c, problems);
+    check_limits_fit_devices(c, problems);
     return problems;
 }
 

@@ -20,6 +20,7 @@
 #include <chrono>
 
 #include "daemon/config.hpp"
+#include "base/text.hpp"
 #include "base/user_error.hpp"
 
 namespace manikind {
@@ -32,7 +33,7 @@ const std::map<std::string, bool>& commands() {  // name -> mutating
     static const std::map<std::string, bool> c = {{"status", false}, {"live", false},          {"results", false},
                                                   {"start_campaign", true}, {"abort", true}, {"pause", true},
                                                   {"resume", true},  {"set_chamber", true},  {"shutdown", true},
-                                                  {"alarms", false}, {"ack_alarm", true}};
+                                                  {"alarms", false}, {"ack_alarm", true}, {"campaign_outcome", false}};
     return c;
 }
 
@@ -46,7 +47,8 @@ bool same_token(const std::string& a, const std::string& b) {
 
 }  // namespace
 
-nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const std::string& line, bool& shutdown) {
+nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const std::string& line, bool& shutdown,
+                              const RequestOrigin& origin) {
     if (line.size() > o.max_message_bytes)
         return fail(fmt::format("message of {} bytes is over the limit of {} bytes", line.size(), o.max_message_bytes));
     const nlohmann::json req = nlohmann::json::parse(line, nullptr, false);
@@ -102,7 +104,26 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
             }
             return done(daemon.start_campaign(plan));
         }
-        if (cmd == "abort") return done(daemon.abort(text("reason").value_or("aborted by the operator")));
+        if (cmd == "abort") {
+            // "confirm": the running campaign's name, as typed; required from the console, checked when given.
+            const auto running = daemon.running_campaign();
+            if (!running) return fail("no campaign is running");
+            const auto confirm = text("confirm");
+            if (origin.abort_needs_confirmation && !confirm)
+                return fail(fmt::format("\"confirm\": type the running campaign's name ('{}') to abort it", *running));
+            if (confirm && *confirm != *running)
+                return fail(fmt::format("\"confirm\": '{}' is not the running campaign ('{}'): nothing aborted",
+                                        printable(*confirm), *running));
+            auto reason = text("reason").value_or("");
+            if (reason.empty()) reason = "no reason given";
+            if (reason.size() > 500) reason.resize(500);
+            return done(daemon.abort(printable(reason), origin.who));
+        }
+        if (cmd == "campaign_outcome") {
+            const auto name = text("campaign");
+            if (!name) return fail("\"campaign\": expected the campaign's name (a string)");
+            return {{"ok", true}, {"outcome", daemon.campaign_outcome_json(*name)}};
+        }
         if (cmd == "alarms") return {{"ok", true}, {"alarms", daemon.alarms_json()}};
         if (cmd == "ack_alarm") {
             const auto id = number("id");

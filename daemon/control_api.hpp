@@ -39,9 +39,16 @@ struct ControlOptions {
     int listen_backlog = 4096;                         // capped by net.core.somaxconn
 };
 
+// Who sent a request: recorded with an abort. The console's abort must also name the campaign
+// it aborts ("confirm"), as the operator typed it.
+struct RequestOrigin {
+    std::string who = "a control-socket client";
+    bool abort_needs_confirmation = false;
+};
+
 // Handles one request line (no I/O). `shutdown_requested` is set by a valid shutdown.
 nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& options, const std::string& line,
-                              bool& shutdown_requested);
+                              bool& shutdown_requested, const RequestOrigin& origin = {});
 
 // What the server has done with its clients (status and tests).
 struct ControlServerCounters {

@@ -11,6 +11,7 @@
 //   - out of file descriptors, accept is retried after a pause (never spun) once an idle client
 //     has been let go.
 #include <arpa/inet.h>
+#include <pwd.h>
 #include <netinet/in.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
@@ -86,13 +87,39 @@ bool someone_answers(const std::string& path) {
 
 }  // namespace
 
+// Who is at the other end: on the Unix socket the kernel's word (SO_PEERCRED: user, uid, pid);
+// over TCP (127.0.0.1 only) the address.
+static std::string peer_of(stream::socket& socket) {
+    const int fd = socket.native_handle();
+    ucred cred{};
+    socklen_t len = sizeof cred;
+    if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0 && len == sizeof cred && cred.pid > 0) {
+        std::string user = std::to_string(cred.uid);
+        std::array<char, 1024> buffer{};
+        passwd pw{};
+        passwd* found = nullptr;
+        if (::getpwuid_r(cred.uid, &pw, buffer.data(), buffer.size(), &found) == 0 && found) user = found->pw_name;
+        return fmt::format("user {} (uid {}, pid {}) on the control socket", printable(user), cred.uid, cred.pid);
+    }
+    sockaddr_storage addr{};
+    socklen_t alen = sizeof addr;
+    if (::getpeername(fd, reinterpret_cast<sockaddr*>(&addr), &alen) == 0 && addr.ss_family == AF_INET) {
+        const auto* in = reinterpret_cast<const sockaddr_in*>(&addr);
+        std::array<char, INET_ADDRSTRLEN> ip{};
+        ::inet_ntop(AF_INET, &in->sin_addr, ip.data(), ip.size());
+        return fmt::format("{}:{} over TCP", ip.data(), ntohs(in->sin_port));
+    }
+    return "a control-socket client";
+}
+
 struct ControlServer::Impl {
     struct Session : std::enable_shared_from_this<Session> {
         Session(Impl& server, stream::socket s, std::uint64_t session_id)
-            : owner(server), socket(std::move(s)), id(session_id), last_activity(steady::now()) {}
+            : owner(server), socket(std::move(s)), id(session_id), who(peer_of(socket)), last_activity(steady::now()) {}
         Impl& owner;
         stream::socket socket;
         std::uint64_t id;
+        std::string who;  // the peer, as an abort records it
         std::array<char, 4096> read_buffer{};
         std::string pending_input;                  // bytes of a request line not yet complete
         std::optional<steady::time_point> partial_since;
@@ -122,7 +149,7 @@ struct ControlServer::Impl {
                 const std::string line = pending_input.substr(start, nl - start);
                 start = nl + 1;
                 last_request = now;
-                queue(owner.answer(line));
+                queue(owner.answer(line, who));
                 if (closed) return;
             }
             pending_input.erase(0, start);
@@ -188,11 +215,11 @@ struct ControlServer::Impl {
     ControlServerCounters counters;
     steady::time_point last_accept_error_log{};
 
-    std::string answer(const std::string& line) {
+    std::string answer(const std::string& line, const std::string& who = "a control-socket client") {
         bool shutdown_now = false;
         std::string reply;
         try {
-            reply = dump_json(handle_request(daemon, o, line, shutdown_now)) + "\n";
+            reply = dump_json(handle_request(daemon, o, line, shutdown_now, RequestOrigin{who, false})) + "\n";
         } catch (const std::exception& e) {  // never out of the server thread: that would end the daemon
             spdlog::error("control API: a request failed: {}", printable(e.what()));
             reply = error_line(fmt::format("internal error: {}", printable(e.what())));

@@ -306,6 +306,56 @@ bool LabDaemon::flush_all_locked() {
     return recorder_->flush() && overflow_.empty() && unnamed_.empty();
 }
 
+double LabDaemon::enclosure_rh_pct() const {
+    double sum = 0;
+    int n = 0;
+    for (const auto& [key, s] : live_)
+        if (key.starts_with("datalogger/ee181_") && key.ends_with(".air_rh_pct") && s.quality == drivers::Quality::good)
+            sum += s.value, ++n;
+    return n ? sum / n : std::nan("");
+}
+
+nlohmann::json LabDaemon::settling_json_locked(std::int64_t now) const {
+    const auto target = enclosure_target(current_->c);
+    const double air = enclosure_air_c(), rh = enclosure_rh_pct();
+    const double air_off = air - target.air_c, rh_off = rh - target.rh_pct;
+    const double window_s = plan_->settle_window_s;
+    const double on_target_s = on_target_since_ns_ ? static_cast<double>(now - *on_target_since_ns_) * 1e-9 : 0.0;
+    // ETA: on target, what the window still needs; off target and closing in, the time to the
+    // tolerance at the last minutes' rate, plus the window; else unknown (null).
+    nlohmann::json eta = nullptr;
+    if (on_target_since_ns_) {
+        eta = std::max(0.0, window_s - on_target_s);
+    } else if (std::isfinite(air_off) && settle_off_history_.size() >= 2) {
+        const auto& [t0, off0] = settle_off_history_.front();
+        const auto& [t1, off1] = settle_off_history_.back();
+        const double rate_c_per_s = (off0 - off1) / (static_cast<double>(t1 - t0) * 1e-9);
+        const double left_c = std::abs(air_off) - plan_->settle_tolerance_c;
+        if (rate_c_per_s > 1e-5 && left_c > 0) eta = left_c / rate_c_per_s + window_s;
+        else if (left_c <= 0) eta = window_s;  // the temperature is there; RH is what is awaited
+    }
+    auto number_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    return {{"criterion", fmt::format("enclosure air within {} °C of {} °C and RH within {} % of {} %, varying less than "
+                                      "{} °C, for {:.0f} min",
+                                      plan_->settle_tolerance_c, target.air_c, plan_->settle_tolerance_rh_pct,
+                                      target.rh_pct, plan_->settle_band_c, window_s / 60)},
+            {"target_air_c", target.air_c},
+            {"air_c", number_or_null(air)},
+            {"air_off_c", number_or_null(air_off)},
+            {"tolerance_c", plan_->settle_tolerance_c},
+            {"target_rh_pct", target.rh_pct},
+            {"rh_pct", number_or_null(rh)},
+            {"rh_off_pct", number_or_null(rh_off)},
+            {"tolerance_rh_pct", plan_->settle_tolerance_rh_pct},
+            {"range_c", enclosure_range_.empty() ? nlohmann::json(nullptr) : nlohmann::json(enclosure_range_.range())},
+            {"band_c", plan_->settle_band_c},
+            {"on_target_s", on_target_s},
+            {"window_s", window_s},
+            {"eta_s", eta},
+            {"timeout_s", plan_->settle_timeout_s},
+            {"timed_out", settle_timeout_alarmed_}};
+}
+
 double LabDaemon::enclosure_air_c() const {
     double sum = 0;
     int n = 0;
@@ -359,6 +409,7 @@ void LabDaemon::enter(Stage s, const std::string& why) {
 std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
     std::lock_guard lk(lock_);
     if (const auto why = check_plan_against_limits(plan, o_.config.safety); !why.empty()) return why;
+    if (const auto why = check_plan_against_devices(plan, o_.config); !why.empty()) return why;
     if (storage_full_)
         return fmt::format("the disk holding {} is full ({}); free space first, recording resumes by itself",
                            db_path_.string(), storage_error_);
@@ -464,11 +515,12 @@ void LabDaemon::begin_campaign(const CampaignPlan& plan) {
               fmt::format("'{}' started: {} cases x {} replicates", plan.name, plan.cases.size(), plan.replicates));
 }
 
-std::string LabDaemon::abort(const std::string& reason) {
+std::string LabDaemon::abort(const std::string& reason, const std::string& who) {
     std::lock_guard lk(lock_);
     if (!plan_) return "no campaign is running";
     acq_->manikin().set_run(false);
-    if (trial_id_) finish_trial("aborted", reason);
+    event("warn", "abort", fmt::format("'{}' aborted by {}: {}", plan_->name, who, reason));
+    if (trial_id_) finish_trial("aborted", fmt::format("{} (by {})", reason, who));
     waiting_.clear();  // an operator's abort stops what was queued too
     finish_campaign("aborted");
     return {};
@@ -709,10 +761,56 @@ void LabDaemon::finish_campaign(const std::string& state) {
     }
     write([=, campaign = campaign_id_](recorder::Database& db) { db.set_campaign_state(campaign, state); });
     event("info", "campaign", fmt::format("'{}' {}", plan_->name, state));
+    standby_locked(fmt::format("campaign '{}' {}", plan_->name, state));
     plan_.reset();
     paused_ = false;
     stage_ = Stage::idle;
     // The next campaign queued begins at the next tick (advance_locked).
+}
+
+// Heating off and the chamber at [standby], after a campaign ends or is aborted: the enclosure is
+// not left at the last case's setpoint with nobody watching.
+void LabDaemon::standby_locked(const std::string& why) {
+    if (acq_) acq_->manikin().set_run(false);
+    const auto& sb = o_.config.standby;
+    if (const auto refused = set_chamber(sb.chamber_temp_c, sb.chamber_rh_pct); !refused.empty())
+        event("warn", "standby", fmt::format("{}: the chamber could not be put in standby: {}", why, refused));
+    else
+        event("info", "standby", fmt::format("{}: heating off, chamber {} °C, {} %", why, sb.chamber_temp_c, sb.chamber_rh_pct));
+}
+
+std::optional<std::string> LabDaemon::running_campaign() {
+    std::lock_guard lk(lock_);
+    if (plan_) return plan_->name;
+    return std::nullopt;
+}
+
+nlohmann::json LabDaemon::campaign_outcome_json(const std::string& campaign) {
+    std::lock_guard lk(lock_);
+    flush_all_locked();  // the last states written are read back
+    const auto id = db_.find_campaign(campaign);
+    if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), campaign));
+    std::string state;
+    for (const auto& c : db_.campaigns())
+        if (c.id == *id) state = c.state;
+    const bool active = (plan_ && plan_->name == campaign) ||
+                        std::any_of(waiting_.begin(), waiting_.end(), [&](const CampaignPlan& p) { return p.name == campaign; });
+    std::map<std::string, int> by_state;
+    std::set<std::pair<std::int64_t, std::int64_t>> done, tried;
+    for (const auto& t : db_.trials(*id)) {
+        ++by_state[t.state];
+        tried.insert({t.case_id, t.replicate});
+        if (t.state == "done") done.insert({t.case_id, t.replicate});
+    }
+    nlohmann::json trials = nlohmann::json::object();
+    for (const auto& [s, n] : by_state) trials[s] = n;
+    const std::size_t planned = db_.cases(*id).size();
+    return {{"campaign", campaign},
+            {"state", active ? std::string("running") : state},
+            {"active", active},
+            {"trials", trials},
+            // Every case x replicate tried has a done trial (an interrupted one run again counts once).
+            {"ok", !active && state == "done" && done.size() == tried.size() && planned > 0}};
 }
 
 namespace {
@@ -836,18 +934,51 @@ void LabDaemon::advance_locked() {
                 return;
             }
             enclosure_range_.clear();
-            enter(Stage::chamber_settling);
+            on_target_since_ns_.reset();
+            settle_timeout_alarmed_ = false;
+            settle_off_history_.clear();
+            const auto target = enclosure_target(current_->c);
+            enter(Stage::chamber_settling,
+                  fmt::format("waiting for the enclosure at {} ± {} °C, {} ± {} % RH, stable for {:.0f} min",
+                              target.air_c, plan_->settle_tolerance_c, target.rh_pct,
+                              plan_->settle_tolerance_rh_pct, plan_->settle_window_s / 60));
             return;
         }
         case Stage::chamber_settling: {
-            enclosure_range_.evict_before(now - static_cast<std::int64_t>(plan_->settle_window_s * 1e9));
-            const bool window_full = !enclosure_range_.empty() &&
-                                     static_cast<double>(now - enclosure_range_.oldest_ns()) * 1e-9 >= plan_->settle_window_s - 1.0;
-            if (window_full && enclosure_range_.range() < plan_->settle_band_c) {
-                enter(Stage::manikin_starting, fmt::format("enclosure stable at {:.2f} °C", enclosure_air_c()));
-            } else if (elapsed > plan_->settle_timeout_s) {
-                finish_trial("failed", fmt::format("timeout: the enclosure did not settle within {:.0f} min",
-                                                   plan_->settle_timeout_s / 60));
+            // Settled (issue 31): on target (air and RH within tolerance of the case's enclosure
+            // target) continuously for the window, and varying less than the band over it. Stable
+            // alone is not enough: an enclosure still creeping towards its setpoint is stable
+            // within 0.3 °C over 10 min while 2 °C short.
+            const auto window_ns = static_cast<std::int64_t>(plan_->settle_window_s * 1e9);
+            enclosure_range_.evict_before(now - window_ns - 1'000'000'000);  // a reading's period of slack
+            const auto& c = current_->c;
+            const auto target = enclosure_target(c);
+            const double air = enclosure_air_c(), rh = enclosure_rh_pct();
+            const bool on_target = std::isfinite(air) && std::abs(air - target.air_c) <= plan_->settle_tolerance_c &&
+                                   (!std::isfinite(rh) || std::abs(rh - target.rh_pct) <= plan_->settle_tolerance_rh_pct);
+            if (!on_target) on_target_since_ns_.reset();
+            else if (!on_target_since_ns_) on_target_since_ns_ = now;
+            if (std::isfinite(air)) {
+                settle_off_history_.emplace_back(now, std::abs(air - target.air_c));
+                while (settle_off_history_.size() > 2 && now - settle_off_history_.front().first > 300'000'000'000LL)
+                    settle_off_history_.pop_front();
+            }
+            const bool stable = !enclosure_range_.empty() && enclosure_range_.range() < plan_->settle_band_c;
+            if (on_target && stable && now - *on_target_since_ns_ >= window_ns) {
+                enter(Stage::manikin_starting,
+                      fmt::format("enclosure on target: {:.2f} °C (target {} ± {}), {:.1f} % RH (target {} ± {}), varying "
+                                  "{:.2f} °C over {:.0f} min",
+                                  air, target.air_c, plan_->settle_tolerance_c, rh, target.rh_pct,
+                                  plan_->settle_tolerance_rh_pct, enclosure_range_.range(), plan_->settle_window_s / 60));
+            } else if (elapsed > plan_->settle_timeout_s && !settle_timeout_alarmed_) {
+                // Held, not failed: the manikin never starts off target; the operator decides.
+                settle_timeout_alarmed_ = true;
+                event("error", "settle_timeout",
+                      fmt::format("case {} replicate {}: the enclosure is not on target after {:.0f} min ({:.2f} °C for {} ± "
+                                  "{}, {:.1f} % RH for {} ± {}); holding: the manikin starts only on target (check the "
+                                  "chamber, or abort)",
+                                  c.id, current_->replicate, plan_->settle_timeout_s / 60, air, target.air_c,
+                                  plan_->settle_tolerance_c, rh, target.rh_pct, plan_->settle_tolerance_rh_pct));
             }
             return;
         }
@@ -977,6 +1108,7 @@ void LabDaemon::stop() {
         if (plan_ && campaign_id_) {
             write([campaign = campaign_id_](recorder::Database& db) { db.set_campaign_state(campaign, "interrupted"); });
             event("warn", "campaign", fmt::format("'{}' interrupted: the daemon stopped (start it again to continue)", plan_->name));
+            standby_locked(fmt::format("campaign '{}' interrupted", plan_->name));
             plan_.reset();
         }
     }
@@ -1011,6 +1143,7 @@ nlohmann::json LabDaemon::status_json() {
     if (current_) {
         j["trial"] = {{"case", current_->c.id}, {"replicate", current_->replicate}, {"id", trial_id_},
                       {"wet", current_->c.wet}, {"stage_elapsed_s", stage_elapsed_s()}};
+        if (stage_ == Stage::chamber_settling) j["trial"]["settling"] = settling_json_locked(clock_->mono_ns());
         if (stage_ == Stage::acquiring) {
             const SteadyCheck c = check_steady_window_locked(paused_ ? paused_at_ns_ : clock_->mono_ns());
             const double limit_c = o_.config.steady_state.max_skin_fluctuation_c;

@@ -50,7 +50,12 @@ public:
     // Commands: an empty string when accepted, else why not (the limit or state named). A campaign
     // started while another runs is queued behind it; abort ends the running one and the queue.
     std::string start_campaign(const CampaignPlan& plan);
-    std::string abort(const std::string& reason);
+    // `who`: the socket peer's user, or the console; recorded with the reason in the event log.
+    std::string abort(const std::string& reason, const std::string& who = "the operator");
+    // How a campaign stands in the database: state, trials by state, and ok (done with every
+    // planned trial done). For `manikind --exit-when-done` and `manikin campaign run --wait`.
+    nlohmann::json campaign_outcome_json(const std::string& campaign);
+    std::optional<std::string> running_campaign();
     std::string pause();
     std::string resume();
     std::string set_chamber(double temp_c, double rh_pct);
@@ -127,6 +132,7 @@ private:
     void event(const std::string& severity, const std::string& kind, const std::string& message);
     void finish_trial(const std::string& state, const std::string& reason);
     void finish_campaign(const std::string& state);
+    void standby_locked(const std::string& why);  // heating off, the chamber at [standby]
     void start_interim_results();
     void begin_campaign(const CampaignPlan& plan);
     void safety_stop(const std::string& why);
@@ -147,6 +153,9 @@ private:
     double stage_elapsed_s() const;
     std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
     double enclosure_air_c() const;
+    double enclosure_rh_pct() const;
+    // Where settling stands: targets, distances, the window, an ETA (status trial.settling).
+    nlohmann::json settling_json_locked(std::int64_t now_ns) const;
     // The steady-state rule's inputs now: evicts samples older than the window, then measures.
     struct SteadyCheck {
         double window_filled_fraction = 0.0;   // time acquiring / steady_state.window_s, capped at 1
@@ -204,6 +213,11 @@ private:
     std::map<std::string, std::int64_t> device_ids_;
     std::vector<analysis::SlidingRange> skin_range_;
     analysis::SlidingRange enclosure_range_;
+    // Chamber settling by criteria (issue 31): on target since, the timeout's alarm said once, and
+    // the air's distance from its target over the last minutes (for the ETA).
+    std::optional<std::int64_t> on_target_since_ns_;
+    bool settle_timeout_alarmed_ = false;
+    std::deque<std::pair<std::int64_t, double>> settle_off_history_;  // (mono ns, |air - target| °C)
     std::int64_t acquiring_since_ns_ = 0;
     std::optional<std::int64_t> steady_since_ns_;
     std::int64_t steady_seen_at_ns_ = 0;

@@ -195,7 +195,17 @@ int main(int argc, char** argv) {
                 if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;
             }
         }
-        if (exit_when_done && !campaign_name.empty() && !daemon.campaign_active()) print_results_summary(daemon, campaign_name);
+        // --exit-when-done: the exit status says how the campaign ended (0 done, 6 otherwise; docs/cli.md).
+        int exit_status = 0;
+        if (exit_when_done && !campaign_name.empty() && !daemon.campaign_active()) {
+            print_results_summary(daemon, campaign_name);
+            const auto outcome = daemon.campaign_outcome_json(campaign_name);
+            if (!outcome.value("ok", false)) {
+                exit_status = static_cast<int>(ExitStatus::not_done);
+                std::fprintf(stderr, "manikind: campaign '%s' ended %s (trials: %s): exit status %d\n", campaign_name.c_str(),
+                             outcome.value("state", "?").c_str(), outcome["trials"].dump().c_str(), exit_status);
+            }
+        }
         ::sd_notify(0, "STOPPING=1");
         std::printf("manikind: stopping\n");
         if (console) console->stop();
@@ -215,7 +225,7 @@ int main(int argc, char** argv) {
         // What the last seconds committed goes now if the archive answers within 10 s; else at
         // the next start (nothing is lost either way).
         if (forwarder) forwarder->finish(std::chrono::seconds(10));
-        return 0;
+        return exit_status;
     } catch (const UserError& e) {
         std::fprintf(stderr, "manikind: %s\n", e.what());
         return 2;

@@ -27,6 +27,7 @@ sim::SimLabOptions simulated_lab_options(const config::Config& config) {
     o.manikin_period_s = config.simulation.manikin_period_s;
     o.world.enclosure_table = sim::table_s3_cases();
     o.world.watchdog_s = config.safety.watchdog_timeout_s;
+    o.world.max_heater_power_w_m2 = config.devices.manikin_max_heater_power_w_m2;
     const auto convert = [](const RegisterMap& map) {
         std::vector<sim::RegisterDef> defs;
         for (const auto& r : map.registers) defs.push_back({r.spec, r.unit_id, r.probe});

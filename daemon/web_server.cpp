@@ -207,7 +207,9 @@ struct WebServer::Impl {
             if (!origin_allowed(req))
                 return error(req, http::status::forbidden, "requests from another site cannot change the daemon's state");
             bool stop_now = false;
-            const auto r = handle_request(daemon, api, req.body(), stop_now);
+            // An abort from the console names the campaign as the operator typed it, and is recorded
+            // as the console's (behind the token: whoever holds it at this browser).
+            const auto r = handle_request(daemon, api, req.body(), stop_now, RequestOrigin{"the operator console", true});
             if (stop_now) shutdown = true;
             return json_reply(req, r.value("ok", false) ? http::status::ok : http::status::bad_request, r);
         }

@@ -122,7 +122,7 @@ function renderTrial(s) {
   $("campaign-line").textContent = s.campaign
     ? `${s.campaign}: ${s.trials_done} of ${s.trials_total} trials done` +
       (t ? ` · case ${t.case} replicate ${t.replicate} · ${fmt(t.stage_elapsed_s, 0)} s in stage` : "") +
-      (s.paused ? " · PAUSED" : "")
+      (s.paused ? " · paused" : "")
     : "no campaign running";
   const tl = $("stage-timeline");
   tl.innerHTML = "";
@@ -135,6 +135,23 @@ function renderTrial(s) {
     tl.appendChild(li);
   });
   $("stage").textContent = s.stage;
+  $("paused-banner").hidden = !s.paused;
+  // Chamber settling: what is awaited, how far off each quantity is, and when it may be done.
+  const st = t && t.settling;
+  $("settling").hidden = !st;
+  if (st) {
+    $("settling-criterion").textContent = st.criterion;
+    const off = (v, tol, unit) => {
+      if (v === null || v === undefined) return el("span", {}, "no reading");
+      const ok = Math.abs(v) <= tol;
+      return el("span", { class: ok ? "" : "off" }, `${v >= 0 ? "+" : ""}${fmt(v, 2)} ${unit} ${ok ? "(within)" : "(off)"}`);
+    };
+    $("settling-air").replaceChildren(`${fmt(st.air_c, 2)} °C `, off(st.air_off_c, st.tolerance_c, "°C"));
+    $("settling-rh").replaceChildren(`${fmt(st.rh_pct, 1)} % `, off(st.rh_off_pct, st.tolerance_rh_pct, "%"));
+    $("settling-on").textContent = `${minutes(st.on_target_s)} of ${minutes(st.window_s)}`;
+    $("settling-eta").textContent = st.timed_out ? "timed out: holding (see alarms)"
+      : (st.eta_s === null ? "unknown (not yet closing in)" : `in about ${minutes(st.eta_s)}`);
+  }
 
   const verdict = $("steady-verdict");
   if (t && t.limit_c !== undefined) {
@@ -349,7 +366,20 @@ async function main() {
   $("zone-quantity").addEventListener("change", paintZones);
   $("pause").addEventListener("click", () => command({ cmd: "pause" }));
   $("resume").addEventListener("click", () => command({ cmd: "resume" }));
-  $("abort").addEventListener("click", () => command({ cmd: "abort", reason: "aborted from the console" }));
+  // Abort asks first: the campaign's name typed, and a reason (both recorded by the daemon).
+  $("abort").addEventListener("click", () => {
+    const running = latest && latest.status ? latest.status.campaign : null;
+    $("abort-name").textContent = running ? running : "(none running)";
+    $("abort-typed").value = "";
+    $("abort-confirm").hidden = false;
+    $("abort-typed").focus();
+  });
+  $("abort-cancel").addEventListener("click", () => { $("abort-confirm").hidden = true; });
+  $("abort-confirm").addEventListener("submit", (e) => {
+    e.preventDefault();
+    command({ cmd: "abort", confirm: $("abort-typed").value, reason: $("abort-reason").value || "aborted from the console" });
+    $("abort-confirm").hidden = true;
+  });
   connect();
   renderHistory();
   setInterval(renderHistory, 5000);

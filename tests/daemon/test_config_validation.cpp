@@ -76,7 +76,7 @@ std::string real_lab_toml(const std::string& token, const std::string& safety) {
 }
 
 const std::string all_safety_keys =
-    "[safety]\nmax_skin_temp_c = 40.0\nmin_skin_temp_c = 25.0\nmax_heater_temp_c = 50.0\nmax_heater_power_w_m2 = 400.0\n"
+    "[safety]\nmax_skin_temp_c = 40.0\nmin_skin_temp_c = 25.0\nmax_heater_temp_c = 50.0\nmax_heater_power_w_m2 = 650.0\n"
     "min_chamber_temp_c = 10.0\nmax_chamber_temp_c = 50.0\nmin_chamber_rh_pct = 10.0\nmax_chamber_rh_pct = 90.0\n"
     "watchdog_timeout_s = 10.0\n";
 
