@@ -30,6 +30,7 @@
 #include "store/export_target.hpp"
 #include "store/hdf5_export.hpp"
 #include "store/database.hpp"
+#include "base/text.hpp"
 #include "base/user_error.hpp"
 #include "physics/sign_convention.hpp"
 
@@ -128,6 +129,22 @@ void print_status(const nlohmann::json& s) {
         const auto& t = s["trial"];
         std::printf("trial %ld: case %d replicate %d, %.0f s in stage\n", t["id"].get<long>(), t["case"].get<int>(),
                     t["replicate"].get<int>(), t["stage_elapsed_s"].get<double>());
+        if (t.contains("settling") && t["settling"].is_object()) {
+            // Chamber settling: what is awaited, how far off each quantity is, when it may be done.
+            const auto& st = t["settling"];
+            const auto num = [](const nlohmann::json& v, const char* f) {
+                return v.is_number() ? fmt::format(fmt::runtime(f), v.get<double>()) : std::string("-");
+            };
+            std::printf("  awaiting: %s\n", printable(st.value("criterion", ""), 300).c_str());
+            std::printf("  air %s °C (%s °C off), RH %s %% (%s %% off); on target %s of %s min; ready %s\n",
+                        num(st["air_c"], "{:.2f}").c_str(), num(st["air_off_c"], "{:+.2f}").c_str(),
+                        num(st["rh_pct"], "{:.1f}").c_str(), num(st["rh_off_pct"], "{:+.1f}").c_str(),
+                        num(st["on_target_s"].is_number() ? nlohmann::json(st["on_target_s"].get<double>() / 60) : st["on_target_s"], "{:.1f}").c_str(),
+                        num(st["window_s"].is_number() ? nlohmann::json(st["window_s"].get<double>() / 60) : st["window_s"], "{:.0f}").c_str(),
+                        st.value("timed_out", false) ? "never: timed out, holding (see alarms)"
+                        : st["eta_s"].is_number()    ? fmt::format("in about {:.0f} min", st["eta_s"].get<double>() / 60).c_str()
+                                                     : "unknown (not yet closing in)");
+        }
         if (t.contains("steady_progress")) {
             const double progress = t["steady_progress"].get<double>();
             // Floor, not round: 99.9 % must not print as 100 % while the rule says no.
