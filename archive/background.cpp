@@ -43,16 +43,38 @@ void BackgroundForwarder::stop() {
     pass_done_.notify_all();
 }
 
-void BackgroundForwarder::finish(std::chrono::milliseconds budget) {
+bool BackgroundForwarder::finish(std::chrono::milliseconds stall, const std::function<void(std::int64_t)>& progress,
+                                 const std::function<bool()>& cut_short) {
+    bool complete = false;
     {
         std::unique_lock lk(m_);
         if (!stop_) {
+            // No wall-clock cap: a loaded machine or a big backlog takes as long as it takes, as
+            // long as chunks keep being committed (issue 31: a 10-s cap left 3.1 M rows behind).
             const std::uint64_t ticket = ++requested_;
             wake_.notify_all();
-            pass_done_.wait_for(lk, budget, [&] { return served_ >= ticket; });
+            const std::int64_t added_at_start = samples_added_;
+            std::int64_t last_added = samples_added_;
+            auto last_progress = std::chrono::steady_clock::now();
+            for (;;) {
+                if (pass_done_.wait_for(lk, std::chrono::seconds(1), [&] { return served_ >= ticket; })) {
+                    complete = last_ok_;
+                    break;
+                }
+                const auto now = std::chrono::steady_clock::now();
+                if (samples_added_ != last_added) last_added = samples_added_, last_progress = now;
+                if (now - last_progress >= stall) break;  // the server stopped answering: the next start resumes
+                const std::int64_t sent = samples_added_ - added_at_start;
+                lk.unlock();
+                if (progress) progress(sent);
+                const bool cut = cut_short && cut_short();
+                lk.lock();
+                if (cut) break;
+            }
         }
     }
     stop();
+    return complete;
 }
 
 bool BackgroundForwarder::forward_now() {
@@ -104,6 +126,10 @@ bool BackgroundForwarder::pass() {
     };
     // Everything committed before the snapshot push() takes is in the archive when it returns.
     const std::int64_t began_utc_ns = utc_now_ns();
+    {
+        std::lock_guard lk(m_);
+        if (state_ == "starting" || state_ == "up to date") state_ = "forwarding";
+    }
     std::string error;
     bool refused = false;
     try {
@@ -131,7 +157,7 @@ bool BackgroundForwarder::pass() {
             consecutive_failures_ = 0;
             archived_through_utc_ns_ = began_utc_ns;
             if (push_options.check_idle_log) idle_checked_ = true, idle_checked_at_ = now_steady;
-            state_ = "forwarding";
+            state_ = "up to date";  // everything committed before this pass began is in the archive
             last_error_.clear();
         } else {
             ++failures_;

@@ -47,9 +47,13 @@ public:
 
     // Ends the thread; a pass under way stops after its current chunk (the next start resumes).
     void stop();
-    // At shutdown, after the recorder's last commit: one more pass for up to `budget`, then stop().
-    // A pass cut off by the budget is finished by the next start.
-    void finish(std::chrono::milliseconds budget);
+    // At shutdown, after the recorder's last commit: one more pass, waited for as long as it makes
+    // progress (a chunk committed within `stall`), reporting rows sent through `progress` about
+    // once a second; `cut_short` (a second signal) ends the wait. Then stop(). Returns true when
+    // everything committed locally is in the archive; false when cut short or stalled (the next
+    // start sends the rest: nothing is lost).
+    bool finish(std::chrono::milliseconds stall, const std::function<void(std::int64_t rows_sent)>& progress = {},
+                const std::function<bool()>& cut_short = {});
 
     // Runs a pass now and waits for it: true when it reached the server and sent everything
     // committed before it began. (Tests, and `manikin archive` status checks.)
@@ -73,7 +77,7 @@ private:
     std::uint64_t requested_ = 0;  // forward_now() requests; a pass serves every request made before it began
     std::uint64_t served_ = 0;
     bool last_ok_ = false;
-    std::string state_ = "starting";
+    std::string state_ = "starting";  // until the first pass ends; "forwarding" while a pass sends rows
     std::uint64_t passes_ = 0, failures_ = 0, consecutive_failures_ = 0;
     std::int64_t samples_added_ = 0;
     std::int64_t archived_through_utc_ns_ = 0;  // 0: not yet

@@ -224,7 +224,24 @@ int main(int argc, char** argv) {
         }
         // What the last seconds committed goes now if the archive answers within 10 s; else at
         // the next start (nothing is lost either way).
-        if (forwarder) forwarder->finish(std::chrono::seconds(10));
+        if (forwarder) {
+            // Everything recorded goes to the archive before the exit, with progress; a second
+            // SIGTERM/SIGINT (or 60 s without a chunk committed) ends the wait, and the next start
+            // sends the rest: the local database keeps every row.
+            std::printf("manikind: forwarding what is left to the archive (Ctrl-C again to leave it for the next start)\n");
+            std::fflush(stdout);
+            const bool complete = forwarder->finish(
+                std::chrono::seconds(60),
+                [](std::int64_t sent) {
+                    std::printf("manikind: archive: %lld rows sent since the stop\n", static_cast<long long>(sent));
+                    std::fflush(stdout);
+                },
+                [&] { return signalled(); });
+            std::printf("manikind: archive: %s\n", complete ? "everything recorded is in the archive"
+                                                          : "not everything is in the archive yet: the next start sends "
+                                                            "the rest (nothing is lost)");
+            std::fflush(stdout);
+        }
         return exit_status;
     } catch (const UserError& e) {
         std::fprintf(stderr, "manikind: %s\n", e.what());
