@@ -108,7 +108,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
     auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
     refuse_unknown_keys(root,
                         {"name", "replicates", "trial_duration_min", "settle_window_min", "settle_band_c", "settle_tolerance_c",
-                         "settle_tolerance_rh_pct", "settle_timeout_min", "builtin_cases", "cases"},
+                         "settle_tolerance_rh_pct", "settle_timeout_min", "excursion_limit_min", "builtin_cases", "cases"},
                         source, "");
     auto number = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
         const auto* n = t.get(key);
@@ -142,6 +142,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
     p.settle_tolerance_c = number(root, "settle_tolerance_c", 0.5, 0.05, 10);
     p.settle_tolerance_rh_pct = number(root, "settle_tolerance_rh_pct", 5.0, 0.5, 50);
     p.settle_timeout_s = 60.0 * number(root, "settle_timeout_min", 180, 1, 24 * 60);
+    p.excursion_limit_s = 60.0 * number(root, "excursion_limit_min", 2, 0.1, 120);
     if (const auto* b = root.get("builtin_cases")) {
         if (!b->is_string() || b->as_string()->get() != "table-s3")
             throw UserError(fmt::format("{}: builtin_cases: the only built-in list is \"table-s3\"", where(*b)));

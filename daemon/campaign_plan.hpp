@@ -50,6 +50,10 @@ struct CampaignPlan {
     double settle_tolerance_rh_pct = 5.0;
     // Past this the daemon raises an alarm and holds (never starts the manikin off target).
     double settle_timeout_s = 3.0 * 3600.0;
+    // While acquiring: the enclosure off its target (the settling tolerances) for longer than this
+    // is an excursion: the trial is flagged, an alarm raised, and the steady-state window starts
+    // again when the enclosure is back, so the final window never holds an excursion.
+    double excursion_limit_s = 120.0;
     double acquire_timeout_s = 4.0 * 3600.0;
     std::vector<PlannedCase> cases;
 };

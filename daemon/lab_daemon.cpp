@@ -996,10 +996,40 @@ void LabDaemon::advance_locked() {
             for (auto& r : skin_range_) r.clear();
             steady_since_ns_.reset();
             acquiring_since_ns_ = now;
+            off_target_since_ns_.reset();
+            in_excursion_ = false;
             enter(Stage::acquiring, fmt::format("skin {} °C, {}", sp.value, sp.sweating ? "wet" : "dry"));
             return;
         }
         case Stage::acquiring: {
+            // Excursions (issue 31): the enclosure off its target for longer than the plan allows.
+            {
+                const auto target = enclosure_target(current_->c);
+                const double air = enclosure_air_c(), rh = enclosure_rh_pct();
+                const bool off = (std::isfinite(air) && std::abs(air - target.air_c) > plan_->settle_tolerance_c) ||
+                                 (std::isfinite(rh) && std::abs(rh - target.rh_pct) > plan_->settle_tolerance_rh_pct);
+                if (off && !off_target_since_ns_) off_target_since_ns_ = now;
+                if (off && !in_excursion_ && now - *off_target_since_ns_ > static_cast<std::int64_t>(plan_->excursion_limit_s * 1e9)) {
+                    in_excursion_ = true;
+                    write([trial = trial_id_](recorder::Database& db) { db.add_trial_flag(trial, flag_enclosure_excursion); });
+                    event("warn", "excursion",
+                          fmt::format("case {} replicate {}: the enclosure left its target for more than {:.0f} min "
+                                      "({:.2f} °C for {} ± {}, {:.1f} % RH for {} ± {}); the trial is flagged, and the "
+                                      "steady-state window starts again when it is back",
+                                      current_->c.id, current_->replicate, plan_->excursion_limit_s / 60, air, target.air_c,
+                                      plan_->settle_tolerance_c, rh, target.rh_pct, plan_->settle_tolerance_rh_pct));
+                }
+                if (!off) {
+                    off_target_since_ns_.reset();
+                    if (in_excursion_) {
+                        in_excursion_ = false;
+                        for (auto& r : skin_range_) r.clear();  // the final window must not hold the excursion
+                        steady_since_ns_.reset();
+                        acquiring_since_ns_ = now;
+                        event("info", "excursion", "the enclosure is back on target: the steady-state window starts again");
+                    }
+                }
+            }
             const double window_s = o_.config.steady_state.window_s;
             const SteadyCheck check = check_steady_window_locked(now);
             const double worst = std::isfinite(check.worst_zone_range_c) ? check.worst_zone_range_c : 0.0;

@@ -34,7 +34,13 @@ enum class Stage { idle, configuring, chamber_settling, manikin_starting, acquir
 const char* stage_name(Stage s);  // as in status, events and the trials table
 
 // Trial quality flags (trials.quality_flags).
-enum TrialFlag : std::int64_t { flag_device_gap = 1, flag_safety_stop = 2, flag_never_steady = 4, flag_dropped_samples = 8 };
+enum TrialFlag : std::int64_t {
+    flag_device_gap = 1,
+    flag_safety_stop = 2,
+    flag_never_steady = 4,
+    flag_dropped_samples = 8,
+    flag_enclosure_excursion = 16,  // the enclosure left its target while acquiring (longer than excursion_limit_min)
+};
 
 struct DaemonOptions {
     config::Config config;
@@ -216,6 +222,8 @@ private:
     // Chamber settling by criteria (issue 31): on target since, the timeout's alarm said once, and
     // the air's distance from its target over the last minutes (for the ETA).
     std::optional<std::int64_t> on_target_since_ns_;
+    std::optional<std::int64_t> off_target_since_ns_;  // acquiring: when the enclosure left its target
+    bool in_excursion_ = false;                         // ... for longer than the plan allows
     bool settle_timeout_alarmed_ = false;
     std::deque<std::pair<std::int64_t, double>> settle_off_history_;  // (mono ns, |air - target| °C)
     std::int64_t acquiring_since_ns_ = 0;

@@ -189,3 +189,36 @@ TEST_CASE("manikind --exit-when-done exits 6 when the campaign ends aborted, 0 w
     CHECK(WEXITSTATUS(ok) == 0);
     fs::remove_all(dir);
 }
+
+TEST_CASE("excursion: the enclosure off target while acquiring flags the trial, alarms, and restarts the steady window",
+          "[daemon][settling]") {
+    DaemonFixture f;
+    auto& d = f.daemon();
+    auto plan = manikind::test::quick_plan("excursion");
+    plan.settle_window_s = 60.0;
+    REQUIRE(d.start_campaign(plan).empty());
+    for (int i = 0; i < 4 * 3600 && stage_of(d) != "acquiring"; ++i) d.step_virtual(1.0);
+    REQUIRE(stage_of(d) == "acquiring");
+    for (int i = 0; i < 600; ++i) d.step_virtual(1.0);
+    const double filled_before = d.status_json()["trial"]["window_filled_fraction"].get<double>();
+    CHECK(filled_before > 0.2);
+    // Someone turns the chamber down mid-trial: the enclosure leaves its target.
+    REQUIRE(d.set_chamber(30.0, 27.0).empty());
+    bool alarm = false;
+    for (int i = 0; i < 1800 && !alarm; ++i) {
+        d.step_virtual(1.0);
+        for (const auto& a : d.alarms_json()) alarm = alarm || a.value("kind", "") == "excursion";
+    }
+    CHECK(alarm);
+    REQUIRE(d.set_chamber(35.0, 27.0).empty());  // and back
+    bool back = false;
+    for (int i = 0; i < 3 * 3600 && !back; ++i) {
+        d.step_virtual(1.0);
+        back = has_event(d, "excursion", "back on target");
+    }
+    REQUIRE(back);
+    CHECK(d.status_json()["trial"]["window_filled_fraction"].get<double>() < 0.05);  // the window starts again
+    const auto trials = d.db().trials(*d.db().find_campaign("excursion"));
+    REQUIRE(trials.size() == 1);
+    CHECK((trials.front().quality_flags & manikind::flag_enclosure_excursion) != 0);
+}
