@@ -241,7 +241,7 @@ manikind::analysis::CaseResult case_with(int id, double skin_c, std::vector<doub
 
 }  // namespace
 
-TEST_CASE("interlab report: cases matched by id across labs; a lab with one replicate or another setpoint is left "
+TEST_CASE("interlab report: cases matched by id across labs, a lab with one replicate or another setpoint is left "
           "out of the estimate, with a note",
           "[interlab]") {
     using namespace manikind::analysis;

@@ -198,7 +198,7 @@ TEST_CASE("format 2 bad input: an undeclared channel, a bad quality code, a bad 
                Catch::Contains(":2:") && Catch::Contains("utc") && Catch::Contains("ISO 8601"));
 }
 
-TEST_CASE("ISO 8601 UTC: written with milliseconds, read back; malformed times refused") {
+TEST_CASE("ISO 8601 UTC: written with milliseconds, read back, malformed times refused") {
     CHECK(an::iso_utc_ms(0) == "1970-01-01T00:00:00.000Z");
     CHECK(an::iso_utc_ms(1795000000123456789) == "2026-11-18T11:06:40.123Z");
     CHECK(an::parse_iso_utc("2026-11-18T11:06:40.123Z") == 1795000000123000000);

@@ -103,7 +103,7 @@ TEST_CASE("streaming analysis: a bad trial file gives read_campaign's error text
               .find("c09-r3.csv:4:29 (field 'z02_flux_w_m2'): expected a number, found 'abc'") != std::string::npos);
 }
 
-TEST_CASE("read_campaign_metadata reads campaign.json only; read_trial_data one trial") {
+TEST_CASE("read_campaign_metadata reads campaign.json only, read_trial_data one trial") {
     const auto whole = an::read_campaign(recordings("good-2zone"));
     const auto metadata = an::read_campaign_metadata(recordings("good-2zone"));
     CHECK(metadata.name == whole.name);

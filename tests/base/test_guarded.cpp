@@ -6,7 +6,7 @@
 
 #include "base/guarded.hpp"
 
-TEST_CASE("run_guarded: an exception escaping a thread's body is counted and the body runs again; a return ends it",
+TEST_CASE("run_guarded: an exception escaping a thread's body is counted and the body runs again, a return ends it",
           "[base][threads]") {
     const auto before = manikind::escaped_exceptions().load();
     int runs = 0;

@@ -157,7 +157,7 @@ TEST_CASE("cli contract: checks with a negative verdict exit 5", "[cli][contract
     fs::remove_all(dir);
 }
 
-TEST_CASE("cli contract: the daemon's refusals exit 4; no results yet is an answer", "[cli][contract]") {
+TEST_CASE("cli contract: the daemon's refusals exit 4, no results yet is an answer", "[cli][contract]") {
     const auto dir = fresh_dir("refused");
     const std::string socket = (dir / "d.sock").string();
     auto d = DaemonProcess::spawn({std::string(MANIKIND_BIN_DIR) + "/manikind", "--virtual", "--socket", socket, "--database",

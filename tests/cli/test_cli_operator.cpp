@@ -44,7 +44,7 @@ TEST_CASE("manikin campaign check: the example passes, a misspelt key fails with
     fs::remove_all(dir);
 }
 
-TEST_CASE("manikin campaigns lists a database's campaigns; status, trial watch and live talk to a running daemon",
+TEST_CASE("manikin campaigns lists a database's campaigns, status, trial watch and live talk to a running daemon",
           "[cli][campaign]") {
     const auto dir = fresh_dir("console");
     const std::string socket = (dir / "d.sock").string(), db = (dir / "d.db").string();

@@ -350,7 +350,7 @@ TEST_CASE("results so far are stored after each trial, marked interim, with the 
     CHECK(interim["twin_parity"][0]["case"] == 1);
 }
 
-TEST_CASE("a chamber that refuses setpoints for 4 min delays the trial instead of failing it; for longer the trial fails and the campaign continues", "[daemon][campaign][faults]") {
+TEST_CASE("a chamber that refuses setpoints for 4 min delays the trial instead of failing it, for longer the trial fails and the campaign continues", "[daemon][campaign][faults]") {
     SECTION("4 min of Modbus exceptions at the trial's start: retried, the trial completes") {
         DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"chamber:exception@0-240"}; });
         REQUIRE(f.daemon().start_campaign(manikind::test::quick_plan("glitch")).empty());

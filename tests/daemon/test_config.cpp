@@ -64,7 +64,7 @@ TEST_CASE("config: TOML syntax errors and missing files name the file and line",
     CHECK_THROWS_WITH(config::load_config("/nonexistent/manikind.toml"), Catch::Contains("cannot open"));
 }
 
-TEST_CASE("config: [lab] chamber and manikin name the instruments; a real lab that omits them is warned, not given the "
+TEST_CASE("config: [lab] chamber and manikin name the instruments, a real lab that omits them is warned, not given the "
           "simulated ones",
           "[config]") {
     const auto simulated = config::parse_config("[recorder]\ncommit_interval_s = 2\n", "sim.toml");

@@ -114,7 +114,7 @@ struct ServedFixture {
 
 }  // namespace
 
-TEST_CASE("a client that never reads its replies is dropped past the bound; an abort meanwhile is answered "
+TEST_CASE("a client that never reads its replies is dropped past the bound, an abort meanwhile is answered "
           "within a second",
           "[daemon][api][hardening]") {
     ServedFixture s([](ControlOptions& o) { o.max_unread_reply_bytes = 2 * 1024 * 1024; });
@@ -155,7 +155,7 @@ TEST_CASE("a slow writer cannot hold the server: abort is answered at once, the 
     ::close(slow);
 }
 
-TEST_CASE("idle clients beyond the cap make room for a new one, which is served; busy slots refuse with a reason",
+TEST_CASE("idle clients beyond the cap make room for a new one, which is served, busy slots refuse with a reason",
           "[daemon][api][hardening]") {
     ServedFixture s([](ControlOptions& o) { o.max_clients = 8; });
     std::vector<int> idle;
@@ -217,7 +217,7 @@ TEST_CASE("the CLI's call gives up after its timeout and says what it waited for
     ::close(listener);
 }
 
-TEST_CASE("a second daemon on the same database or socket is refused with the holder's PID; the first is unharmed",
+TEST_CASE("a second daemon on the same database or socket is refused with the holder's PID, the first is unharmed",
           "[daemon][lock][hardening]") {
     ServedFixture first;
     const std::string pid = std::to_string(::getpid());
@@ -245,7 +245,7 @@ TEST_CASE("a second daemon on the same database or socket is refused with the ho
     CHECK(fs::exists(first.options.socket_path));
 }
 
-TEST_CASE("a stale socket is replaced; a live one or a file that is not a socket never is", "[daemon][lock][hardening]") {
+TEST_CASE("a stale socket is replaced, a live one or a file that is not a socket never is", "[daemon][lock][hardening]") {
     DaemonFixture f;
     ControlOptions o;
     o.token = random_token();

@@ -30,7 +30,7 @@ std::string stage_of(manikind::LabDaemon& d) { return d.status_json()["stage"].g
 
 }  // namespace
 
-TEST_CASE("settling: the manikin starts only with the enclosure on target and stable; status says what is awaited",
+TEST_CASE("settling: the manikin starts only with the enclosure on target and stable, and status says what is awaited",
           "[daemon][settling]") {
     DaemonFixture f;
     auto& d = f.daemon();
@@ -110,7 +110,7 @@ TEST_CASE("abort: who and why are recorded, the lab goes to standby, and the out
     CHECK(trials.front().reason.find("by user alice") != std::string::npos);
 }
 
-TEST_CASE("a campaign done with every trial done has outcome ok; standby follows its end", "[daemon][abort]") {
+TEST_CASE("a campaign done with every trial done has outcome ok, and standby follows its end", "[daemon][abort]") {
     DaemonFixture f;
     auto& d = f.daemon();
     REQUIRE(d.start_campaign(manikind::test::quick_plan("fine")).empty());
@@ -139,7 +139,7 @@ TEST_CASE("limits that fit the manikin: a heater limit below the heaters' rating
     CHECK(problems.size() == 1);
 }
 
-TEST_CASE("limits that fit the manikin: standard clothing-test conditions pass the shipped configuration; a case the "
+TEST_CASE("limits that fit the manikin: standard clothing-test conditions pass the shipped configuration, and a case the "
           "heaters cannot hold is refused before any heating",
           "[daemon][limits]") {
     const auto c = manikind::config::default_config();

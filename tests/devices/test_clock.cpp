@@ -12,7 +12,7 @@
 
 using manikind::drivers::ManualClock;
 
-TEST_CASE("clock: the virtual clock stands still between steps; utc follows mono", "[clock]") {
+TEST_CASE("clock: the virtual clock stands still between steps, utc follows mono", "[clock]") {
     ManualClock c(1'000'000'000'000);
     CHECK(c.mono_ns() == 0);
     CHECK(c.mono_ns() == 0);

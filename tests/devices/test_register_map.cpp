@@ -5,7 +5,7 @@
 
 using namespace manikind;
 
-TEST_CASE("register map: the shipped Eurotherm 3200 map loads; PV is address 1, target setpoint 2 (HA028651 15.5)", "[register_map]") {
+TEST_CASE("register map: the shipped Eurotherm 3200 map loads, PV is address 1, target setpoint 2 (HA028651 15.5)", "[register_map]") {
     const auto map = load_register_map(std::string(MANIKIND_CONFIG_DIR) + "/chamber_registers.toml");
     CHECK(map.family == "Eurotherm 3200 series");
     const auto& pv = map.at("air_temp_pv_c");

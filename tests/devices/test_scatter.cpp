@@ -213,7 +213,7 @@ void run_trial(sim::World& w) {
 
 }  // namespace
 
-TEST_CASE("world: each trial draws new scatter; recorded minus actual is the probe error", "[devices][scatter]") {
+TEST_CASE("world: each trial draws new scatter, recorded minus actual is the probe error", "[devices][scatter]") {
     const sim::ReplicateScatter scatter;  // the defaults
     sim::World w(world_options(5, scatter));
     const int n_trials = 120, n_reads = 100;

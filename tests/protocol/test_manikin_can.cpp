@@ -54,7 +54,7 @@ TEST_CASE("manikin CAN: a candump -l line written by hand from docs/manikin-can-
     CHECK(to_candump_line(live, 1718000000.123456) == "(1718000000.123456) can0 105#AC0D7B00C8010A03");
 }
 
-TEST_CASE("manikin CAN: setpoints, heartbeat and control round trip; values saturate, never wrap", "[protocol][can]") {
+TEST_CASE("manikin CAN: setpoints, heartbeat and control round trip, values saturate, never wrap", "[protocol][can]") {
     const auto s = decode_as<Setpoint>(encode(Setpoint{0, ControlMode::constant_heat_flux, 150.5, true, 120.0}));
     CHECK(s.zone == 0);
     CHECK(s.mode == ControlMode::constant_heat_flux);

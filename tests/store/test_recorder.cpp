@@ -204,11 +204,10 @@ TEST_CASE("database: [recorder] journal = rollback puts the file in rollback mod
     CHECK(Database::open(path).journal_mode() == "wal");
     {
         // Leaving WAL needs the file to itself: with another connection open it stays WAL, at once.
+        // (No wall-clock bound here: a loaded machine must not fail a correct program.)
         auto other = Database::open(path);
-        const auto t0 = std::chrono::steady_clock::now();
         auto db = Database::open(path, Durability::process, Journal::rollback);
         CHECK(db.journal_mode() == "wal");
-        CHECK(std::chrono::steady_clock::now() - t0 < std::chrono::seconds(4));  // not the 5-s busy timeout
         CHECK(db.sample_count(f.trial) == 2);
     }
     CHECK(Database::open(path, Durability::process, Journal::rollback).journal_mode() == "truncate");
@@ -474,7 +473,7 @@ TEST_CASE("database: each trial's samples are one id range, numbered as stored, 
     CHECK(details.find("SCAN s") == std::string::npos);
 }
 
-TEST_CASE("database: a set-up is stored once per content and named by its SHA-256; trials point at theirs (v7)", "[recorder]") {
+TEST_CASE("database: a set-up is stored once per content and named by its SHA-256, trials point at theirs (v7)", "[recorder]") {
     TempDir dir("setup");
     auto db = Database::open(dir.path / "trials.db");
     const auto f = make_fixture(db);
