@@ -306,11 +306,12 @@ bool LabDaemon::flush_all_locked() {
     return recorder_->flush() && overflow_.empty() && unnamed_.empty();
 }
 
-double LabDaemon::enclosure_rh_pct() const {
+// The enclosure's air (°C) or RH (%): the mean of the EE181 probes' good live readings; NaN without one.
+double LabDaemon::enclosure_mean(const char* quantity_suffix) const {
     double sum = 0;
     int n = 0;
     for (const auto& [key, s] : live_)
-        if (key.starts_with("datalogger/ee181_") && key.ends_with(".air_rh_pct") && s.quality == drivers::Quality::good)
+        if (key.starts_with("datalogger/ee181_") && key.ends_with(quantity_suffix) && s.quality == drivers::Quality::good)
             sum += s.value, ++n;
     return n ? sum / n : std::nan("");
 }
@@ -356,14 +357,6 @@ nlohmann::json LabDaemon::settling_json_locked(std::int64_t now) const {
             {"timed_out", settle_timeout_alarmed_}};
 }
 
-double LabDaemon::enclosure_air_c() const {
-    double sum = 0;
-    int n = 0;
-    for (const auto& [key, s] : live_)
-        if (key.starts_with("datalogger/ee181_") && key.ends_with(".air_temp_c") && s.quality == drivers::Quality::good)
-            sum += s.value, ++n;
-    return n ? sum / n : std::nan("");
-}
 
 LabDaemon::SteadyCheck LabDaemon::check_steady_window_locked(std::int64_t now) {
     const double window_s = o_.config.steady_state.window_s;

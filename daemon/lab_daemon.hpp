@@ -158,8 +158,9 @@ private:
     void write(recorder::Recorder::Job job);
     double stage_elapsed_s() const;
     std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
-    double enclosure_air_c() const;
-    double enclosure_rh_pct() const;
+    double enclosure_mean(const char* quantity_suffix) const;
+    double enclosure_air_c() const { return enclosure_mean(".air_temp_c"); }
+    double enclosure_rh_pct() const { return enclosure_mean(".air_rh_pct"); }
     // Where settling stands: targets, distances, the window, an ETA (status trial.settling).
     nlohmann::json settling_json_locked(std::int64_t now_ns) const;
     // The steady-state rule's inputs now: evicts samples older than the window, then measures.
