@@ -237,14 +237,13 @@ void LabDaemon::record_sample_locked(const drivers::Sample& s) {
         }
     }
     std::int64_t channel_id = 0;
-    // A channel not yet in the database while storage waits (locked, full, failing): the reading
-    // waits with its name and is recorded once the channel can be added (retry_unnamed_locked).
-    const bool named = channel_ids_.count(key) != 0;
-    if (!named && !unnamed_.empty()) {
-        hold_unnamed_locked(s);
-        return;
-    }
-    if (!storage_allows_locked([&] { channel_id = recorded_channel(s.device, s.channel); })) {
+    if (const auto known = channel_ids_.find(key); known != channel_ids_.end()) {
+        channel_id = known->second;  // the common case: one lookup, no call to the writer
+    } else if (!unnamed_.empty() ||
+               !storage_allows_locked([&] { channel_id = recorded_channel(s.device, s.channel); })) {
+        // A channel not yet in the database while storage waits (locked, full, failing): the
+        // reading waits with its name and is recorded once the channel can be added
+        // (retry_unnamed_locked), after those already waiting.
         hold_unnamed_locked(s);
         return;
     }
