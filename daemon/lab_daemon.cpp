@@ -259,7 +259,9 @@ void LabDaemon::hold_unnamed_locked(const drivers::Sample& s) {
 // Each tick: the held readings whose channel can now be added go on, in the order they came.
 void LabDaemon::retry_unnamed_locked() {
     while (!unnamed_.empty()) {
-        const auto& [s, trial] = unnamed_.front();
+        // Not a structured binding: clang 14 refuses to capture one in the lambda below.
+        const drivers::Sample& s = unnamed_.front().first;
+        const std::int64_t trial = unnamed_.front().second;
         std::int64_t channel_id = 0;
         if (!storage_allows_locked([&] { channel_id = recorded_channel(s.device, s.channel); })) return;
         offer_row_locked({trial, channel_id, s.mono_ns, s.utc_ns, s.value, static_cast<std::uint8_t>(s.quality)});
