@@ -318,7 +318,7 @@ double LabDaemon::enclosure_mean(const char* quantity_suffix) const {
 }
 
 nlohmann::json LabDaemon::settling_json_locked(std::int64_t now) const {
-    const auto target = enclosure_target(current_->c);
+    const EnclosureTarget& target = target_;
     const double air = enclosure_air_c(), rh = enclosure_rh_pct();
     const double air_off = air - target.air_c, rh_off = rh - target.rh_pct;
     const double window_s = plan_->settle_window_s;
@@ -576,15 +576,17 @@ void LabDaemon::write(recorder::Recorder::Job job) {
     // makes it when it can. Only past its bound (100,000 writes waiting) is one refused, and
     // counted (status storage.writes_lost).
     if (storage_allows_locked([&] { recorder_->call(job); })) return;
-    if (!recorder_->post(std::move(job))) spdlog::error("a write to the database was refused: {} already wait", 100000);
+    if (!recorder_->post(std::move(job)))
+        spdlog::error("a write to the database was refused: {} already wait", recorder::RecorderOptions{}.max_jobs);
 }
 
 void LabDaemon::storage_stop_locked(const std::string& why) {
     if (storage_full_) return;
     storage_full_ = true;
     storage_error_ = why;
-    dropped_when_full_ = recorder_->stats().dropped;
-    jobs_lost_when_full_ = recorder_->stats().jobs_lost;
+    const auto rs = recorder_->stats();
+    dropped_when_full_ = rs.dropped;
+    jobs_lost_when_full_ = rs.jobs_lost;
     if (acq_) acq_->manikin().set_run(false);  // no heating that cannot be recorded
     const std::string running = plan_ ? fmt::format(" '{}' interrupted (start it again to continue);", plan_->name) : "";
     event("error", "disk_full",
@@ -931,10 +933,10 @@ void LabDaemon::advance_locked() {
             on_target_since_ns_.reset();
             settle_timeout_alarmed_ = false;
             settle_off_history_.clear();
-            const auto target = enclosure_target(current_->c);
+            target_ = enclosure_target(current_->c);  // once a trial: settling and excursions read it each tick
             enter(Stage::chamber_settling,
                   fmt::format("waiting for the enclosure at {} ± {} °C, {} ± {} % RH, stable for {:.0f} min",
-                              target.air_c, plan_->settle_tolerance_c, target.rh_pct,
+                              target_.air_c, plan_->settle_tolerance_c, target_.rh_pct,
                               plan_->settle_tolerance_rh_pct, plan_->settle_window_s / 60));
             return;
         }
@@ -946,7 +948,7 @@ void LabDaemon::advance_locked() {
             const auto window_ns = static_cast<std::int64_t>(plan_->settle_window_s * 1e9);
             enclosure_range_.evict_before(now - window_ns - 1'000'000'000);  // a reading's period of slack
             const auto& c = current_->c;
-            const auto target = enclosure_target(c);
+            const EnclosureTarget& target = target_;
             const double air = enclosure_air_c(), rh = enclosure_rh_pct();
             const bool on_target = std::isfinite(air) && std::abs(air - target.air_c) <= plan_->settle_tolerance_c &&
                                    (!std::isfinite(rh) || std::abs(rh - target.rh_pct) <= plan_->settle_tolerance_rh_pct);
@@ -998,7 +1000,7 @@ void LabDaemon::advance_locked() {
         case Stage::acquiring: {
             // Excursions (issue 31): the enclosure off its target for longer than the plan allows.
             {
-                const auto target = enclosure_target(current_->c);
+                const EnclosureTarget& target = target_;
                 const double air = enclosure_air_c(), rh = enclosure_rh_pct();
                 const bool off = (std::isfinite(air) && std::abs(air - target.air_c) > plan_->settle_tolerance_c) ||
                                  (std::isfinite(rh) && std::abs(rh - target.rh_pct) > plan_->settle_tolerance_rh_pct);

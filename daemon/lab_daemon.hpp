@@ -222,6 +222,7 @@ private:
     analysis::SlidingRange enclosure_range_;
     // Chamber settling by criteria (issue 31): on target since, the timeout's alarm said once, and
     // the air's distance from its target over the last minutes (for the ETA).
+    EnclosureTarget target_;  // the running trial's enclosure target, resolved when it starts settling
     std::optional<std::int64_t> on_target_since_ns_;
     std::optional<std::int64_t> off_target_since_ns_;  // acquiring: when the enclosure left its target
     bool in_excursion_ = false;                         // ... for longer than the plan allows

@@ -207,15 +207,19 @@ Recorder::Attempt Recorder::attempt(const std::function<void()>& write) {
         write();
         a.done = true;
     } catch (const StorageFull& e) {
-        a.full = e.what();
+        a.full = a.message = e.what();
         a.error = std::current_exception();
     } catch (const StorageBusy& e) {
-        a.locked = e.what();
+        a.locked = a.message = e.what();
         a.error = std::current_exception();
     } catch (const StorageFault& e) {
-        a.fault = e.what();
+        a.fault = a.message = e.what();
+        a.error = std::current_exception();
+    } catch (const std::exception& e) {
+        a.message = e.what();
         a.error = std::current_exception();
     } catch (...) {
+        a.message = "an exception that is not a std::exception";
         a.error = std::current_exception();
     }
     return a;
@@ -280,15 +284,8 @@ bool Recorder::run_jobs(Database& db, std::unique_lock<std::mutex>& lock) {
         const bool give_up = waits && stopping && job.attempts + 1 >= options_.max_commit_attempts;
         if (give_up) spdlog::error("recorder: a write (event or state) discarded at shutdown after {} attempts: {}",
                                    job.attempts + 1, *a.waiting());
-        if (!a.done && !a.waiting() && !job.reply) {
-            try {
-                std::rethrow_exception(a.error);
-            } catch (const std::exception& e) {
-                spdlog::error("recorder: a write (event or state) failed and is not kept: {}", e.what());
-            } catch (...) {
-                spdlog::error("recorder: a write (event or state) failed and is not kept");
-            }
-        }
+        if (!a.done && !a.waiting() && !job.reply)
+            spdlog::error("recorder: a write (event or state) failed and is not kept: {}", a.message);
         lock.lock();
         note_attempt_locked(a, !job.reply);
         if (waits && !give_up) {
@@ -356,15 +353,8 @@ void Recorder::write_loop(Database& db) {
         log_transition(path_.string(), a.done, a.full, a.locked, a.fault, was_full, was_locked, was_fault);
         const std::optional<std::string>& waiting = a.waiting();
         if (!a.done && (!waiting || stopping)) {
-            try {
-                std::rethrow_exception(a.error);
-            } catch (const std::exception& e) {
-                spdlog::error("recorder: commit of {} rows failed{} (attempt {} of {}): {}", n, stopping ? " at shutdown" : "",
-                              attempts + 1, options_.max_commit_attempts, e.what());
-            } catch (...) {
-                spdlog::error("recorder: commit of {} rows failed (attempt {} of {})", n, attempts + 1,
-                              options_.max_commit_attempts);
-            }
+            spdlog::error("recorder: commit of {} rows failed{} (attempt {} of {}): {}", n, stopping ? " at shutdown" : "",
+                          attempts + 1, options_.max_commit_attempts, a.message);
             ++attempts;
         }
         const bool give_up = !a.done && attempts >= options_.max_commit_attempts;

@@ -141,6 +141,7 @@ private:
         bool done = false;
         std::optional<std::string> full, locked, fault;  // a wait-and-retry failure, by kind
         std::exception_ptr error;                        // what it threw, if anything
+        std::string message;                             // its what(), for the log
         const std::optional<std::string>& waiting() const { return full ? full : locked ? locked : fault; }
     };
     static Attempt attempt(const std::function<void()>& write);
