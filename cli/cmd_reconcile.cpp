@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <cstdint>
 #include <string>
 
@@ -31,7 +32,7 @@ namespace rc = analysis::reconcile;
 void add_reconcile_command(CLI::App& app) {
     struct Opts {
         CampaignSource source;
-        std::string twin = "baseline", plots, write_twin;
+        std::string twin = "baseline", plots, write_twin, noise_from;
         bool json = false, no_pairs = false, power = false;
         double alpha = 0.01;
         int simulations = 2000;
@@ -55,6 +56,10 @@ void add_reconcile_command(CLI::App& app) {
         ->check(CLI::Range(200, 100000))
         ->capture_default_str();
     cmd->add_option("--seed", o->seed, "Seed of the simulations (results are reproducible)")->capture_default_str();
+    cmd->add_option("--noise-from", o->noise_from,
+                    "Carry the lab's replicate scatter from an earlier campaign with replicates (a folder, or with --db a "
+                    "campaign in the same database) for a campaign with one replicate per case: without it no claim "
+                    "is made there (docs/reconcile.md, \"One replicate\")");
     cmd->add_flag("--power", o->power, "Plan instead: per candidate, the smallest effect named with 80 % power for "
                                        "this campaign's cases and noise, at its replicates and at 3, 5 and 10");
     cmd->footer("The twin sees only the campaign's recorded conditions. The noise of every case mean comes from the\n"
@@ -82,7 +87,22 @@ void add_reconcile_command(CLI::App& app) {
         auto cases = rc::case_inputs_from_results(result, campaign.zone_map, &skipped);
         for (int id : skipped) spdlog::warn("case {}: no air temperature or humidity in the steady window; left out", id);
         if (cases.empty()) throw UserError(fmt::format("{}: no case has a steady window to compare", campaign_label));
-        const auto model = rc::make_twin_model(std::move(cases), base);
+        std::optional<rc::CarriedNoise> carried;
+        if (!o->noise_from.empty()) {
+            CampaignSource from = o->source;
+            from.campaign = o->noise_from;
+            const analysis::Campaign earlier = read_campaign_source(from);
+            const auto earlier_result = analysis::analyze_campaign(earlier);
+            auto earlier_cases = rc::case_inputs_from_results(earlier_result, earlier.zone_map);
+            if (earlier_cases.empty()) throw UserError(fmt::format("--noise-from {}: no case has a steady window", o->noise_from));
+            const auto earlier_model = rc::make_twin_model(std::move(earlier_cases), base);
+            try {
+                carried = rc::carried_noise(*earlier_model, earlier.instruments, earlier.name.empty() ? o->noise_from : earlier.name);
+            } catch (const std::invalid_argument& e) {
+                throw UserError(fmt::format("--noise-from {}", e.what()));
+            }
+        }
+        const auto model = rc::make_twin_model(std::move(cases), base, std::move(carried));
         rc::Options opt;
         opt.try_pairs = !o->no_pairs;
         opt.alpha = o->alpha;

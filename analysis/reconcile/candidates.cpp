@@ -76,9 +76,9 @@ std::string plain_statement(const CandidateTerm& c, const std::vector<double>& v
         const double theory = c.parameters[0].theory.value_or(146.0);
         const bool agrees = std::abs(v[0] - theory) <= 2.0 * u[0];
         return fmt::format("Humidity-driven buoyancy is missing from the twin: the recordings say the free-convection "
-                           "drive is dT + {:.1f} (±{:.1f}) w dC, {} the {:.0f} that beta_C alpha/(beta_T D) predicts. "
+                           "drive is dT + {:.1f} (±{:.1f}) w dC, {} {:.0f} that beta_C alpha/(beta_T D) predicts. "
                            "Vapour from the wet skin lightens the near-skin air and, in hot air, opposes the downward "
-                           "thermal plume.", v[0], u[0], agrees ? "consistent with" : "not the", theory);
+                           "thermal plume.", v[0], u[0], agrees ? "consistent with the" : "not the", theory);
     }
     if (c.term == "diffusion_floor")
         return fmt::format("Heat leaves by diffusion even when the plume stalls: a floor h0 = {:.2f} (±{:.2f}) W/m2K "

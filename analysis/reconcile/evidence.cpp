@@ -180,6 +180,189 @@ Eigen::MatrixXd simulate(const Eigen::VectorXd& mean, int count, std::mt19937_64
     return y;
 }
 
+Eigen::MatrixXd local_directions(const ForwardModel& model, const Subset& s, const std::vector<double>& base_pred,
+                                 std::vector<std::pair<int, bool>>* kinds) {
+    const auto& pts = model.points();
+    std::map<int, Eigen::Index> column;
+    std::vector<int> zones;
+    for (std::size_t i : s.idx)
+        if (column.emplace(pts[i].zone, static_cast<Eigen::Index>(zones.size())).second) zones.push_back(pts[i].zone);
+    const auto z_count = static_cast<Eigen::Index>(zones.size());
+    Eigen::MatrixXd a = Eigen::MatrixXd::Zero(s.size(), 2 * z_count);
+    for (Eigen::Index i = 0; i < s.size(); ++i) {
+        const std::size_t point = s.idx[static_cast<std::size_t>(i)];
+        const Eigen::Index z = column[pts[point].zone];
+        a(i, 2 * z) = 1.0;
+        a(i, 2 * z + 1) = base_pred[point];
+    }
+    if (kinds) {
+        kinds->clear();
+        for (int z : zones) {
+            kinds->emplace_back(z, false);
+            kinds->emplace_back(z, true);
+        }
+    }
+    return s.llt.matrixL().solve(a);
+}
+
+Eigen::VectorXd linear_evidence(const Eigen::MatrixXd& directions, const Eigen::VectorXd& r) {
+    Eigen::VectorXd out(directions.cols());
+    for (Eigen::Index j = 0; j < directions.cols(); ++j) {
+        const double info = directions.col(j).squaredNorm();
+        out(j) = info > 1e-12 ? std::pow(directions.col(j).dot(r), 2) / info : 0.0;
+    }
+    return out;
+}
+
+namespace {
+
+constexpr double kShiftCap = 16.0;      // whitened norm: beyond, a shift is 8 sd from being preferred
+constexpr double kBasisTolerance = 0.02; // largest column left out of the basis, whitened units
+constexpr int kCampaignsPerDraw = 50;
+
+// Columns of the grids near the twin and the linear directions, in an orthonormal basis found by
+// pivoted Gram-Schmidt (stops when every column is represented within kBasisTolerance).
+struct ShiftBasis {
+    Eigen::MatrixXd u;                        // n x r
+    Eigen::MatrixXd grid_coef;                // r x m, the kept grid columns
+    std::vector<std::pair<std::size_t, Eigen::Index>> grid_column;  // (grid, grid point) per kept column
+    Eigen::MatrixXd linear_coef;              // r x L, unit directions
+};
+
+ShiftBasis shift_basis(const Subset& s, const std::vector<WhitenedGrid>& grids, const Eigen::MatrixXd& linear) {
+    ShiftBasis out;
+    std::vector<Eigen::VectorXd> cols;
+    for (std::size_t k = 0; k < grids.size(); ++k) {
+        const auto& wg = grids[k];
+        for (Eigen::Index g = 0; g < wg.w.cols(); ++g) {
+            if (!wg.grid->valid[static_cast<std::size_t>(g)]) continue;
+            Eigen::VectorXd d = wg.w.col(g) - s.w_base;
+            if (d.norm() > kShiftCap) continue;
+            out.grid_column.emplace_back(k, g);
+            cols.push_back(std::move(d));
+        }
+    }
+    const auto m = static_cast<Eigen::Index>(cols.size());
+    Eigen::MatrixXd d(s.size(), m + linear.cols());
+    for (Eigen::Index j = 0; j < m; ++j) d.col(j) = cols[static_cast<std::size_t>(j)];
+    for (Eigen::Index j = 0; j < linear.cols(); ++j) {
+        const double norm = linear.col(j).norm();
+        d.col(m + j) = norm > 0.0 ? Eigen::VectorXd(linear.col(j) / norm) : Eigen::VectorXd::Zero(s.size());
+    }
+    Eigen::MatrixXd resid = d;
+    std::vector<Eigen::VectorXd> basis;
+    while (static_cast<Eigen::Index>(basis.size()) < s.size()) {
+        Eigen::Index best = -1;
+        double best_norm = kBasisTolerance;
+        for (Eigen::Index j = 0; j < resid.cols(); ++j) {
+            const double v = resid.col(j).norm();
+            if (v > best_norm) {
+                best_norm = v;
+                best = j;
+            }
+        }
+        if (best < 0) break;
+        Eigen::VectorXd q = resid.col(best) / best_norm;
+        for (const auto& b : basis) q -= b.dot(q) * b;  // once more against round-off
+        q.normalize();
+        resid -= q * (q.transpose() * resid);
+        basis.push_back(std::move(q));
+    }
+    out.u.resize(s.size(), static_cast<Eigen::Index>(basis.size()));
+    for (std::size_t i = 0; i < basis.size(); ++i) out.u.col(static_cast<Eigen::Index>(i)) = basis[i];
+    const Eigen::MatrixXd coef = out.u.transpose() * d;
+    out.grid_coef = coef.leftCols(m);
+    out.linear_coef = coef.rightCols(linear.cols());
+    return out;
+}
+
+}  // namespace
+
+FamilyNull family_null(const Subset& s, const std::vector<WhitenedGrid>& grids, const Eigen::MatrixXd& linear,
+                       const std::function<Eigen::MatrixXd(std::uint64_t)>& draw_covariance, int simulations,
+                       std::uint64_t seed) {
+    FamilyNull out;
+    const ShiftBasis sb = shift_basis(s, grids, linear);
+    out.basis_rank = static_cast<int>(sb.u.cols());
+    const int draws = draw_covariance ? std::max(1, simulations / kCampaignsPerDraw) : 1;
+    const int per_draw = draw_covariance ? kCampaignsPerDraw : simulations;
+    out.covariance_draws = draw_covariance ? draws : 0;
+    out.max_evidence.assign(static_cast<std::size_t>(draws * per_draw), 0.0);
+    out.chi2.assign(out.max_evidence.size(), 0.0);
+    // Judged under a covariance S* the whitened shift d and data z (z ~ N(0, I): the fitted model
+    // is the truth) give chi2 reductions 2 d'Qz - d'Qd with Q = L' S*^-1 L (L the fitted
+    // model's factor); with d = U c, that is 2 c'(QU)'z - c'(U'QU)c.
+    auto one_draw = [&](int b) {
+        Eigen::MatrixXd qu = sb.u;
+        std::mt19937_64 rng(seed + 104729ULL * static_cast<std::uint64_t>(b + 1));
+        const Eigen::MatrixXd z = simulate(Eigen::VectorXd::Zero(s.size()), per_draw, rng);
+        Eigen::RowVectorXd chi2;
+        if (draw_covariance) {
+            const Eigen::MatrixXd cov = draw_covariance(seed + 7919ULL * static_cast<std::uint64_t>(b + 1));
+            Eigen::LLT<Eigen::MatrixXd> llt(cov);
+            if (llt.info() != Eigen::Success) return false;
+            const Eigen::MatrixXd lu = s.llt.matrixL() * sb.u;
+            qu = s.llt.matrixU() * llt.solve(lu);
+            // The twin's own chi2 judged by the drawn covariance: z'Qz = |L*^-1 L z|².
+            const Eigen::MatrixXd lz = s.llt.matrixL() * z;
+            chi2 = llt.matrixL().solve(lz).colwise().squaredNorm();
+        } else {
+            chi2 = z.colwise().squaredNorm();
+        }
+        const Eigen::MatrixXd g = sb.u.transpose() * qu;
+        const Eigen::RowVectorXd quad = (sb.grid_coef.array() * (g * sb.grid_coef).array()).colwise().sum();
+        const Eigen::RowVectorXd lin_info = (sb.linear_coef.array() * (g * sb.linear_coef).array()).colwise().sum();
+        const Eigen::MatrixXd p = qu.transpose() * z;                     // r x S
+        const Eigen::MatrixXd e_grid = 2.0 * (sb.grid_coef.transpose() * p);  // m x S, before the quadratic
+        const Eigen::MatrixXd e_lin = sb.linear_coef.transpose() * p;     // L x S
+        for (Eigen::Index c = 0; c < per_draw; ++c) {
+            double best = 0.0;
+            const auto& gc = sb.grid_column;
+            for (std::size_t j = 0; j < gc.size(); ++j) {
+                const double e = e_grid(static_cast<Eigen::Index>(j), c) - quad(static_cast<Eigen::Index>(j));
+                if (e <= best) continue;
+                double refined = e;
+                // The parabola through the neighbours, as profile_min refines the observed.
+                const bool left = j > 0 && gc[j - 1].first == gc[j].first && gc[j - 1].second + 1 == gc[j].second;
+                const bool right = j + 1 < gc.size() && gc[j + 1].first == gc[j].first && gc[j + 1].second == gc[j].second + 1;
+                if (left && right) {
+                    const double a = e_grid(static_cast<Eigen::Index>(j - 1), c) - quad(static_cast<Eigen::Index>(j - 1));
+                    const double d = e_grid(static_cast<Eigen::Index>(j + 1), c) - quad(static_cast<Eigen::Index>(j + 1));
+                    const double curvature = 2.0 * e - a - d;
+                    if (a <= e && d <= e && curvature > 0.0) refined = e + (d - a) * (d - a) / (8.0 * curvature);
+                }
+                best = std::max(best, refined);
+            }
+            for (Eigen::Index j = 0; j < e_lin.rows(); ++j)
+                if (lin_info(j) > 1e-12) best = std::max(best, e_lin(j, c) * e_lin(j, c) / lin_info(j));
+            out.max_evidence[static_cast<std::size_t>(b * per_draw + c)] = best;
+            out.chi2[static_cast<std::size_t>(b * per_draw + c)] = chi2(c);
+        }
+        return true;
+    };
+    std::vector<char> ok(static_cast<std::size_t>(draws), 0);
+    auto work = [&](int begin) {
+        for (int b = begin; b < draws; b += 2) ok[static_cast<std::size_t>(b)] = one_draw(b) ? 1 : 0;
+    };
+    if (draws > 1) {
+        auto other = std::async(std::launch::async, work, 1);
+        work(0);
+        other.get();
+    } else {
+        work(0);
+    }
+    // A draw whose covariance was not positive definite is left out (never counted as zero).
+    std::vector<double> kept, kept_chi2;
+    for (int b = 0; b < draws; ++b)
+        if (ok[static_cast<std::size_t>(b)]) {
+            kept.insert(kept.end(), out.max_evidence.begin() + b * per_draw, out.max_evidence.begin() + (b + 1) * per_draw);
+            kept_chi2.insert(kept_chi2.end(), out.chi2.begin() + b * per_draw, out.chi2.begin() + (b + 1) * per_draw);
+        }
+    out.max_evidence = std::move(kept);
+    out.chi2 = std::move(kept_chi2);
+    return out;
+}
+
 double upper_quantile(std::vector<double> sample, double alpha) {
     if (sample.empty()) return std::numeric_limits<double>::infinity();
     std::sort(sample.begin(), sample.end());

@@ -4,6 +4,7 @@
 // campaigns cost matrix products rather than fits, and case-level cross-validation and
 // robust intervals (cases are the independent units, not zone points).
 #include <cstdint>
+#include <functional>
 #include <random>
 #include <vector>
 
@@ -69,6 +70,33 @@ Eigen::MatrixXd profile_chi2(const std::vector<const WhitenedGrid*>& grids, cons
 
 // B campaigns simulated around a whitened mean: mean + N(0, I).
 Eigen::MatrixXd simulate(const Eigen::VectorXd& mean, int count, std::mt19937_64& rng);
+
+// The null distribution of the family's best evidence (docs/reconcile.md, "The null"): the
+// largest chi2 reduction any single term (profiled on its grid) or any linear direction (a
+// zone's offset or gain, one parameter each) achieves in campaigns simulated from the twin as
+// given. Each batch of campaigns is judged against a covariance drawn by `draw_covariance` (the
+// noise model as its own estimate scatters: the whole estimation repeated on simulated
+// replicates), while the data come from the fitted noise model; without it, the fitted noise
+// model judges (its estimate taken as exact). Computed in a basis of the grids' shifts near the
+// twin (columns within kShiftCap of it in whitened units; beyond, a shift cannot beat the noise),
+// so a covariance draw costs products with r basis vectors, not with every grid column.
+struct FamilyNull {
+    std::vector<double> max_evidence;   // one per simulated campaign
+    std::vector<double> chi2;           // the twin's chi2 in each (a goodness-of-fit null with the same draws)
+    int covariance_draws = 0;           // 0: the plug-in noise model
+    int basis_rank = 0;
+};
+FamilyNull family_null(const Subset& s, const std::vector<WhitenedGrid>& grids, const Eigen::MatrixXd& linear_directions,
+                       const std::function<Eigen::MatrixXd(std::uint64_t)>& draw_covariance, int simulations,
+                       std::uint64_t seed);
+
+// Whitened local directions over a subset: each zone's offset (1 on its points) and gain (the
+// base prediction on its points); `kinds` gives (zone, gain?) per column.
+Eigen::MatrixXd local_directions(const ForwardModel& model, const Subset& s, const std::vector<double>& base_prediction,
+                                 std::vector<std::pair<int, bool>>* kinds);
+
+// Evidence (chi2 reduction) of each linear direction (whitened columns) on whitened residual r.
+Eigen::VectorXd linear_evidence(const Eigen::MatrixXd& directions, const Eigen::VectorXd& r);
 
 // The (1 - alpha) quantile of a sample.
 double upper_quantile(std::vector<double> sample, double alpha);

@@ -122,21 +122,26 @@ public:
         return j;
     }
 
-    NoiseModel noise_model(const Instruments& instruments, double shared_fraction,
-                           const std::vector<tw::Term>& with) const override {
+    // The noise model's pieces: the replicates' residuals with the twin's sensitivities (what
+    // the random part is estimated from) and the Type B parts, which are specified, not estimated.
+    struct NoiseParts {
+        ReplicateResiduals data;
+        Eigen::MatrixXd systematic;   // probes (P) and the manikin's calibration (K)
+        NoiseModel meta;              // everything but the covariances
+    };
+
+    NoiseParts noise_parts(const Instruments& instruments, double shared_fraction, const std::vector<tw::Term>& with) const {
         tw::TwinVersion physics = base_;
         physics.terms.insert(physics.terms.end(), with.begin(), with.end());
         const std::size_t n = points_.size();
-        NoiseModel out;
-        out.covariance = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
-        out.random_covariance = out.covariance;
+        NoiseParts parts;
+        NoiseModel& out = parts.meta;
         out.point_replicates.resize(n, 1);
 
         // Random part: each trial's residual against the twin at that trial's own recorded
         // conditions, so condition changes between replicates are not counted as noise.
-        ReplicateResiduals data;
+        ReplicateResiduals& data = parts.data;
         data.factor_start_sd = {0.1, 0.5, 0.2, 0.01, 0.3};
-        std::vector<Eigen::MatrixXd> loadings;
         for (const auto& in : cases_) {
             const std::size_t z_count = in.conditions.zones.size();
             std::vector<std::vector<double>> trials;
@@ -155,21 +160,7 @@ public:
             for (std::size_t z = 0; z < z_count; ++z) abs_q[z] = std::abs(twin_case[z].q_total_w_m2);
             data.residual_w_m2.push_back(std::move(trials));
             data.abs_flux_w_m2.push_back(std::move(abs_q));
-            loadings.push_back(case_loadings(physics, in, twin_case, instruments));
-        }
-        data.loadings = loadings;
-        const ScatterModel scatter = estimate_scatter(data);
-        out.from_replicates = scatter.estimable;
-        out.random_dof = scatter.dof;
-        out.relative_sd = scatter.relative_sd;
-        if (scatter.estimable) {
-            const char* names[] = {"air °C", "RH %", "wall °C", "gain", "offset W/m²"};
-            for (std::size_t k = 0; k < scatter.factor_sd.size() && k < 5; ++k) {
-                out.trial_factor_sd.emplace_back(names[k], scatter.factor_sd[k]);
-            }
-        } else {
-            out.notes.push_back("no case has two replicates: the random part is each point's own standard "
-                                "uncertainty from the analysis, taken as independent");
+            data.loadings.push_back(case_loadings(physics, in, twin_case, instruments));
         }
 
         const auto flux = instruments.count("heat_flux_w_m2") ? instruments.at("heat_flux_w_m2") : InstrumentSpec{};
@@ -184,65 +175,208 @@ public:
                                         rh.standard_uncertainty(100.0) / 100.0 - rh.standard_uncertainty(0.0) / 100.0);
         }
 
+        const auto nn = static_cast<Eigen::Index>(n);
+        parts.systematic = Eigen::MatrixXd::Zero(nn, nn);
         std::vector<std::vector<std::size_t>> rows(cases_.size());
         for (std::size_t i = 0; i < n; ++i) rows[index_[i].first].push_back(i);
-        std::vector<double> scale(n, 0.0);
-        for (std::size_t i = 0; i < n; ++i) scale[i] = loadings[index_[i].first](static_cast<Eigen::Index>(index_[i].second), 3);
-        for (std::size_t c = 0; c < cases_.size(); ++c) {
-            const CaseInput& in = cases_[c];
-            const int reps = std::max<int>(1, static_cast<int>(in.trials.size()));
-            // The case mean of its replicates: the trial covariance over the number of trials.
-            Eigen::MatrixXd trial_cov;
-            if (scatter.estimable) trial_cov = scatter.trial_covariance(data.abs_flux_w_m2[c], loadings[c]);
-            for (std::size_t a : rows[c]) {
-                out.point_replicates[a] = reps;
-                for (std::size_t b : rows[c]) {
-                    double cov = 0.0;
-                    if (scatter.estimable)
-                        cov = trial_cov(static_cast<Eigen::Index>(index_[a].second), static_cast<Eigen::Index>(index_[b].second));
-                    else if (a == b)
-                        cov = points_[a].standard_u() * points_[a].standard_u() * reps;
-                    out.random_covariance(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) = cov / reps;
-                }
-            }
-        }
         // The probes' Type B errors act through the twin's sensitivities. Part of that variance is
         // the probe's calibration, the same in every case (`probe_shared_fraction`); the rest
         // differs from case to case (the error's dependence on temperature and humidity) and is
         // shared by the zones of one case only.
         for (Eigen::Index k = 0; k < 3; ++k) {
-            Eigen::VectorXd g = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(n));
+            Eigen::VectorXd g = Eigen::VectorXd::Zero(nn);
             for (std::size_t c = 0; c < cases_.size(); ++c) {
                 const auto& cond = cases_[c].conditions;
                 const double u = k == 0   ? spec_u(instruments, "air_temp_c", cond.air_temp_c)
                                  : k == 1 ? spec_u(instruments, "air_rh_pct", cond.air_rh_pct)
                                  : cond.wall_temp_c ? spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)
                                                     : 0.0;
-                for (std::size_t a : rows[c]) g(static_cast<Eigen::Index>(a)) = u * loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
+                for (std::size_t a : rows[c]) g(static_cast<Eigen::Index>(a)) = u * data.loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
             }
-            out.covariance += shared_fraction * g * g.transpose();
+            parts.systematic += shared_fraction * g * g.transpose();
             for (std::size_t c = 0; c < cases_.size(); ++c)
                 for (std::size_t a : rows[c])
                     for (std::size_t b : rows[c])
-                        out.covariance(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
+                        parts.systematic(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
                             (1.0 - shared_fraction) * g(static_cast<Eigen::Index>(a)) * g(static_cast<Eigen::Index>(b));
         }
-        // The manikin's calibration: one offset and one gain error shared by every zone and case.
-        for (std::size_t a = 0; a < n; ++a)
-            for (std::size_t b = 0; b < n; ++b)
-                out.covariance(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
-                    out.calibration_offset_u_w_m2 * out.calibration_offset_u_w_m2 +
-                    out.calibration_gain_u * out.calibration_gain_u * scale[a] * scale[b];
-        out.covariance += out.random_covariance;
+        for (std::size_t c = 0; c < cases_.size(); ++c)
+            for (std::size_t a : rows[c]) out.point_replicates[a] = std::max<int>(1, static_cast<int>(cases_[c].trials.size()));
+        return parts;
+    }
+
+    // This campaign's scatter model: estimated from its replicates, else carried from an earlier
+    // campaign, else not estimable.
+    ScatterModel scatter_of(const NoiseParts& parts, const CarriedNoise* carried_override = nullptr) const {
+        ScatterModel own = estimate_scatter(parts.data);
+        if (own.estimable) return own;
+        const CarriedNoise* c = carried_override ? carried_override : carried_ ? &*carried_ : nullptr;
+        return c ? to_scatter(*c) : own;
+    }
+
+    ScatterModel to_scatter(const CarriedNoise& c) const {
+        ScatterModel s;
+        s.estimable = true;
+        s.dof = c.dof;
+        s.relative_sd = c.relative_sd;
+        s.factor_sd = c.factor_sd;
+        double mean_sd = 0.0;
+        for (const auto& [zone, sd] : c.zone_sd_w_m2) mean_sd += sd / static_cast<double>(c.zone_sd_w_m2.size());
+        const auto& zones = first_zones();
+        for (const auto& z : zones) {
+            const auto it = c.zone_sd_w_m2.find(z.zone);
+            s.zone_sd_w_m2.push_back(it == c.zone_sd_w_m2.end() ? mean_sd : it->second);
+        }
+        return s;
+    }
+
+    // The whole covariance from a scatter model: the random part of each case mean (the trial
+    // covariance over the replicates) plus the Type B parts.
+    Eigen::MatrixXd assemble(const NoiseParts& parts, const ScatterModel& scatter, Eigen::MatrixXd* random_out,
+                             int replicates = 0) const {
+        const std::size_t n = points_.size();
+        const auto nn = static_cast<Eigen::Index>(n);
+        Eigen::MatrixXd random = Eigen::MatrixXd::Zero(nn, nn);
+        std::vector<std::vector<std::size_t>> rows(cases_.size());
+        for (std::size_t i = 0; i < n; ++i) rows[index_[i].first].push_back(i);
+        for (std::size_t c = 0; c < cases_.size(); ++c) {
+            const int reps = replicates > 0 ? replicates : std::max<int>(1, static_cast<int>(cases_[c].trials.size()));
+            Eigen::MatrixXd trial_cov;
+            if (scatter.estimable) trial_cov = scatter.trial_covariance(parts.data.abs_flux_w_m2[c], parts.data.loadings[c]);
+            for (std::size_t a : rows[c])
+                for (std::size_t b : rows[c]) {
+                    double cov = 0.0;
+                    if (scatter.estimable)
+                        cov = trial_cov(static_cast<Eigen::Index>(index_[a].second), static_cast<Eigen::Index>(index_[b].second));
+                    else if (a == b)
+                        cov = points_[a].standard_u() * points_[a].standard_u() * reps;
+                    random(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) = cov / reps;
+                }
+        }
+        Eigen::MatrixXd total = random;
+        if (scatter.estimable) {
+            total += parts.systematic;
+            // The manikin's calibration: one offset and one gain error shared by every zone and
+            // case. Without replicates each point's own U/k already holds the heat-flux Type B,
+            // so it is not added again (counted once).
+            const auto& m = parts.meta;
+            for (std::size_t a = 0; a < n; ++a) {
+                const double sa = parts.data.loadings[index_[a].first](static_cast<Eigen::Index>(index_[a].second), 3);
+                for (std::size_t b = 0; b < n; ++b) {
+                    const double sb = parts.data.loadings[index_[b].first](static_cast<Eigen::Index>(index_[b].second), 3);
+                    total(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
+                        m.calibration_offset_u_w_m2 * m.calibration_offset_u_w_m2 + m.calibration_gain_u * m.calibration_gain_u * sa * sb;
+                }
+            }
+        } else {
+            // The probes' part is not in a point's U (the analysis's GUM budget is of the flux).
+            total += parts.systematic;
+        }
         // A hair of independent noise keeps the covariance positive definite when the random
         // part is tiny (synthetic data) and the systematic parts are of low rank.
-        out.covariance.diagonal().array() += 1e-9 * out.covariance.diagonal().mean() + 1e-12;
+        total.diagonal().array() += 1e-9 * total.diagonal().mean() + 1e-12;
+        if (random_out) *random_out = std::move(random);
+        return total;
+    }
+
+    NoiseModel noise_model(const Instruments& instruments, double shared_fraction,
+                           const std::vector<tw::Term>& with) const override {
+        NoiseParts parts = noise_parts(instruments, shared_fraction, with);
+        NoiseModel out = parts.meta;
+        const ScatterModel own = estimate_scatter(parts.data);
+        const ScatterModel scatter = scatter_of(parts);
+        out.from_replicates = own.estimable;
+        out.carried_from = !own.estimable && carried_ ? carried_->source : "";
+        out.random_dof = scatter.dof;
+        out.relative_sd = scatter.relative_sd;
+        if (scatter.estimable) {
+            const char* names[] = {"air °C", "RH %", "wall °C", "gain", "offset W/m²"};
+            for (std::size_t k = 0; k < scatter.factor_sd.size() && k < 5; ++k) out.trial_factor_sd.emplace_back(names[k], scatter.factor_sd[k]);
+            const auto& zones = first_zones();
+            for (std::size_t z = 0; z < zones.size() && z < scatter.zone_sd_w_m2.size(); ++z)
+                out.zone_sd_w_m2[zones[z].zone] = scatter.zone_sd_w_m2[z];
+        }
+        if (!own.estimable && carried_)
+            out.notes.push_back(fmt::format("one replicate per case: the replicate scatter is carried from {} ({} dof)",
+                                            carried_->source, carried_->dof));
+        else if (!own.estimable)
+            out.notes.push_back("no case has two replicates: the random part is each point's own standard "
+                                "uncertainty from the analysis, taken as independent (a lower bound: no claim "
+                                "is made on it; --noise-from carries a lab's scatter from a campaign with replicates)");
+        out.covariance = assemble(parts, scatter, &out.random_covariance);
         return out;
+    }
+
+    // Replicates simulated from the fitted scatter model and estimated again (the estimate's own
+    // scatter), the Type B parts as specified.
+    class Resampler final : public NoiseResampler {
+    public:
+        Resampler(const TwinModel& model, NoiseParts parts, ScatterModel fitted, bool own)
+            : model_(model), parts_(std::move(parts)), fitted_(std::move(fitted)), own_(own) {}
+        Eigen::MatrixXd draw(std::uint64_t seed, int replicates) const override {
+            ScatterModel again;
+            if (own_) {
+                ReplicateResiduals shape = parts_.data;
+                if (replicates > 0)
+                    for (auto& trials : shape.residual_w_m2)
+                        if (!trials.empty()) trials.resize(static_cast<std::size_t>(replicates), trials.front());
+                again = estimate_scatter(simulate_residuals(shape, fitted_, seed));
+            } else {
+                const CarriedNoise c = model_.carried_->redraw ? model_.carried_->redraw(seed) : *model_.carried_;
+                again = model_.to_scatter(c);
+            }
+            return model_.assemble(parts_, again, nullptr, replicates);
+        }
+
+    private:
+        const TwinModel& model_;
+        NoiseParts parts_;
+        ScatterModel fitted_;
+        bool own_;
+    };
+
+    std::unique_ptr<NoiseResampler> noise_resampler(const Instruments& instruments, double shared_fraction,
+                                                    const std::vector<tw::Term>& with) const override {
+        NoiseParts parts = noise_parts(instruments, shared_fraction, with);
+        ScatterModel own = estimate_scatter(parts.data);
+        if (own.estimable) return std::make_unique<Resampler>(*this, std::move(parts), std::move(own), true);
+        if (carried_) return std::make_unique<Resampler>(*this, std::move(parts), ScatterModel{}, false);
+        return nullptr;
+    }
+
+    // For `--noise-from`: this campaign's own scatter and how its estimate scatters.
+    CarriedNoise carry(const Instruments& instruments, std::string source) const {
+        NoiseParts parts = noise_parts(instruments, 0.5, {});
+        const ScatterModel own = estimate_scatter(parts.data);
+        if (!own.estimable)
+            throw std::invalid_argument(source + ": no case has two replicates, so it has no replicate scatter to carry");
+        std::vector<int> zone_ids;
+        for (const auto& z : first_zones()) zone_ids.push_back(z.zone);
+        auto to_carried = [zone_ids, source](const ScatterModel& s) {
+            CarriedNoise c;
+            c.source = source;
+            c.relative_sd = s.relative_sd;
+            c.factor_sd = s.factor_sd;
+            c.dof = s.dof;
+            for (std::size_t z = 0; z < zone_ids.size() && z < s.zone_sd_w_m2.size(); ++z) c.zone_sd_w_m2[zone_ids[z]] = s.zone_sd_w_m2[z];
+            return c;
+        };
+        CarriedNoise out = to_carried(own);
+        auto data = std::make_shared<const ReplicateResiduals>(parts.data);
+        out.redraw = [data, own, to_carried](std::uint64_t seed) { return to_carried(estimate_scatter(simulate_residuals(*data, own, seed))); };
+        return out;
+    }
+
+    void set_carried(std::optional<CarriedNoise> c) { carried_ = std::move(c); }
+    const std::vector<tw::ZoneInput>& first_zones() const {
+        static const std::vector<tw::ZoneInput> none;
+        return cases_.empty() ? none : cases_.front().conditions.zones;
     }
 
 private:
     std::vector<CaseInput> cases_;
     tw::TwinVersion base_;
+    std::optional<CarriedNoise> carried_;
     std::vector<Point> points_;
     std::vector<std::pair<std::size_t, std::size_t>> index_;
 };
@@ -308,8 +442,16 @@ private:
 
 }  // namespace
 
-std::unique_ptr<ForwardModel> make_twin_model(std::vector<CaseInput> cases, tw::TwinVersion base) {
-    return std::make_unique<TwinModel>(std::move(cases), std::move(base));
+std::unique_ptr<ForwardModel> make_twin_model(std::vector<CaseInput> cases, tw::TwinVersion base, std::optional<CarriedNoise> carried) {
+    auto m = std::make_unique<TwinModel>(std::move(cases), std::move(base));
+    m->set_carried(std::move(carried));
+    return m;
+}
+
+CarriedNoise carried_noise(const ForwardModel& twin_model, const Instruments& instruments, std::string source) {
+    const auto* twin = dynamic_cast<const TwinModel*>(&twin_model);
+    if (!twin) throw std::invalid_argument("--noise-from needs a campaign of zone fluxes");
+    return twin->carry(instruments, std::move(source));
 }
 
 std::unique_ptr<ForwardModel> make_whole_body_h_model(std::vector<HObservation> obs, double a, double exponent) {

@@ -2,7 +2,10 @@
 // What reconcile judges against (docs/reconcile.md): the observed points, the noise model of
 // their case means, and the forward models that predict every point with extra physics terms
 // on top of their base (the twin over recorded cases; whole-body h against a correlation).
+#include <cstdint>
+#include <functional>
 #include <map>
+#include <optional>
 #include <memory>
 #include <string>
 #include <utility>
@@ -37,6 +40,7 @@ struct NoiseModel {
     Eigen::MatrixXd random_covariance;        // its replicate-scatter part (scales as 1/replicates)
     std::vector<int> point_replicates;        // replicates behind each point's mean
     bool from_replicates = false;             // random part estimated from replicate scatter
+    std::string carried_from;                 // else carried from this earlier campaign (--noise-from)
     int random_dof = 0;                       // pooled degrees of freedom of that estimate
     double relative_sd = 0.0;                 // kappa: scatter proportional to |q| (per trial)
     std::vector<std::pair<std::string, double>> trial_factor_sd;  // shared by one trial's zones (per trial)
@@ -47,6 +51,18 @@ struct NoiseModel {
     double probe_shared_fraction = 0.0;       // of that variance, common to every case; the rest per case
     std::string rh_u_text;                     // per case, e.g. "(1.4 + 0.01 RH)/sqrt(3) %"
     std::vector<std::string> notes;            // e.g. "one replicate per case: ..."
+};
+
+// Draws covariances as the noise model's own estimate would scatter (docs/reconcile.md, "The
+// null"): replicates simulated from the fitted scatter model, estimated again by the same
+// procedure, with the Type B parts (fixed, not estimated) added. Each draw is what a campaign
+// whose true noise is the fitted model would have been judged against.
+class NoiseResampler {
+public:
+    virtual ~NoiseResampler() = default;
+    // n x n, like NoiseModel::covariance. `replicates` > 0: as if every case had that many
+    // replicates (for planning: the estimate's scatter and the case means' random part change).
+    virtual Eigen::MatrixXd draw(std::uint64_t seed, int replicates = 0) const = 0;
 };
 
 // Predicts every point with a set of extra terms on top of its base physics.
@@ -63,6 +79,11 @@ public:
     // `probe_shared_fraction`: the part of a probe's Type B variance common to every case.
     virtual NoiseModel noise_model(const Instruments& instruments, double probe_shared_fraction,
                                    const std::vector<physics::twin::Term>& with = {}) const = 0;
+    // None where the noise is not estimated from the data (stated uncertainties, one replicate).
+    virtual std::unique_ptr<NoiseResampler> noise_resampler(const Instruments&, double /*probe_shared_fraction*/,
+                                                            const std::vector<physics::twin::Term>& /*with*/ = {}) const {
+        return nullptr;
+    }
 };
 
 // One replicate's steady-window means: its own recorded conditions and zone fluxes.
@@ -83,7 +104,24 @@ struct CaseInput {
     std::vector<double> heights_m;
     std::vector<TrialInput> trials;              // the replicates used; empty when unknown
 };
-std::unique_ptr<ForwardModel> make_twin_model(std::vector<CaseInput> cases, physics::twin::TwinVersion base);
+// A lab's noise carried from an earlier campaign with replicates (`--noise-from`): the scatter
+// model estimated there (per zone id), used where this campaign cannot estimate its own (one
+// replicate per case). Its own estimation uncertainty comes with it (`sampler`).
+struct CarriedNoise {
+    std::string source;                          // what it was estimated from, for the report
+    std::map<int, double> zone_sd_w_m2;          // sigma0 per zone id (per trial)
+    double relative_sd = 0.0;                    // kappa
+    std::vector<double> factor_sd;               // tau_k: air °C, RH %, wall °C, gain, offset W/m²
+    int dof = 0;                                 // replicate degrees of freedom behind it
+    // Draws (zone_sd by zone id, kappa, tau) as the source's estimate would scatter.
+    std::function<CarriedNoise(std::uint64_t)> redraw;
+};
+// The scatter model of a twin model estimated from its replicates; throws std::invalid_argument
+// when it has none (no case with two replicates).
+CarriedNoise carried_noise(const ForwardModel& twin_model, const Instruments& instruments, std::string source);
+
+std::unique_ptr<ForwardModel> make_twin_model(std::vector<CaseInput> cases, physics::twin::TwinVersion base,
+                                              std::optional<CarriedNoise> carried = std::nullopt);
 
 // Whole-body h observations (the paper's CFD table) against a temperature-only correlation
 // h = a |dT + gamma dC|^n (+ h0); supports humidity_buoyancy and diffusion_floor.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <stdexcept>
 
 #include <Eigen/Dense>
@@ -191,6 +192,26 @@ ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations) {
     }
     out.relative_sd = kappa;
     for (std::size_t z = 0; z < n_zones; ++z) out.zone_sd_w_m2[z] = std::sqrt(sigma_sq[z]);
+    return out;
+}
+
+ReplicateResiduals simulate_residuals(const ReplicateResiduals& shape, const ScatterModel& truth, std::uint64_t seed) {
+    ReplicateResiduals out = shape;
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> gauss(0.0, 1.0);
+    for (std::size_t c = 0; c < out.residual_w_m2.size(); ++c) {
+        const Eigen::MatrixXd& j = out.loadings.at(c);
+        for (auto& trial : out.residual_w_m2[c]) {
+            Eigen::VectorXd eta(j.cols());
+            for (Eigen::Index k = 0; k < j.cols(); ++k)
+                eta(k) = gauss(rng) * (static_cast<std::size_t>(k) < truth.factor_sd.size() ? truth.factor_sd[static_cast<std::size_t>(k)] : 0.0);
+            const Eigen::VectorXd shared = j * eta;
+            for (std::size_t z = 0; z < trial.size(); ++z) {
+                const double v = z < truth.zone_sd_w_m2.size() ? truth.variance(z, out.abs_flux_w_m2[c].at(z)) : 0.0;
+                trial[z] = gauss(rng) * std::sqrt(v) + (static_cast<Eigen::Index>(z) < shared.size() ? shared(static_cast<Eigen::Index>(z)) : 0.0);
+            }
+        }
+    }
     return out;
 }
 

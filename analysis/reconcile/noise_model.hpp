@@ -8,6 +8,7 @@
 // the manikin on the day), acting through the twin's sensitivities J. Everything is pooled over
 // the cases by maximum likelihood (EM, the eta being latent), on the within-case (Helmert)
 // contrasts, so the case means themselves carry no information into the noise.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -40,5 +41,10 @@ struct ScatterModel {
 
 // Throws std::invalid_argument when the shapes disagree.
 ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations = 30);
+
+// Residuals of the same shape (cases, trials, zones) drawn from a scatter model: each trial
+// d = e + J eta, e ~ N(0, sigma0_z² + (kappa q_z)²), eta ~ N(0, tau²). What the data would have
+// been had the model been true; estimated again, it shows how the estimate scatters.
+ReplicateResiduals simulate_residuals(const ReplicateResiduals& shape, const ScatterModel& truth, std::uint64_t seed);
 
 }  // namespace manikind::analysis::reconcile

@@ -4,6 +4,7 @@
 // systematic parts do not).
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <future>
 #include <numeric>
 #include <optional>
@@ -42,8 +43,12 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
     const NoiseModel noise = model.noise_model(opt.instruments, opt.probe_shared_fraction);
     rep.campaign_replicates = noise.point_replicates.empty() ? 0 : *std::max_element(noise.point_replicates.begin(), noise.point_replicates.end());
     rep.replicates = replicates;
-    if (std::find(replicates.begin(), replicates.end(), rep.campaign_replicates) == replicates.end())
-        rep.replicates.insert(rep.replicates.begin(), rep.campaign_replicates);
+    if (rep.campaign_replicates > 0 &&
+        std::find(replicates.begin(), replicates.end(), rep.campaign_replicates) == replicates.end())
+        rep.replicates.push_back(rep.campaign_replicates);
+    std::sort(rep.replicates.begin(), rep.replicates.end());
+    rep.replicates.erase(std::unique(rep.replicates.begin(), rep.replicates.end()), rep.replicates.end());
+    const std::unique_ptr<NoiseResampler> resampler = model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
     const auto base = model.predict({});
     const std::vector<CandidateTerm> library = ev::single_library(model);
     const std::vector<ev::Grid> grids = ev::make_grids(model, library, kGridSteps);
@@ -61,12 +66,14 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
         for (std::size_t k = 0; k < grids.size(); ++k) wg[k] = ev::whiten_grid(s, grids[k]);
         std::vector<const ev::WhitenedGrid*> all;
         for (const auto& g : wg) all.push_back(&g);
-        const Eigen::MatrixXd null_sim = ev::simulate(s.w_base, opt.null_simulations, rng);
-        const Eigen::MatrixXd null_prof = ev::profile_chi2(all, null_sim);
-        std::vector<double> null_max(static_cast<std::size_t>(null_sim.cols()));
-        for (Eigen::Index b = 0; b < null_sim.cols(); ++b)
-            null_max[static_cast<std::size_t>(b)] = (null_sim.col(b) - s.w_base).squaredNorm() - null_prof.col(b).minCoeff();
-        const double threshold = ev::upper_quantile(null_max, opt.alpha);
+        // The claim threshold reconcile would use with n replicates: the family (terms and each
+        // zone's offset and gain) under one alpha, the noise model's own estimate re-drawn as it
+        // would scatter with n replicates (docs/reconcile.md, "The null").
+        const Eigen::MatrixXd local = model.supports("heat_leak") ? ev::local_directions(model, s, base, nullptr) : Eigen::MatrixXd();
+        std::function<Eigen::MatrixXd(std::uint64_t)> draw;
+        if (resampler) draw = [&](std::uint64_t seed) { return resampler->draw(seed, n); };
+        const double threshold =
+            ev::upper_quantile(ev::family_null(s, wg, local, draw, opt.null_simulations, opt.seed).max_evidence, opt.alpha);
 
         for (std::size_t k = 0; k < library.size(); ++k) {
             const auto& p = library[k].parameters[0];
@@ -99,7 +106,9 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     Eigen::Index best = 0;
                     prof.col(b).minCoeff(&best);
                     const double evidence = (sim.col(b) - s.w_base).squaredNorm() - prof(best, b);
-                    named += evidence > threshold && static_cast<std::size_t>(best) == k ? 1 : 0;
+                    // A zone's offset or gain that explains more would be reported instead.
+                    const double local_best = local.cols() > 0 ? ev::linear_evidence(local, sim.col(b) - s.w_base).maxCoeff() : 0.0;
+                    named += evidence > threshold && evidence > local_best && static_cast<std::size_t>(best) == k ? 1 : 0;
                 }
                 return static_cast<double>(named) / kPowerSimulations;
             };
@@ -116,6 +125,17 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                 d.simulated_power = sim_power;
             }
             rep.limits.push_back(std::move(d));
+        }
+    }
+    // Monotone in replicates by construction: a lab with more replicates can always analyse fewer,
+    // so a limit reached with n' replicates is reached with any n > n'.
+    for (auto& d : rep.limits) {
+        for (const auto& e : rep.limits) {
+            if (e.label != d.label || e.replicates >= d.replicates || !e.value) continue;
+            if (!d.value || std::abs(*e.value - d.null_value) < std::abs(*d.value - d.null_value)) {
+                d.value = e.value;
+                d.simulated_power = std::max(d.simulated_power, e.simulated_power);
+            }
         }
     }
     return rep;

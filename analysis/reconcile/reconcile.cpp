@@ -172,6 +172,16 @@ double chi2_upper_p(double x, double dof) {
     return boost::math::cdf(boost::math::complement(boost::math::chi_squared(dof), std::max(0.0, x)));
 }
 
+// Goodness of fit: the share of null campaigns (the twin true, judged by the noise model as its
+// own estimate scatters) whose chi2 reaches this one; a fit of p parameters is compared with
+// p added back (fitting p parameters lowers chi2 by about chi2_p). Without a simulated null,
+// chi2 on n - p dof.
+double gof_p(double chi2, int params, const std::vector<double>& null_chi2, double n) {
+    if (null_chi2.empty()) return chi2_upper_p(chi2, n - params);
+    const auto reach = std::count_if(null_chi2.begin(), null_chi2.end(), [&](double v) { return v >= chi2 + params; });
+    return (static_cast<double>(reach) + 1.0) / (static_cast<double>(null_chi2.size()) + 1.0);
+}
+
 // A candidate's fit, its case-level statistics and intervals.
 CandidateResult describe(const ForwardModel& model, const ev::Subset& s, const std::vector<CandidateTerm>& terms,
                          const Fitted& f, double base_chi2, double evidence) {
@@ -246,6 +256,15 @@ void widen_by_jackknife(const ForwardModel& model, const Eigen::MatrixXd& covari
         r.interval_lo[j] = r.values[j] - k * r.uncertainties[j];
         r.interval_hi[j] = r.values[j] + k * r.uncertainties[j];
     }
+    // The advice quotes the uncertainty: quote the widened one.
+    r.advice.clear();
+    std::size_t j = 0;
+    for (const auto& t : r.terms) {
+        const std::vector<double> v(r.values.begin() + static_cast<long>(j), r.values.begin() + static_cast<long>(j + t.parameters.size()));
+        const std::vector<double> u(r.uncertainties.begin() + static_cast<long>(j), r.uncertainties.begin() + static_cast<long>(j + t.parameters.size()));
+        for (auto& a : plausibility_advice(t, v, u)) r.advice.push_back(std::move(a));
+        j += t.parameters.size();
+    }
 }
 
 // One pass of the evidence over a set of points.
@@ -254,14 +273,20 @@ struct Stage {
     std::vector<ev::WhitenedGrid> grids;
     double base_chi2 = 0.0;
     std::vector<double> base_grid_chi2;       // per single: profile minimum on the observed data
-    std::vector<double> null_max;             // simulated best-single evidence under the twin
+    std::vector<double> null_max;             // simulated best evidence of the family under the twin
+    std::vector<double> null_chi2;            // the twin's chi2 in the same simulated campaigns
     double threshold = 0.0;
+    int covariance_draws = 0;
     std::vector<CandidateResult> singles;     // aligned with grids
     std::vector<Fitted> single_fits;
+    // Local directions: one offset and one gain per zone (whitened), in the same family.
+    Eigen::MatrixXd local;
+    std::vector<std::pair<int, bool>> local_kind;  // (zone, gain?) per column
 };
 
-Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::vector<ev::Grid>& grids,
-                std::vector<std::size_t> idx, const std::vector<double>& base_pred, const Options& opt) {
+Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const NoiseResampler* resampler,
+                const std::vector<ev::Grid>& grids, std::vector<std::size_t> idx, const std::vector<double>& base_pred,
+                const Options& opt, std::optional<double> fixed_threshold = std::nullopt) {
     Stage st;
     st.subset = ev::make_subset(model, noise.covariance, std::move(idx), base_pred);
     const auto& s = st.subset;
@@ -275,19 +300,31 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::v
         work(0);
         other.get();
     }
-    std::vector<const ev::WhitenedGrid*> all;
-    for (const auto& g : st.grids) all.push_back(&g);
-    // Observed evidence per single, and its null distribution (the best single's evidence in
-    // campaigns simulated from the twin as given and the noise model).
-    std::mt19937_64 rng(opt.seed);
-    const Eigen::MatrixXd sim = ev::simulate(s.w_base, opt.null_simulations, rng);
-    const Eigen::MatrixXd prof = ev::profile_chi2(all, sim);
-    st.null_max.resize(static_cast<std::size_t>(sim.cols()));
-    for (Eigen::Index b = 0; b < sim.cols(); ++b) {
-        const double base = (sim.col(b) - s.w_base).squaredNorm();
-        st.null_max[static_cast<std::size_t>(b)] = prof.rows() > 0 ? base - prof.col(b).minCoeff() : 0.0;
+    if (model.supports("heat_leak")) st.local = ev::local_directions(model, s, base_pred, &st.local_kind);
+    // The family's best evidence in campaigns simulated from the twin as given, each judged by
+    // the noise model as its own estimation would have come out (docs/reconcile.md, "The null"):
+    // physics terms and local directions under one alpha.
+    if (fixed_threshold) {
+        st.threshold = *fixed_threshold;
+    } else {
+        std::function<Eigen::MatrixXd(std::uint64_t)> draw;
+        if (resampler)
+            draw = [&](std::uint64_t seed) {
+                const Eigen::MatrixXd full = resampler->draw(seed);
+                const Eigen::Index n = s.size();
+                Eigen::MatrixXd sub(n, n);
+                for (Eigen::Index a = 0; a < n; ++a)
+                    for (Eigen::Index b = 0; b < n; ++b)
+                        sub(a, b) = full(static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(a)]),
+                                         static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(b)]));
+                return sub;
+            };
+        const ev::FamilyNull null = ev::family_null(s, st.grids, st.local, draw, opt.null_simulations, opt.seed);
+        st.null_max = null.max_evidence;
+        st.null_chi2 = null.chi2;
+        st.covariance_draws = null.covariance_draws;
+        st.threshold = ev::upper_quantile(st.null_max, opt.alpha);
     }
-    st.threshold = ev::upper_quantile(st.null_max, opt.alpha);
     // Fit every single from its grid optimum (the report lists them all).
     st.singles.resize(grids.size());
     st.single_fits.resize(grids.size());
@@ -318,28 +355,25 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const std::v
     return st;
 }
 
-// Zones whose steady offset stands out, chosen greedily: at each step the zone with the largest
-// GLS z-score given the offsets already chosen, while it passes Bonferroni over the zones. An
-// empty result with `too_many` set means the mismatch is not local.
-std::vector<int> local_zones(const ForwardModel& model, const ev::Subset& s, const std::vector<double>& pred, double alpha,
-                             int max_zones, bool* too_many) {
+// Zones whose steady offset or gain stands out, chosen greedily: at each step the zone direction
+// (an offset, or a gain: the zone's flux scaled) with the largest evidence given those already
+// chosen, while that evidence is beyond the family's null threshold (the same alpha as the
+// physics terms). An empty result with `too_many` set means the mismatch is not local.
+struct LocalPick {
+    int zone = 0;
+    bool gain = false;
+};
+std::vector<LocalPick> local_zones(const ForwardModel& model, const Stage& st, const std::vector<double>& pred, double threshold,
+                                   int max_zones, bool* too_many) {
     const auto& pts = model.points();
-    std::vector<int> zone_ids;
-    std::map<int, Eigen::Index> column;
-    for (std::size_t i : s.idx)
-        if (column.emplace(pts[i].zone, static_cast<Eigen::Index>(column.size())).second) zone_ids.push_back(pts[i].zone);
-    const auto z_count = static_cast<Eigen::Index>(column.size());
-    Eigen::MatrixXd a = Eigen::MatrixXd::Zero(s.size(), z_count);
-    for (Eigen::Index i = 0; i < s.size(); ++i) a(i, column[pts[s.idx[static_cast<std::size_t>(i)]].zone]) = 1.0;
-    a = s.llt.matrixL().solve(a);
+    const auto& s = st.subset;
     std::vector<double> resid(pts.size());
     for (std::size_t i = 0; i < pts.size(); ++i) resid[i] = pts[i].q_exp - pred[i];
     const Eigen::VectorXd r = s.whiten(resid);
-    const double limit = boost::math::quantile(
-        boost::math::complement(boost::math::normal(), alpha / (2.0 * static_cast<double>(std::max<Eigen::Index>(1, z_count)))));
+    const Eigen::MatrixXd& a = st.local;
     std::vector<Eigen::Index> chosen;
     *too_many = false;
-    while (true) {
+    while (a.cols() > 0) {
         Eigen::MatrixXd x(s.size(), static_cast<Eigen::Index>(chosen.size()));
         for (std::size_t k = 0; k < chosen.size(); ++k) x.col(static_cast<Eigen::Index>(k)) = a.col(chosen[k]);
         auto project_out = [&](const Eigen::VectorXd& v) -> Eigen::VectorXd {
@@ -347,37 +381,45 @@ std::vector<int> local_zones(const ForwardModel& model, const ev::Subset& s, con
             return v - x * (x.transpose() * x).ldlt().solve(x.transpose() * v);
         };
         const Eigen::VectorXd rr = project_out(r);
-        double best_z = 0.0;
+        double best_e = 0.0;
         Eigen::Index best = -1;
-        for (Eigen::Index z = 0; z < z_count; ++z) {
-            if (std::find(chosen.begin(), chosen.end(), z) != chosen.end()) continue;
-            const Eigen::VectorXd az = project_out(a.col(z));
+        for (Eigen::Index j = 0; j < a.cols(); ++j) {
+            const int zone = st.local_kind[static_cast<std::size_t>(j)].first;
+            if (std::any_of(chosen.begin(), chosen.end(), [&](Eigen::Index c) { return st.local_kind[static_cast<std::size_t>(c)].first == zone; }))
+                continue;
+            const Eigen::VectorXd az = project_out(a.col(j));
             const double info = az.squaredNorm();
             if (info <= 1e-12) continue;
-            const double score = std::abs(az.dot(rr)) / std::sqrt(info);
-            if (score > best_z) {
-                best_z = score;
-                best = z;
+            const double e = std::pow(az.dot(rr), 2) / info;
+            if (e > best_e) {
+                best_e = e;
+                best = j;
             }
         }
-        if (best < 0 || best_z <= limit) break;
+        if (best < 0 || best_e <= threshold) break;
         if (static_cast<int>(chosen.size()) >= max_zones) {
             *too_many = true;
             return {};
         }
         chosen.push_back(best);
     }
-    std::vector<int> out;
-    for (auto c : chosen) out.push_back(zone_ids[static_cast<std::size_t>(c)]);
+    std::vector<LocalPick> out;
+    for (auto c : chosen) out.push_back({st.local_kind[static_cast<std::size_t>(c)].first, st.local_kind[static_cast<std::size_t>(c)].second});
     return out;
 }
 
-// One heat_leak term per zone: a steady offset, in W/m² (positive = more heat lost than the twin says).
-std::vector<CandidateTerm> offset_terms(const std::vector<int>& zones) {
+// One term per zone: a steady offset in W/m² (positive = more heat lost than the twin says), or a
+// gain of the zone's sensor.
+std::vector<CandidateTerm> local_terms(const std::vector<LocalPick>& picks) {
     std::vector<CandidateTerm> out;
-    for (int z : zones)
-        out.push_back({"heat_leak", "", "a steady offset on one zone: a heat leak, a loose sensor or a bad zone",
-                       {{"q_w_m2", "W/m2", -200.0, 200.0, 0.0, 0.0, std::nullopt, -200.0, 200.0}}, {z}});
+    for (const auto& p : picks) {
+        if (p.gain)
+            out.push_back({"zone_gain", "", "a zone's heat-flux sensor reads a fixed fraction high or low: its calibration",
+                           {{"gain", "", -0.5, 0.5, 0.0, 0.0, std::nullopt, -0.5, 0.5}}, {p.zone}});
+        else
+            out.push_back({"heat_leak", "", "a steady offset on one zone: a heat leak, a loose sensor or a bad zone",
+                           {{"q_w_m2", "W/m2", -200.0, 200.0, 0.0, 0.0, std::nullopt, -200.0, 200.0}}, {p.zone}});
+    }
     return out;
 }
 
@@ -423,12 +465,29 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     const std::vector<CandidateTerm> library = ev::single_library(model);
     const std::vector<ev::Grid> grids = ev::make_grids(model, library, kGridSteps);
 
-    Stage st = run_stage(model, rep.noise, grids, all_idx, rep.predicted_before, opt);
+    // Without replicates (and no scatter carried from an earlier campaign) the random part is each
+    // point's U/k: a lower bound on the real scatter, so nothing can be claimed at alpha on it.
+    const bool lower_bound = !rep.noise.from_replicates && rep.noise.carried_from.empty() && model.supports("heat_leak");
+    const std::unique_ptr<NoiseResampler> resampler = model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
+    Stage st = run_stage(model, rep.noise, resampler.get(), grids, all_idx, rep.predicted_before, opt);
+    rep.covariance_draws = st.covariance_draws;
     {
         const ev::Subset& all = st.subset;
         rep.before = stats_of(pts, all, rep.predicted_before, 0);
-        rep.gof_p_before = chi2_upper_p(st.base_chi2, static_cast<double>(all.size()));
+        rep.gof_p_before = gof_p(st.base_chi2, 0, st.null_chi2, static_cast<double>(all.size()));
     }
+    // The family's observed best evidence and its share of the null (a p-value, uniform on nulls).
+    {
+        double best = 0.0;
+        for (std::size_t k = 0; k < st.singles.size(); ++k) best = std::max(best, st.singles[k].evidence);
+        std::vector<double> resid(pts.size());
+        for (std::size_t i = 0; i < pts.size(); ++i) resid[i] = pts[i].q_exp - rep.predicted_before[i];
+        if (st.local.cols() > 0) best = std::max(best, ev::linear_evidence(st.local, st.subset.whiten(resid)).maxCoeff());
+        rep.family_evidence = best;
+        const auto beyond = std::count_if(st.null_max.begin(), st.null_max.end(), [&](double v) { return v >= best; });
+        rep.null_p = (static_cast<double>(beyond) + 1.0) / (static_cast<double>(st.null_max.size()) + 1.0);
+    }
+    if (lower_bound) st.threshold = std::numeric_limits<double>::infinity();
     auto best_passing = [&](const Stage& x) -> std::optional<std::size_t> {
         std::optional<std::size_t> best;
         for (std::size_t k = 0; k < x.singles.size(); ++k)
@@ -436,53 +495,62 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
         return best;
     };
 
-    // Local anomalies compete with physics: a few zones with a steady offset (one parameter per
-    // zone) against the best single term, out of sample by case. Checked on the twin's residual
-    // and again on the residual of the physics that wins.
+    // Local anomalies compete with physics: a few zones with a steady offset or gain (one
+    // parameter per zone) against the best single term, out of sample by case. Checked on the
+    // twin's residual and again on the residual of the physics that wins, against the same
+    // family-wise threshold as the physics.
     std::set<int> excluded;
-    auto exclude = [&](const std::vector<int>& zones) {
-        excluded.insert(zones.begin(), zones.end());
+    auto exclude = [&](const std::vector<LocalPick>& picks) {
+        for (const auto& p : picks) excluded.insert(p.zone);
         std::vector<std::size_t> keep;
         for (std::size_t i = 0; i < pts.size(); ++i)
             if (!excluded.count(pts[i].zone)) keep.push_back(i);
-        st = run_stage(model, rep.noise, grids, keep, rep.predicted_before, opt);
+        const double family_threshold = st.threshold;
+        st = run_stage(model, rep.noise, resampler.get(), grids, keep, rep.predicted_before, opt);
+        st.threshold = std::max(st.threshold, family_threshold);
     };
-    for (int pass = 0; pass < 2 && model.supports("heat_leak"); ++pass) {
+    for (int pass = 0; pass < 2 && model.supports("heat_leak") && !lower_bound; ++pass) {
         const auto b = best_passing(st);
         if (pass == 1 && !b) break;
         const auto& ref = pass == 1 ? st.single_fits[*b].prediction : rep.predicted_before;
         bool too_many = false;
-        const auto zones = local_zones(model, st.subset, ref, opt.alpha, opt.max_anomalous_zones, &too_many);
-        if (zones.empty()) continue;
-        const auto terms = offset_terms(zones);
+        const auto picks = local_zones(model, st, ref, st.threshold, opt.max_anomalous_zones, &too_many);
+        if (picks.empty()) continue;
+        const auto terms = local_terms(picks);
         std::vector<double> start(terms.size(), 0.0);
         const Fitted f = fit_gls(model, st.subset, terms, {start});
         CandidateResult local = describe(model, st.subset, terms, f, st.base_chi2, st.base_chi2 - f.chi2);
         if (pass == 0 && b && *local.loo_score >= *st.singles[*b].loo_score) continue;  // physics explains more
-        for (std::size_t k = 0; k < zones.size(); ++k) {
+        for (std::size_t k = 0; k < picks.size(); ++k) {
             ZoneAnomaly an;
-            an.zone = zones[k];
+            an.zone = picks[k].zone;
+            an.kind = picks[k].gain ? "gain" : "offset";
             for (std::size_t i : st.subset.idx)
-                if (pts[i].zone == zones[k]) {
+                if (pts[i].zone == an.zone) {
                     an.zone_name = pts[i].zone_name;
                     ++an.cases;
                     an.cases_outside += std::abs(pts[i].q_exp - ref[i]) > pts[i].expanded_u ? 1 : 0;
                 }
-            an.offset_w_m2 = f.values[k];
-            an.u_w_m2 = local.uncertainties[k];
-            an.z = an.u_w_m2 > 0.0 ? an.offset_w_m2 / an.u_w_m2 : 0.0;
+            an.value = f.values[k];
+            an.u = local.uncertainties[k];
+            if (!picks[k].gain) {
+                an.offset_w_m2 = an.value;
+                an.u_w_m2 = an.u;
+            }
+            an.z = an.u > 0.0 ? an.value / an.u : 0.0;
             rep.anomalies.push_back(an);
         }
-        exclude(zones);
+        exclude(picks);
     }
+    const std::vector<double> gof_null = st.null_chi2;  // the claim stage's, for the fit gate
     // The noise model again, with the sensitivities of the leading physics (when a term leads):
-    // under it the rivals, pairs and intervals are judged.
+    // under it the rivals, pairs and intervals are judged; the claim's threshold stays the
+    // family's (computed with the noise model's own uncertainty).
     if (const auto b = best_passing(st)) {
         const double claim_threshold = st.threshold;
         std::vector<std::size_t> keep = st.subset.idx;
         rep.noise = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms({library[*b]}, st.single_fits[*b].values));
-        st = run_stage(model, rep.noise, grids, keep, rep.predicted_before, opt);
-        st.threshold = std::max(st.threshold, claim_threshold);
+        st = run_stage(model, rep.noise, nullptr, grids, keep, rep.predicted_before, opt, claim_threshold);
     }
     rep.null_threshold = st.threshold;
     const ev::Subset& sub = st.subset;
@@ -610,16 +678,32 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
             std::string rivals;
             for (const auto& r : rep.ambiguous_with) rivals += (rivals.empty() ? "" : ", ") + r;
             why_not = fmt::format("{} fits best, but this campaign cannot tell it from {}", chosen.label, rivals);
-        } else if (chosen.after.chi2_per_dof > opt.max_chi2_per_dof_after &&
-                   chi2_upper_p(chosen.chi2, n_used - static_cast<double>(chosen.values.size())) < 1e-3) {
-            why_not = fmt::format("{} improves the fit but leaves it beyond the noise (chi2/dof {:.2f} after)",
-                                  chosen.label, chosen.after.chi2_per_dof);
+        } else if (const double p_after = gof_p(chosen.chi2, static_cast<int>(chosen.values.size()), gof_null, n_used);
+                   p_after < opt.alpha) {
+            // The fit gate is a goodness-of-fit test at the claim's own alpha.
+            why_not = fmt::format("{} improves the fit but leaves it beyond the noise (chi2 {:.0f} on {:.0f} dof after, "
+                                  "p = {:.2g} < alpha {:.2g})", chosen.label, chosen.chi2,
+                                  n_used - static_cast<double>(chosen.values.size()), p_after, opt.alpha);
         } else {
             widen_by_jackknife(model, rep.noise.covariance, sub, rep.predicted_before, chosen);
-            chosen.accepted = true;
-            chosen.reason = fmt::format("explains the residual: evidence {:.1f} beyond the null's {:.1f} ({:.0f} % level)",
-                                        chosen.evidence, st.threshold, 100.0 * (1.0 - opt.alpha));
-            claim = chosen;
+            // A claim must exclude "no effect" at 95 % for every parameter it names.
+            std::string weak;
+            std::size_t j = 0;
+            for (const auto& t : chosen.terms)
+                for (const auto& p : t.parameters) {
+                    if (chosen.interval_lo[j] <= p.null_value && p.null_value <= chosen.interval_hi[j])
+                        weak = fmt::format("{} = {:.4g} [{:.4g}, {:.4g}] (95 %) includes no effect ({:g})", p.name,
+                                           chosen.values[j], chosen.interval_lo[j], chosen.interval_hi[j], p.null_value);
+                    ++j;
+                }
+            if (!weak.empty()) {
+                why_not = fmt::format("{} has evidence beyond the null, but its interval {}", chosen.label, weak);
+            } else {
+                chosen.accepted = true;
+                chosen.reason = fmt::format("explains the residual: evidence {:.1f} beyond the null's {:.1f} ({:.0f} % level, "
+                                            "family-wise)", chosen.evidence, st.threshold, 100.0 * (1.0 - opt.alpha));
+                claim = chosen;
+            }
         }
     }
     for (auto& r : results) {
@@ -628,7 +712,9 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
             continue;
         }
         if (!r.reason.empty()) continue;
-        if (r.evidence <= st.threshold)
+        if (lower_bound)
+            r.reason = "not judged: one replicate per case and no replicate scatter carried (--noise-from)";
+        else if (r.evidence <= st.threshold)
             r.reason = fmt::format("evidence {:.1f} within what noise alone gives ({:.1f} at the {:.0f} % level)", r.evidence,
                                    st.threshold, 100.0 * (1.0 - opt.alpha));
         else if (winner_single && r.label != st.singles[*winner_single].label)
@@ -636,7 +722,12 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
         else if (!why_not.empty())
             r.reason = why_not;
     }
-    std::sort(results.begin(), results.end(), [](const auto& a, const auto& b) { return a.chi2 < b.chi2; });
+    // The answer first, then the singles, then the pairs (each by chi2).
+    std::sort(results.begin(), results.end(), [](const auto& a, const auto& b) {
+        if (a.accepted != b.accepted) return a.accepted;
+        if (a.terms.size() != b.terms.size()) return a.terms.size() < b.terms.size();
+        return a.chi2 < b.chi2;
+    });
     rep.candidates = results;
 
     rep.new_version.name = opt.new_version_name;
@@ -645,10 +736,14 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     if (!rep.anomalies.empty()) {
         std::string zones;
         for (const auto& a : rep.anomalies)
-            zones += fmt::format("{}{} ({}) {:+.1f} ± {:.1f} W/m², outside its CI in {} of {} cases", zones.empty() ? "" : "; ",
-                                 a.zone, a.zone_name, a.offset_w_m2, a.u_w_m2, a.cases_outside, a.cases);
+            zones += a.kind == "gain"
+                         ? fmt::format("{}{} ({}) reads {:+.1f} ± {:.1f} % (a gain), outside its CI in {} of {} cases",
+                                       zones.empty() ? "" : "; ", a.zone, a.zone_name, 100.0 * a.value, 100.0 * a.u,
+                                       a.cases_outside, a.cases)
+                         : fmt::format("{}{} ({}) {:+.1f} ± {:.1f} W/m², outside its CI in {} of {} cases",
+                                       zones.empty() ? "" : "; ", a.zone, a.zone_name, a.value, a.u, a.cases_outside, a.cases);
         anomaly_text = fmt::format("A local anomaly, not missing physics: zone{} {}. A steady offset on so few zones "
-                                   "looks like a heat leak, a loose sensor or a bad zone; these zones were left out of "
+                                   "looks like a heat leak, a loose or miscalibrated sensor or a bad zone; these zones were left out of "
                                    "the physics fit.", rep.anomalies.size() > 1 ? "s" : "", zones);
     }
     if (claim) {
@@ -663,25 +758,30 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
             rep.statement += (rep.statement.empty() ? "" : " ") + plain_statement(t, v, u);
             k += t.parameters.size();
         }
-        for (const auto& a : claim->advice) rep.statement += " Note: " + a;
+        for (const auto& a : claim->advice) rep.statement += " Note: " + a + (a.empty() || a.back() == '.' ? "" : ".");
         if (!anomaly_text.empty()) rep.statement += " " + anomaly_text;
     } else {
         rep.new_version.name = model.base_name();
         rep.predicted_after = rep.predicted_before;
-        if (!anomaly_text.empty()) {
+        if (lower_bound) {
+            rep.statement = fmt::format(
+                "No claim can be made: every case has one replicate, so the scatter between replicates cannot be "
+                "estimated, and each point's own U/k is only a lower bound on it (a false claim could not be held at "
+                "{:g} %). Run at least two replicates of some cases, or carry the lab's scatter from an earlier "
+                "campaign with replicates (--noise-from <campaign>). The best candidate evidence is {:.1f}; the mismatch "
+                "is at {}.", 100.0 * opt.alpha, rep.family_evidence, where);
+        } else if (!anomaly_text.empty()) {
             rep.statement = anomaly_text + (why_not.empty() ? " No physics term is needed for the rest." : " " + why_not + ".");
         } else if (!why_not.empty()) {
             rep.statement = fmt::format("The mismatch is real, but no term is claimed: {}. It is at {}; it correlates most "
                                         "with {} (|r| = {:.2f}).", why_not, where, rep.located.front().driver,
                                         rep.located.front().strength);
-        } else if (rep.gof_p_before >= 1e-3) {
+        } else if (rep.gof_p_before >= opt.alpha) {
             rep.consistent_before = true;
             rep.statement = fmt::format("The twin agrees with the recordings within their noise; no physics is missing "
-                                        "(the best candidate's evidence {:.1f} is within the {:.1f} that noise alone "
-                                        "reaches in {:.0f} % of simulated campaigns).",
-                                        st.singles.empty() ? 0.0 : std::max_element(st.singles.begin(), st.singles.end(),
-                                            [](const auto& a, const auto& b) { return a.evidence < b.evidence; })->evidence,
-                                        st.threshold, 100.0 * (1.0 - opt.alpha));
+                                        "(the best evidence of any term or zone, {:.1f}, is within the {:.1f} that noise "
+                                        "alone reaches in {:.0f} % of simulated campaigns; p = {:.2f}).",
+                                        rep.family_evidence, st.threshold, 100.0 * (1.0 - opt.alpha), rep.null_p);
         } else {
             rep.statement = fmt::format("No candidate term explains the mismatch. It is at {}; it correlates most with "
                                         "{} (|r| = {:.2f}). No explanation is claimed.",

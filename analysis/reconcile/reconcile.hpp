@@ -64,7 +64,9 @@ struct CandidateResult {
 struct ZoneAnomaly {
     int zone = 0;
     std::string zone_name;
-    double offset_w_m2 = 0.0;    // Q_exp - Q_sim, generalised-least-squares estimate
+    std::string kind = "offset"; // "offset" (W/m²) or "gain" (the zone's sensor reads (1 + gain) q)
+    double value = 0.0, u = 0.0; // of that kind, generalised-least-squares estimate and standard uncertainty
+    double offset_w_m2 = 0.0;    // Q_exp - Q_sim for an offset (0 for a gain)
     double u_w_m2 = 0.0;
     double z = 0.0;
     int cases_outside = 0, cases = 0;
@@ -82,8 +84,11 @@ struct Report {
     bool consistent_before = false;          // nothing to explain: no claim, no anomaly, fit within the noise
     double gof_p_before = 1.0;               // P(chi2 >= observed) for the twin as given
     NoiseModel noise;                        // the covariance the fits were judged against
-    double null_threshold = 0.0;             // (1 - alpha) quantile of the best single's evidence under the twin
+    double null_threshold = 0.0;             // (1 - alpha) quantile of the family's best evidence under the twin
     int null_simulations = 0;
+    int covariance_draws = 0;                // noise-model re-estimations behind the null (0: plug-in)
+    double family_evidence = 0.0;            // observed best evidence of any term or zone direction
+    double null_p = 1.0;                     // share of null campaigns reaching it (uniform on nulls)
     double alpha = 0.01;
     std::vector<ZoneAnomaly> anomalies;      // zones left out of the physics fit
     std::vector<std::string> ambiguous_with; // terms the winner could not be told apart from

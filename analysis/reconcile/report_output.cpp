@@ -57,16 +57,20 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
     const auto& n = r.noise;
     nlohmann::json zone_sd = nlohmann::json::object();
     for (const auto& [zone, sd] : n.zone_sd_w_m2) zone_sd[std::to_string(zone)] = sd;
-    j["noise_model"] = {{"from_replicates", n.from_replicates}, {"random_dof", n.random_dof},
+    j["noise_model"] = {{"from_replicates", n.from_replicates}, {"carried_from", n.carried_from}, {"random_dof", n.random_dof},
                         {"relative_sd", n.relative_sd}, {"trial_factor_sd", n.trial_factor_sd},
                         {"calibration_offset_u_w_m2", n.calibration_offset_u_w_m2},
                         {"calibration_gain_u", n.calibration_gain_u}, {"air_temp_u_c", n.air_temp_u_c},
                         {"wall_temp_u_c", n.wall_temp_u_c}, {"probe_shared_fraction", n.probe_shared_fraction}, {"rh_u", n.rh_u_text}, {"notes", n.notes}};
-    j["claim_rule"] = {{"alpha", r.alpha}, {"null_simulations", r.null_simulations},
-                       {"null_threshold_chi2", r.null_threshold}};
+    // Infinite when no claim can be made (one replicate, nothing carried): null in JSON.
+    j["claim_rule"] = {{"alpha", r.alpha}, {"family_wise", true}, {"null_simulations", r.null_simulations},
+                       {"covariance_draws", r.covariance_draws},
+                       {"null_threshold_chi2", std::isfinite(r.null_threshold) ? nlohmann::json(r.null_threshold) : nlohmann::json()},
+                       {"family_evidence", r.family_evidence}, {"null_p", r.null_p}};
     j["anomalies"] = nlohmann::json::array();
     for (const auto& a : r.anomalies)
-        j["anomalies"].push_back({{"zone", a.zone}, {"zone_name", a.zone_name}, {"offset_w_m2", a.offset_w_m2},
+        j["anomalies"].push_back({{"zone", a.zone}, {"zone_name", a.zone_name}, {"kind", a.kind}, {"value", a.value},
+                                  {"u", a.u}, {"unit", a.kind == "gain" ? "1" : "W/m2"}, {"offset_w_m2", a.offset_w_m2},
                                   {"u_w_m2", a.u_w_m2}, {"z", a.z}, {"cases_outside_ci", a.cases_outside}, {"cases", a.cases}});
     j["ambiguous_with"] = r.ambiguous_with;
     j["located"] = nlohmann::json::array();
@@ -135,7 +139,9 @@ std::string power_to_text(const PowerReport& plan) {
     }
     o << "  * this campaign's replicates. Units: gamma K m3/kg, h0 W/m2K, delta_c and bias_c degC, r_m2k_w m2K/W;\n"
          "    fraction: the wet fraction below which a region's dryness is found. Each value is checked by simulating\n"
-         "    400 campaigns with that effect: reconcile's evidence must pass the null and name the right term.\n";
+         "    400 campaigns with that effect: the right term's evidence must be the largest, beyond reconcile's\n"
+         "    family-wise threshold at n replicates, and beyond any zone's offset or gain. A fast model of the\n"
+         "    decision (docs/reconcile.md, \"Detection limits\", has how often reconcile itself names each).\n";
     return o.str();
 }
 
@@ -145,6 +151,8 @@ std::string report_to_text(const Report& r) {
         return fmt::format("RMSE {:7.2f}   chi2/dof {:8.2f}   outside 95 % CI {:4d} of {}", s.rmse, s.chi2_per_dof, s.outside_ci, s.n_points);
     };
     o << "Twin: " << r.twin_name << "\n";
+    // The answer first; the evidence behind it follows.
+    o << (r.explanation ? "Explanation: " + r.explanation->label : std::string("Explanation: none")) << "\n  " << r.statement << "\n\n";
     o << "Before: " << stats_line(r.before) << "\n";
     const auto& n = r.noise;
     std::string factors;
@@ -152,14 +160,23 @@ std::string report_to_text(const Report& r) {
     o << fmt::format("Noise:  {}; calibration ±{:.2f} W/m² + {:.1f} % shared by all points; probes' Type B "
                      "±{:.2f} °C air, RH {}, ±{:.2f} °C wall ({:.0f} % of that variance common to all cases, the rest "
                      "per case)\n",
-                     n.from_replicates ? fmt::format("replicate scatter pooled per zone ({} dof), {:.1f} % of flux; "
-                                                     "per trial shared: {}", n.random_dof, 100.0 * n.relative_sd, factors)
-                                       : std::string("no replicates to pool"),
+                     n.from_replicates || !n.carried_from.empty()
+                         ? fmt::format("replicate scatter pooled per zone ({} dof{}), {:.1f} % of flux; per trial shared: {}",
+                                       n.random_dof, n.carried_from.empty() ? "" : ", carried from " + n.carried_from,
+                                       100.0 * n.relative_sd, factors)
+                         : std::string("no replicates to pool"),
                      n.calibration_offset_u_w_m2, 100.0 * n.calibration_gain_u, n.air_temp_u_c, n.rh_u_text.empty() ? "-" : n.rh_u_text,
                      n.wall_temp_u_c, 100.0 * n.probe_shared_fraction);
     for (const auto& note : n.notes) o << "        " << note << "\n";
-    o << fmt::format("Claim:  evidence (chi2 drop) beyond {:.1f}, what noise alone exceeds in {:.0f} % of {} simulated campaigns\n\n",
-                     r.null_threshold, 100.0 * r.alpha, r.null_simulations);
+    if (std::isfinite(r.null_threshold))
+        o << fmt::format("Claim:  evidence (chi2 drop) of any term or zone beyond {:.1f}, what noise alone exceeds in {:.0f} % of "
+                         "{} simulated campaigns ({}); observed best {:.1f}, p = {:.3f}\n\n",
+                         r.null_threshold, 100.0 * r.alpha, r.null_simulations,
+                         r.covariance_draws > 0 ? fmt::format("judged by {} re-estimations of the noise model", r.covariance_draws)
+                                                : std::string("the noise model taken as exact"),
+                         r.family_evidence, r.null_p);
+    else
+        o << "Claim:  none possible (one replicate per case, no scatter carried: --noise-from)\n\n";
     o << "Located:\n";
     for (const auto& l : r.located) o << fmt::format("  {}  (driver: {}, |r| = {:.2f})\n", l.where, l.driver, l.strength);
     o << "\nCandidates (best first):\n";
@@ -173,7 +190,6 @@ std::string report_to_text(const Report& r) {
                          c.loo_rmse ? fmt::format("{:.2f}", *c.loo_rmse) : "-", c.after.chi2_per_dof, c.reason);
     }
     if (r.candidates.size() > 12) o << fmt::format("  ... and {} more (--json lists all)\n", r.candidates.size() - 12);
-    o << "\n" << (r.explanation ? "Explanation: " + r.explanation->label : std::string("Explanation: none")) << "\n  " << r.statement << "\n";
     o << "\nAfter:  " << stats_line(r.after) << "\n\nBy case (RMSE before -> after, outside CI before -> after):\n";
     for (const auto& [id, b] : r.by_case)
         o << fmt::format("  case {:<9d} {:7.2f} -> {:7.2f}   {:3d} -> {:3d} of {}\n", id, b.before.rmse, b.after.rmse,

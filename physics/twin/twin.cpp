@@ -28,6 +28,7 @@ const std::vector<TermSpec>& term_specs() {
         {"textile_resistance", {{"r_m2k_w", 0.0}}},       // surface at T_s - R q (Text S2.4)
         {"partial_wettedness", {{"fraction", 1.0}}},      // w -> fraction w in one region
         {"heat_leak", {{"q_w_m2", 0.0}}},                 // a constant extra flux on some zones
+        {"zone_gain", {{"gain", 0.0}}},                   // some zones' flux sensors read (1 + gain) q
     };
     return specs;
 }
@@ -55,6 +56,7 @@ struct Knobs {
     double textile_r_m2k_w = 0.0;
     std::vector<std::pair<std::string, double>> wettedness_by_region;
     std::vector<std::pair<std::vector<int>, double>> leaks;
+    std::vector<std::pair<std::vector<int>, double>> gains;
 };
 
 Knobs resolve(const TwinVersion& v) {
@@ -69,6 +71,7 @@ Knobs resolve(const TwinVersion& v) {
         else if (t.name == "textile_resistance") k.textile_r_m2k_w = param(t, "r_m2k_w", 0.0);
         else if (t.name == "partial_wettedness") k.wettedness_by_region.emplace_back(t.region, param(t, "fraction", 1.0));
         else if (t.name == "heat_leak") k.leaks.emplace_back(t.zones, param(t, "q_w_m2", 0.0));
+        else if (t.name == "zone_gain") k.gains.emplace_back(t.zones, param(t, "gain", 0.0));
     }
     return k;
 }
@@ -102,8 +105,8 @@ void validate_term(const Term& term) {
     }
     if (term.name == "partial_wettedness" && term.region.empty())
         throw std::invalid_argument("twin term 'partial_wettedness' needs a region");
-    if (term.name == "heat_leak" && term.zones.empty())
-        throw std::invalid_argument("twin term 'heat_leak' needs zones");
+    if ((term.name == "heat_leak" || term.name == "zone_gain") && term.zones.empty())
+        throw std::invalid_argument("twin term '" + term.name + "' needs zones");
 }
 
 std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions& trial) {
@@ -153,7 +156,9 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
         };
 
         ZoneFlux f = fluxes_at(z.skin_temp_c);
-        if (k.textile_r_m2k_w > 0.0) {
+        // The textile skin is worn only for the wet trials (the paper's Fig. 1A inset, Text S3):
+        // a dry trial's surface is the manikin's own shell.
+        if (k.textile_r_m2k_w > 0.0 && trial.wettedness > 0.0) {
             // Surface temperature: root of g(T) = T - T_s + R q(T). q rises with T, so g' > 1 and
             // Newton (secant derivative) converges in a few steps; kept within ±30 K of the skin.
             const double r = k.textile_r_m2k_w;
@@ -169,6 +174,15 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
                 g = surface_c - z.skin_temp_c + r * (f.q_total_w_m2 - f.q_other_w_m2);
             }
         }
+        // A sensor's gain error scales what it reads, whatever the physics behind it.
+        for (const auto& [zones, gain] : k.gains)
+            if (std::find(zones.begin(), zones.end(), z.zone) != zones.end()) {
+                f.q_convection_w_m2 *= 1.0 + gain;
+                f.q_radiation_w_m2 *= 1.0 + gain;
+                f.q_evaporation_w_m2 *= 1.0 + gain;
+                f.q_other_w_m2 *= 1.0 + gain;
+                f.q_total_w_m2 *= 1.0 + gain;
+            }
         out.push_back(f);
     }
     return out;

@@ -88,3 +88,29 @@ TEST_CASE("cli: reconcile --power prints a detection limit per candidate at 3, 5
     }
     std::filesystem::remove_all(dir);
 }
+
+TEST_CASE("cli: reconcile of a one-replicate campaign claims nothing and says why, and --noise-from an earlier campaign "
+          "with replicates allows the claim", "[cli][reconcile]") {
+    const std::string one = temp_dir("one-replicate"), earlier = temp_dir("earlier");
+    REQUIRE(run_manikin("simulate-campaign --effect humidity_buoyancy:gamma=146 --replicates 1 --seed 21 --out " + one).exit_code == 0);
+    REQUIRE(run_manikin("simulate-campaign --seed 22 --out " + earlier).exit_code == 0);
+    auto r = run_manikin("reconcile " + one + " --json");
+    REQUIRE(r.exit_code == 0);
+    auto j = nlohmann::json::parse(r.out);
+    CHECK(j["explanation"].is_null());
+    CHECK(j["claim_rule"]["null_threshold_chi2"].is_null());
+    CHECK_THAT(j["statement"].get<std::string>(), Catch::Contains("--noise-from"));
+    r = run_manikin("reconcile " + one + " --json --noise-from " + earlier);
+    REQUIRE(r.exit_code == 0);
+    j = nlohmann::json::parse(r.out);
+    CHECK_FALSE(j["noise_model"]["carried_from"].get<std::string>().empty());
+    CHECK(j["claim_rule"]["covariance_draws"].get<int>() > 0);
+    REQUIRE(j["explanation"].is_object());
+    CHECK(j["explanation"]["term"] == "humidity_buoyancy");
+    // A campaign without replicates has no scatter to lend.
+    r = run_manikin("reconcile " + earlier + " --noise-from " + one + " 2>&1");
+    CHECK(r.exit_code == 2);
+    CHECK_THAT(r.out, Catch::Contains("--noise-from") && Catch::Contains("no case has two replicates"));
+    std::filesystem::remove_all(one);
+    std::filesystem::remove_all(earlier);
+}

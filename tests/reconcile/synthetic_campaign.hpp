@@ -4,6 +4,7 @@
 // only the CaseInput list (conditions, Q_exp, U, k): never the world's terms.
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <random>
 #include <sstream>
 #include <string>
@@ -64,6 +65,9 @@ struct SyntheticOptions {
     double flux_accuracy_w_m2 = 1.0;      // Type B: a + b |q|, rectangular
     double flux_accuracy_of_reading = 0.03;
     bool vary_air_speed = true;           // recorded air speed 0.02..0.30 m/s across cases
+    // Zones whose flux sensors read (1 + gain) times the truth: applied to the readings here,
+    // outside the twin's code (its zone_gain term is what reconcile fits).
+    std::map<int, double> sensor_gain;
 };
 
 inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::twin::TwinVersion& world,
@@ -108,7 +112,9 @@ inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::
             trial.conditions = recorded;
             for (std::size_t z = 0; z < nz; ++z) {
                 const double q = truth[z].q_total_w_m2 * (1.0 + o.replicate_rel_sd * noise(rng)) + o.replicate_sd_w_m2 * noise(rng);
-                trial.q_w_m2.push_back(gain * q + offset);
+                const auto sensor = o.sensor_gain.find(zones[z].zone);
+                const double zone_gain = sensor == o.sensor_gain.end() ? 1.0 : 1.0 + sensor->second;
+                trial.q_w_m2.push_back(zone_gain * (gain * q + offset));
                 reps[z].push_back(trial.q_w_m2.back());
             }
             air_sum += recorded.air_temp_c;

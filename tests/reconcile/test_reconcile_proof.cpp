@@ -13,6 +13,8 @@
 #include <cstdio>
 #include <algorithm>
 #include <set>
+#include <stdexcept>
+#include <tuple>
 
 #include "tests/reconcile/synthetic_campaign.hpp"
 
@@ -180,4 +182,116 @@ TEST_CASE("reconcile: locate names vapour concentration among the drivers of a m
     CHECK(named);
     CHECK(rep.before.outside_ci > 0.3 * rep.before.n_points);
     for (const auto& r : rep.by_region) CHECK(r.after.rmse <= r.before.rmse + 1e-9);
+}
+
+TEST_CASE("reconcile: two zones whose flux sensors read 8 % high are located as gains on exactly those zones at 3 "
+          "replicates, no physics", "[reconcile][gain]") {
+    for (unsigned seed : {31u, 32u}) {
+        test::SyntheticOptions o;
+        o.seed = seed;
+        o.sensor_gain = {{5, 0.08}, {23, 0.08}};
+        const auto model = rc::make_twin_model(test::make_campaign(tw::TwinVersion{"world", {}}, o), tw::TwinVersion{});
+        const auto rep = rc::reconcile(*model);
+        INFO(rep.statement);
+        CHECK_FALSE(rep.explanation.has_value());
+        REQUIRE(rep.anomalies.size() == 2);
+        std::set<int> zones;
+        for (const auto& a : rep.anomalies) {
+            zones.insert(a.zone);
+            CHECK(a.kind == "gain");
+            CHECK(std::abs(a.value - 0.08) <= 3.0 * a.u + 0.005);
+        }
+        CHECK(zones == std::set<int>{5, 23});
+        CHECK_THAT(rep.statement, Catch::Contains("(a gain)"));
+    }
+}
+
+TEST_CASE("reconcile: one replicate per case makes no claim and says why, and the lab's scatter carried from an earlier "
+          "campaign (--noise-from) allows one", "[reconcile][one-replicate]") {
+    test::SyntheticOptions one;
+    one.seed = 41;
+    one.replicates = 1;
+    const auto world = world_with("humidity_buoyancy", "gamma", 146.0);
+    {
+        const auto model = rc::make_twin_model(test::make_campaign(world, one), tw::TwinVersion{});
+        const auto rep = rc::reconcile(*model);
+        INFO(rep.statement);
+        CHECK_FALSE(rep.explanation.has_value());
+        CHECK(rep.anomalies.empty());
+        CHECK_THAT(rep.statement, Catch::Contains("one replicate") && Catch::Contains("--noise-from"));
+        CHECK_FALSE(std::isfinite(rep.null_threshold));
+    }
+    // The earlier campaign: the same lab, no concealed physics, three replicates, another seed.
+    test::SyntheticOptions earlier;
+    earlier.seed = 42;
+    const auto source = rc::make_twin_model(test::make_campaign(tw::TwinVersion{"world", {}}, earlier), tw::TwinVersion{});
+    const rc::CarriedNoise carried = rc::carried_noise(*source, analysis::default_instrument_specs(), "the earlier campaign");
+    CHECK(carried.dof == 30);
+    const auto model = rc::make_twin_model(test::make_campaign(world, one), tw::TwinVersion{}, carried);
+    const auto rep = rc::reconcile(*model);
+    INFO(rep.statement);
+    CHECK(rep.noise.carried_from == "the earlier campaign");
+    CHECK(rep.covariance_draws > 0);
+    REQUIRE(rep.explanation.has_value());
+    CHECK(rep.explanation->label == "humidity_buoyancy");
+    CHECK(rep.explanation->interval_lo[0] <= 146.0);
+    CHECK(146.0 <= rep.explanation->interval_hi[0]);
+    // A campaign with no replicates cannot lend its scatter.
+    CHECK_THROWS_AS(rc::carried_noise(*rc::make_twin_model(test::make_campaign(world, one), tw::TwinVersion{}),
+                                      analysis::default_instrument_specs(), "x"),
+                    std::invalid_argument);
+}
+
+TEST_CASE("reconcile: one replicate with carried scatter, 10 null campaigns: no claim", "[reconcile][one-replicate][null]") {
+    test::SyntheticOptions earlier;
+    earlier.seed = 43;
+    const auto source = rc::make_twin_model(test::make_campaign(tw::TwinVersion{"world", {}}, earlier), tw::TwinVersion{});
+    const rc::CarriedNoise carried = rc::carried_noise(*source, analysis::default_instrument_specs(), "earlier");
+    int claims = 0;
+    for (unsigned seed = 601; seed <= 610; ++seed) {
+        test::SyntheticOptions one;
+        one.seed = seed;
+        one.replicates = 1;
+        const auto rep = rc::reconcile(*rc::make_twin_model(test::make_campaign(tw::TwinVersion{"world", {}}, one), tw::TwinVersion{}, carried));
+        claims += rep.explanation || !rep.anomalies.empty() ? 1 : 0;
+        if (rep.explanation) std::printf("one-replicate null seed %u: claimed %s\n", seed, rep.explanation->label.c_str());
+    }
+    CHECK(claims <= 1);
+}
+
+TEST_CASE("reconcile: a textile skin of 0.025 m2K/W worn in the wet trials (Fig. 1A inset) is named", "[reconcile][textile]") {
+    const auto rep = reconcile_world(world_with("textile_resistance", "r_m2k_w", 0.025), 51);
+    INFO(rep.statement);
+    REQUIRE(rep.explanation.has_value());
+    CHECK(rep.explanation->label == "textile_resistance");
+    CHECK(rep.explanation->interval_lo[0] <= 0.025);
+    CHECK(0.025 <= rep.explanation->interval_hi[0]);
+}
+
+TEST_CASE("reconcile: a claim's interval excludes no effect, and the report leads with the answer", "[reconcile]") {
+    const auto rep = reconcile_world(world_with("humidity_buoyancy", "gamma", 146.0), 61);
+    REQUIRE(rep.explanation.has_value());
+    CHECK(rep.explanation->interval_lo[0] > 0.0);
+    REQUIRE_FALSE(rep.candidates.empty());
+    CHECK(rep.candidates.front().accepted);
+    CHECK(rep.candidates.front().label == rep.explanation->label);
+}
+
+TEST_CASE("reconcile: humidity buoyancy and a wall offset concealed together are named together (the pair, or "
+          "'together, not separable'), never nothing", "[reconcile][pair]") {
+    for (const auto& [gamma, wall, seed] : std::vector<std::tuple<double, double, unsigned>>{{60.0, 1.5, 71u}, {146.0, 1.0, 72u}}) {
+        const tw::TwinVersion world{"world", {{"humidity_buoyancy", {{"gamma", gamma}}, "", {}},
+                                              {"wall_offset", {{"delta_c", wall}}, "", {}}}};
+        const auto rep = reconcile_world(world, seed);
+        INFO("gamma " << gamma << ", wall " << wall << ": " << rep.statement);
+        std::printf("pair gamma %g + wall %g: %s\n", gamma, wall, rep.statement.c_str());
+        if (rep.explanation) {
+            std::set<std::string> terms;
+            for (const auto& t : rep.explanation->terms) terms.insert(t.term);
+            CHECK(terms == std::set<std::string>{"humidity_buoyancy", "wall_offset"});
+        } else {
+            CHECK_THAT(rep.statement, Catch::Contains("humidity_buoyancy") && Catch::Contains("wall_offset") &&
+                                          Catch::Contains("together"));
+        }
+    }
 }
