@@ -66,6 +66,14 @@ struct TrialInfo {
     std::optional<double> chamber_setpoint_rh_pct;
     std::string started_utc;
     std::optional<std::int64_t> t0_utc_ns;  // wall time at t_s = 0 (format 2: "t0_utc")
+    std::string ensemble;              // clothing worn: an id of Campaign::ensembles, "nude", or empty (not a clothing test)
+    std::string test;                  // "insulation", "evaporative", or empty
+};
+
+// A clothing ensemble a campaign's trials wear (docs/formats.md, "ensembles").
+struct Ensemble {
+    std::string description;
+    std::optional<double> fcl;         // clothing area factor; absent: ISO 9920's estimate from the insulation
 };
 
 // One instrument channel as recorded (format 2), e.g. device "datalogger", name
@@ -112,6 +120,7 @@ struct Campaign {
     std::map<std::string, InstrumentSpec> instruments;  // every channel, defaults filled in
     std::vector<RecordedChannel> channels;                // format 2: every instrument channel in the CSVs
     std::map<std::string, std::string> provenance;        // program, database, twin_version, config_sha256, ...
+    std::map<std::string, Ensemble> ensembles;            // clothing tests: what the trials wear, by id
     std::vector<Trial> trials;
     std::vector<std::string> warnings; // unknown keys and the like, with the file named
 };

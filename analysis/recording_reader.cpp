@@ -663,8 +663,18 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
         info.t0_utc_ns = parse_iso_utc(cj.string(t, "t0_utc", path, at_key("t0_utc")));
         if (!info.t0_utc_ns) cj.fail(path + "t0_utc", "expected an ISO 8601 UTC time like 2026-11-24T01:35:07.250Z", at);
     }
-    static const std::set<std::string> known{"id", "case", "replicate", "file", "skin_setpoint_c", "wet",
-                                             "wettedness", "chamber_setpoint", "started_utc", "t0_utc"};
+    if (t.contains("ensemble")) {
+        info.ensemble = cj.string(t, "ensemble", path, at_key("ensemble"));
+        if (info.ensemble.empty()) cj.fail(path + "ensemble", "expected an ensemble id (or \"nude\")", at_key("ensemble"));
+    }
+    if (t.contains("test")) {
+        info.test = cj.string(t, "test", path, at_key("test"));
+        if (info.test != "insulation" && info.test != "evaporative")
+            cj.fail(path + "test", fmt::format("expected \"insulation\" or \"evaporative\", found '{}'", info.test), at_key("test"));
+    }
+    static const std::set<std::string> known{"id",        "case",        "replicate", "file",     "skin_setpoint_c",
+                                             "wet",       "wettedness",  "chamber_setpoint",      "started_utc",
+                                             "t0_utc",    "ensemble",    "test"};
     for (const auto& [key, value] : t.items()) {
         (void)value;
         if (!known.count(key))
@@ -768,8 +778,28 @@ Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOp
                             doc.at("heat_flux_sign").dump()),
                 locate(cj.text(), "\"heat_flux_sign\""));
 
+    if (doc.contains("ensembles")) {
+        const auto& ens = doc.at("ensembles");
+        const Located at = locate(cj.text(), "\"ensembles\"");
+        if (!ens.is_object()) cj.fail("ensembles", "expected an object keyed by ensemble id", at);
+        for (const auto& [id, e] : ens.items()) {
+            const std::string path = "ensembles." + id + ".";
+            if (id.empty() || id == "nude")
+                cj.fail("ensembles." + id, "an ensemble id must be non-empty and not \"nude\" (the bare manikin needs no entry)", at);
+            if (!e.is_object()) cj.fail("ensembles." + id, "expected an object with description and optionally fcl", at);
+            Ensemble ensemble;
+            if (e.contains("description")) ensemble.description = cj.string(e, "description", path, at);
+            if (e.contains("fcl")) {
+                const double fcl = cj.number(e, "fcl", path, at);
+                // ISO 9920's clothing area factors run from 1.0 (nude) to about 1.7 (arctic).
+                if (!(fcl >= 1.0 && fcl <= 3.0)) cj.fail(path + "fcl", fmt::format("must be within 1..3, found {}", fcl), at);
+                ensemble.fcl = fcl;
+            }
+            campaign.ensembles[id] = ensemble;
+        }
+    }
     static const std::set<std::string> known_top{"format", "name", "zone_map", "instruments", "trials",
-                                                 "channels", "provenance", "heat_flux_sign"};
+                                                 "channels", "provenance", "heat_flux_sign", "ensembles"};
     for (const auto& [key, value] : doc.items()) {
         (void)value;
         if (!known_top.count(key)) {
@@ -790,6 +820,13 @@ Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOp
                     locate(cj.text(), "\"" + info.id + "\"", 1));
         infos.push_back(std::move(info));
     }
+    // A trial's ensemble is one the campaign lists (or the bare manikin).
+    for (std::size_t i = 0; i < infos.size(); ++i)
+        if (!infos[i].ensemble.empty() && infos[i].ensemble != "nude" && !campaign.ensembles.count(infos[i].ensemble))
+            cj.fail(fmt::format("trials[{}].ensemble", i),
+                    fmt::format("unknown ensemble '{}' (not in the top-level \"ensembles\"; \"nude\" for the bare manikin)",
+                                infos[i].ensemble),
+                    locate(cj.text(), "\"" + infos[i].ensemble + "\""));
     // Replicate numbers default to the order within a case.
     std::map<int, int> count_per_case;
     std::set<std::pair<int, int>> case_replicates;

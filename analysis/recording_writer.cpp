@@ -166,12 +166,22 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
         doc["channels"] = channels;
     }
     if (!campaign.provenance.empty()) doc["provenance"] = campaign.provenance;
+    if (!campaign.ensembles.empty()) {
+        nlohmann::json ens = nlohmann::json::object();
+        for (const auto& [id, e] : campaign.ensembles) {
+            ens[id] = {{"description", e.description}};
+            if (e.fcl) ens[id]["fcl"] = *e.fcl;
+        }
+        doc["ensembles"] = ens;
+    }
     json trials = json::array();
     for (const auto& t : campaign.trials) {
         const auto& i = t.info;
         const std::string file = i.file.empty() ? "trials/" + i.id + ".csv" : i.file;
         json e{{"id", i.id}, {"case", i.case_id}, {"replicate", i.replicate}, {"file", file}};
         if (i.skin_setpoint_c) e["skin_setpoint_c"] = *i.skin_setpoint_c;
+        if (!i.ensemble.empty()) e["ensemble"] = i.ensemble;
+        if (!i.test.empty()) e["test"] = i.test;
         if (i.wettedness) {
             if (*i.wettedness == 0.0 || *i.wettedness == 1.0) e["wet"] = *i.wettedness == 1.0;
             else e["wettedness"] = *i.wettedness;

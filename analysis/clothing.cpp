@@ -1,0 +1,606 @@
+#include "analysis/clothing.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+#include <boost/math/distributions/students_t.hpp>
+#include <fmt/core.h>
+
+#include "physics/psychrometrics.hpp"
+
+namespace manikind::analysis::clothing {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// One trial of a clothing test, as the steady window left it.
+struct TestTrial {
+    std::string ensemble, test, id;
+    const TrialResult* r = nullptr;
+    const Campaign* campaign = nullptr;
+};
+
+// Instrument errors shared by every trial (one draw of the Monte Carlo), in units of each
+// spec's limit (a standardised draw from its distribution): the same manikin and probes
+// measured every trial, so their calibration errors are common (docs/clothing.md, "Type B").
+struct Draw {
+    double flux_offset = 0.0, flux_gain = 0.0, air = 0.0, skin = 0.0, rh = 0.0;
+};
+
+double standardised(Distribution d, std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    std::normal_distribution<double> n(0.0, 0.5);   // a k = 2 limit: u = a/2
+    switch (d) {
+        case Distribution::rectangular: return u(rng);
+        case Distribution::normal_k2: return n(rng);
+        case Distribution::triangular: return 0.5 * (u(rng) + u(rng));
+    }
+    return u(rng);
+}
+
+InstrumentSpec spec_of(const Campaign& c, const char* channel) {
+    const auto it = c.instruments.find(channel);
+    return it == c.instruments.end() ? InstrumentSpec{} : it->second;
+}
+
+// The trial's values under a draw of the instrument errors.
+struct Perturbed {
+    double air_temp_c = 0.0, air_rh_pct = 0.0;
+    std::vector<double> skin_c, q_w_m2;  // per zone; NaN where missing
+};
+
+Perturbed perturb(const TestTrial& t, const Draw& d) {
+    const Campaign& c = *t.campaign;
+    const auto flux = spec_of(c, "heat_flux_w_m2"), air = spec_of(c, "air_temp_c"), skin = spec_of(c, "skin_temp_c"),
+               rh = spec_of(c, "air_rh_pct");
+    Perturbed p;
+    p.air_temp_c = t.r->air_temp_c + d.air * air.limit(t.r->air_temp_c);
+    p.air_rh_pct = std::clamp(t.r->air_rh_pct + d.rh * rh.limit(t.r->air_rh_pct), 0.0, 100.0);
+    p.skin_c.resize(t.r->zone_skin_temp_c.size());
+    p.q_w_m2.resize(t.r->zone_q_w_m2.size());
+    for (std::size_t z = 0; z < p.skin_c.size(); ++z) p.skin_c[z] = t.r->zone_skin_temp_c[z] + d.skin * skin.limit(t.r->zone_skin_temp_c[z]);
+    for (std::size_t z = 0; z < p.q_w_m2.size(); ++z) {
+        const double q = t.r->zone_q_w_m2[z];
+        p.q_w_m2[z] = q + d.flux_offset * flux.accuracy + d.flux_gain * flux.accuracy_of_reading * std::abs(q);
+    }
+    return p;
+}
+
+// Area fractions over the zones with a value in both channels (and optionally a zone subset).
+struct Weights {
+    std::vector<std::size_t> zones;
+    std::vector<double> f;
+};
+Weights weights(const ZoneMap& map, const Perturbed& p, const std::string& region = "") {
+    Weights w;
+    double area = 0.0;
+    for (std::size_t z = 0; z < map.zones.size() && z < p.q_w_m2.size() && z < p.skin_c.size(); ++z) {
+        if (!region.empty() && map.zones[z].region != region) continue;
+        if (!std::isfinite(p.q_w_m2[z]) || !std::isfinite(p.skin_c[z])) continue;
+        w.zones.push_back(z);
+        w.f.push_back(map.zones[z].area_m2);
+        area += map.zones[z].area_m2;
+    }
+    for (double& f : w.f) f /= area > 0.0 ? area : 1.0;
+    return w;
+}
+
+// Every quantity of one evaluation (the data as measured, or one Monte Carlo draw).
+struct Quantities {
+    // Per ensemble: the replicates' values of each primary key, and the means and derived keys.
+    std::map<std::string, std::map<std::string, std::vector<double>>> replicates;
+    std::map<std::string, std::map<std::string, double>> value;
+    std::map<std::string, double> fcl;
+};
+
+double mean_of(const std::vector<double>& v) {
+    double s = 0.0;
+    int n = 0;
+    for (double x : v)
+        if (std::isfinite(x)) {
+            s += x;
+            ++n;
+        }
+    return n > 0 ? s / n : kNaN;
+}
+
+Quantities evaluate(const std::vector<TestTrial>& trials, const ZoneMap& map, const std::set<std::string>& regions,
+                    const std::map<std::string, std::optional<double>>& given_fcl, const Draw& d) {
+    Quantities out;
+    // Insulation first: the evaporative test's dry part needs each zone's It.
+    std::map<std::string, std::vector<std::vector<double>>> zone_it;  // ensemble -> replicate -> zone
+    for (const auto& t : trials) {
+        if (t.test != "insulation") continue;
+        const Perturbed p = perturb(t, d);
+        const Weights w = weights(map, p);
+        double ts = 0.0, q = 0.0, serial = 0.0;
+        std::vector<double> it_z(map.zones.size(), kNaN);
+        for (std::size_t i = 0; i < w.zones.size(); ++i) {
+            const std::size_t z = w.zones[i];
+            ts += w.f[i] * p.skin_c[z];
+            q += w.f[i] * p.q_w_m2[z];
+            it_z[z] = (p.skin_c[z] - p.air_temp_c) / p.q_w_m2[z];
+            serial += w.f[i] * it_z[z];
+        }
+        auto& rep = out.replicates[t.ensemble];
+        rep["It_par"].push_back((ts - p.air_temp_c) / q);   // ASTM F1291 / ISO 15831, parallel
+        rep["It_ser"].push_back(serial);                     // serial
+        for (const auto& region : regions) {
+            const Weights wr = weights(map, p, region);
+            double tr = 0.0, qr = 0.0;
+            for (std::size_t i = 0; i < wr.zones.size(); ++i) {
+                tr += wr.f[i] * p.skin_c[wr.zones[i]];
+                qr += wr.f[i] * p.q_w_m2[wr.zones[i]];
+            }
+            rep["It_par:" + region].push_back(wr.zones.empty() ? kNaN : (tr - p.air_temp_c) / qr);
+        }
+        zone_it[t.ensemble].push_back(std::move(it_z));
+    }
+    for (const auto& t : trials) {
+        if (t.test != "evaporative") continue;
+        const Perturbed p = perturb(t, d);
+        const Weights w = weights(map, p);
+        const double p_air_kpa = physics::vapour_pressure_pa(p.air_temp_c, p.air_rh_pct) / 1000.0;
+        // The dry part of each zone's loss (ASTM F2370, non-isothermal option): (T_z - T_a)/It_z
+        // with the ensemble's own It per zone; none in the isothermal test (T_z = T_a).
+        std::vector<double> it_z(map.zones.size(), kNaN);
+        if (const auto it = zone_it.find(t.ensemble); it != zone_it.end())
+            for (std::size_t z = 0; z < it_z.size(); ++z) {
+                std::vector<double> v;
+                for (const auto& rep : it->second) v.push_back(rep[z]);
+                it_z[z] = mean_of(v);
+            }
+        double ps = 0.0, qe = 0.0, serial = 0.0;
+        std::vector<double> qe_z(map.zones.size(), kNaN), ps_z(map.zones.size(), kNaN);
+        for (std::size_t i = 0; i < w.zones.size(); ++i) {
+            const std::size_t z = w.zones[i];
+            const double dry = std::isfinite(it_z[z]) && it_z[z] > 0.0 ? (p.skin_c[z] - p.air_temp_c) / it_z[z] : 0.0;
+            qe_z[z] = p.q_w_m2[z] - dry;
+            ps_z[z] = physics::saturation_vapour_pressure_pa(p.skin_c[z]) / 1000.0;
+            ps += w.f[i] * ps_z[z];
+            qe += w.f[i] * qe_z[z];
+            serial += w.f[i] * (ps_z[z] - p_air_kpa) / qe_z[z];
+        }
+        auto& rep = out.replicates[t.ensemble];
+        rep["Ret_par"].push_back((ps - p_air_kpa) / qe);   // ASTM F2370, parallel (m²kPa/W)
+        rep["Ret_ser"].push_back(serial);
+        for (const auto& region : regions) {
+            const Weights wr = weights(map, p, region);
+            double pr = 0.0, qr = 0.0;
+            for (std::size_t i = 0; i < wr.zones.size(); ++i) {
+                pr += wr.f[i] * ps_z[wr.zones[i]];
+                qr += wr.f[i] * qe_z[wr.zones[i]];
+            }
+            rep["Ret_par:" + region].push_back(wr.zones.empty() ? kNaN : (pr - p_air_kpa) / qr);
+        }
+    }
+    for (const auto& [ensemble, keys] : out.replicates)
+        for (const auto& [key, v] : keys) out.value[ensemble][key] = mean_of(v);
+    // Derived from the nude manikin's values (ISO 9920 4.2).
+    const auto nude = out.value.find("nude");
+    for (auto& [ensemble, v] : out.value) {
+        auto get = [&](const std::map<std::string, double>& m, const std::string& k) {
+            const auto it = m.find(k);
+            return it == m.end() ? kNaN : it->second;
+        };
+        const double it = get(v, "It_par"), ret = get(v, "Ret_par");
+        if (std::isfinite(it) && std::isfinite(ret)) v["im"] = it / (kLewisRelation_k_kpa * ret);
+        if (ensemble == "nude" || nude == out.value.end()) continue;
+        const double ia = get(nude->second, "It_par"), rea = get(nude->second, "Ret_par");
+        double fcl = 1.0;
+        const auto given = given_fcl.find(ensemble);
+        if (given != given_fcl.end() && given->second) {
+            fcl = *given->second;
+        } else if (std::isfinite(it) && std::isfinite(ia)) {
+            // ISO 9920's estimate fcl = 1.00 + 0.28 Icl (Icl in clo), with Icl = It - Ia/fcl: a
+            // fixed point that converges in a few steps (the map contracts: 0.28 Ia/0.155 fcl² < 1).
+            for (int i = 0; i < 20; ++i) fcl = 1.0 + 0.28 * std::max(0.0, it - ia / fcl) / kClo_m2k_w;
+        }
+        out.fcl[ensemble] = fcl;
+        if (std::isfinite(it) && std::isfinite(ia)) {
+            v["Icle_par"] = it - ia;
+            v["Icl_par"] = it - ia / fcl;
+            for (const auto& region : regions) {
+                const double a = get(v, "It_par:" + region), b = get(nude->second, "It_par:" + region);
+                if (std::isfinite(a) && std::isfinite(b)) v["Icle_par:" + region] = a - b;
+            }
+        }
+        if (std::isfinite(ret) && std::isfinite(rea)) v["Recl_par"] = ret - rea / fcl;
+    }
+    return out;
+}
+
+double t_quantile(double dof, double p) {
+    if (!(dof > 0.0) || !std::isfinite(dof) || dof > 1e6) return boost::math::quantile(boost::math::students_t(1e6), p);
+    return boost::math::quantile(boost::math::students_t(dof), p);
+}
+
+// Type A of a mean of replicates: s / sqrt(n) on n - 1 dof.
+struct TypeA {
+    double u = kNaN;
+    double dof = 0.0;
+};
+TypeA type_a(const std::vector<double>& v) {
+    std::vector<double> x;
+    for (double a : v)
+        if (std::isfinite(a)) x.push_back(a);
+    if (x.size() < 2) return {};
+    const double m = std::accumulate(x.begin(), x.end(), 0.0) / static_cast<double>(x.size());
+    double ss = 0.0;
+    for (double a : x) ss += (a - m) * (a - m);
+    const double n = static_cast<double>(x.size());
+    return {std::sqrt(ss / (n - 1.0) / n), n - 1.0};
+}
+
+// A sum of independent Type A parts c_i u_i (Welch-Satterthwaite dof).
+TypeA combine(const std::vector<std::pair<double, TypeA>>& parts) {
+    double var = 0.0, denom = 0.0;
+    for (const auto& [c, a] : parts) {
+        if (!std::isfinite(a.u)) return {};
+        const double v = c * c * a.u * a.u;
+        var += v;
+        denom += a.dof > 0.0 ? v * v / a.dof : 0.0;
+    }
+    TypeA out;
+    out.u = std::sqrt(var);
+    out.dof = denom > 0.0 ? var * var / denom : 1e9;
+    return out;
+}
+
+Value make_value(double value, TypeA a, double u_b, const std::string& unit, double confidence) {
+    Value v;
+    v.value = value;
+    v.unit = unit;
+    v.u_a = a.u;
+    v.u_b = u_b;
+    const double ua = std::isfinite(a.u) ? a.u : 0.0;
+    v.u_c = std::hypot(ua, u_b);
+    // GUM G.4.1: only the Type A part has finite degrees of freedom.
+    v.dof = ua > 0.0 ? std::pow(v.u_c, 4) / (std::pow(ua, 4) / a.dof) : 1e9;
+    v.k = std::isfinite(a.u) ? t_quantile(v.dof, 0.5 + confidence / 2.0) : 2.0;
+    v.U95 = v.k * v.u_c;
+    return v;
+}
+
+Conditions conditions_of(const std::vector<TestTrial>& trials, const std::string& ensemble, const std::string& test) {
+    Conditions c;
+    std::vector<double> ta, rh, v, ts;
+    for (const auto& t : trials)
+        if (t.ensemble == ensemble && t.test == test) {
+            ta.push_back(t.r->air_temp_c);
+            rh.push_back(t.r->air_rh_pct);
+            v.push_back(t.r->air_speed_m_s);
+            ts.push_back(t.r->mean_skin_temp_c);
+            ++c.trials;
+        }
+    c.air_temp_c = mean_of(ta);
+    c.air_rh_pct = mean_of(rh);
+    c.air_speed_m_s = mean_of(v);
+    c.mean_skin_temp_c = mean_of(ts);
+    return c;
+}
+
+std::optional<double> cv_of(const std::vector<double>& v) {
+    const TypeA a = type_a(v);
+    if (!std::isfinite(a.u)) return std::nullopt;
+    const double m = mean_of(v);
+    return a.u * std::sqrt(static_cast<double>(v.size())) / std::abs(m);
+}
+
+}  // namespace
+
+Result compute(const Campaign& campaign, const CampaignResult& analysis, const Campaign* baseline,
+               const CampaignResult* baseline_analysis, const Options& options) {
+    Result out;
+    out.campaign = campaign.name;
+    out.options = options;
+    auto collect = [&](const Campaign& c, const CampaignResult& a, std::vector<TestTrial>& into, bool nude_only) {
+        std::map<std::string, const TrialResult*> by_id;
+        for (const auto& cs : a.cases)
+            for (const auto& t : cs.trials) by_id[t.id] = &t;
+        for (const auto& cs : a.unanalysed_cases)
+            for (const auto& t : cs.trials) by_id[t.id] = &t;
+        for (const auto& trial : c.trials) {
+            const auto& info = trial.info;
+            if (info.ensemble.empty() || info.test.empty()) continue;
+            if (nude_only && info.ensemble != "nude") continue;
+            const auto it = by_id.find(info.id);
+            if (it == by_id.end() || !it->second->included) {
+                out.warnings.push_back(fmt::format("{}: trial {} ({} {}) left out: {}", c.name, info.id, info.ensemble, info.test,
+                                                   it == by_id.end() ? "not analysed" : it->second->exclusion_reason));
+                continue;
+            }
+            into.push_back({info.ensemble, info.test, info.id, it->second, &c});
+        }
+    };
+    std::vector<TestTrial> trials;
+    collect(campaign, analysis, trials, false);
+    const bool own_nude = std::any_of(trials.begin(), trials.end(), [](const auto& t) { return t.ensemble == "nude"; });
+    if (baseline && baseline_analysis) {
+        if (own_nude) {
+            out.warnings.push_back("the campaign has its own nude trials: --baseline is not used");
+        } else {
+            const auto before = trials.size();
+            collect(*baseline, *baseline_analysis, trials, true);
+            if (trials.size() == before)
+                throw std::invalid_argument(fmt::format("--baseline {}: no steady nude trial (ensemble \"nude\" with a test)", baseline->name));
+            out.baseline = baseline->name;
+        }
+    }
+    if (trials.empty())
+        throw std::invalid_argument(fmt::format(
+            "{}: no clothing test in this campaign (no trial names an ensemble and a test; docs/clothing.md)", campaign.name));
+
+    const ZoneMap& map = campaign.zone_map;
+    std::set<std::string> regions;
+    for (const auto& z : map.zones) regions.insert(z.region);
+    std::map<std::string, std::optional<double>> given_fcl;
+    for (const auto& [id, e] : campaign.ensembles) given_fcl[id] = e.fcl;
+
+    const Quantities measured = evaluate(trials, map, regions, given_fcl, Draw{});
+    // Monte Carlo over the shared instrument errors (GUM Supplement 1): the Type B standard
+    // uncertainty of every quantity is its standard deviation over the draws.
+    std::mt19937_64 rng(options.seed);
+    const auto dist = [&](const char* ch) { return spec_of(campaign, ch).distribution; };
+    std::map<std::string, std::map<std::string, std::pair<double, double>>> sums;  // sum, sum of squares
+    const int draws = std::max(100, options.monte_carlo_draws);
+    for (int i = 0; i < draws; ++i) {
+        Draw d;
+        d.flux_offset = standardised(dist("heat_flux_w_m2"), rng);
+        d.flux_gain = standardised(dist("heat_flux_w_m2"), rng);
+        d.air = standardised(dist("air_temp_c"), rng);
+        d.skin = standardised(dist("skin_temp_c"), rng);
+        d.rh = standardised(dist("air_rh_pct"), rng);
+        const Quantities q = evaluate(trials, map, regions, given_fcl, d);
+        for (const auto& [ensemble, keys] : q.value)
+            for (const auto& [key, v] : keys) {
+                if (!std::isfinite(v)) continue;
+                const auto base = measured.value.at(ensemble).count(key) ? measured.value.at(ensemble).at(key) : kNaN;
+                auto& s = sums[ensemble][key];
+                s.first += v - base;
+                s.second += (v - base) * (v - base);
+            }
+    }
+    auto u_b = [&](const std::string& ensemble, const std::string& key) {
+        const auto& s = sums[ensemble][key];
+        const double n = static_cast<double>(draws);
+        return std::sqrt(std::max(0.0, s.second / n - (s.first / n) * (s.first / n)));
+    };
+
+    std::vector<std::string> order;
+    if (measured.value.count("nude")) order.push_back("nude");
+    for (const auto& [id, v] : measured.value)
+        if (id != "nude") order.push_back(id);
+    for (const auto& id : order) {
+        const auto& v = measured.value.at(id);
+        const auto& reps = measured.replicates.at(id);
+        auto value_of = [&](const std::string& k) {
+            const auto it = v.find(k);
+            return it == v.end() ? kNaN : it->second;
+        };
+        auto reps_of = [&](const std::string& k) {
+            const auto it = reps.find(k);
+            return it == reps.end() ? std::vector<double>{} : it->second;
+        };
+        auto nude_a = [&](const std::string& k) {
+            const auto it = measured.replicates.find("nude");
+            if (it == measured.replicates.end() || !it->second.count(k)) return TypeA{};
+            return type_a(it->second.at(k));
+        };
+        EnsembleResult e;
+        e.id = id;
+        if (const auto it = campaign.ensembles.find(id); it != campaign.ensembles.end()) e.description = it->second.description;
+        if (id == "nude") {
+            e.description = e.description.empty() ? "the bare manikin" : e.description;
+            e.fcl_source = "nude";
+        } else if (measured.fcl.count(id)) {
+            e.fcl = measured.fcl.at(id);
+            e.fcl_source = given_fcl.count(id) && given_fcl.at(id) ? "given" : "ISO 9920 estimate fcl = 1.00 + 0.28 Icl (clo)";
+        }
+        const double conf = options.confidence;
+        if (std::isfinite(value_of("It_par"))) {
+            e.insulation_conditions = conditions_of(trials, id, "insulation");
+            e.insulation_replicates = reps_of("It_par");
+            e.insulation_total_parallel = make_value(value_of("It_par"), type_a(reps_of("It_par")), u_b(id, "It_par"), "m2K/W", conf);
+            e.insulation_total_serial = make_value(value_of("It_ser"), type_a(reps_of("It_ser")), u_b(id, "It_ser"), "m2K/W", conf);
+            e.insulation_cv = cv_of(e.insulation_replicates);
+            if (e.insulation_cv) e.insulation_cv_pass = *e.insulation_cv <= options.cv_limit_insulation;
+            if (std::isfinite(value_of("Icle_par"))) {
+                const TypeA it_a = type_a(reps_of("It_par")), ia_a = nude_a("It_par");
+                e.insulation_effective_parallel =
+                    make_value(value_of("Icle_par"), combine({{1.0, it_a}, {1.0, ia_a}}), u_b(id, "Icle_par"), "m2K/W", conf);
+                e.insulation_intrinsic_parallel = make_value(value_of("Icl_par"), combine({{1.0, it_a}, {1.0 / e.fcl, ia_a}}),
+                                                             u_b(id, "Icl_par"), "m2K/W", conf);
+            }
+        }
+        if (std::isfinite(value_of("Ret_par"))) {
+            e.evaporative_conditions = conditions_of(trials, id, "evaporative");
+            const double gap = e.evaporative_conditions->mean_skin_temp_c - e.evaporative_conditions->air_temp_c;
+            e.evaporative_method = std::abs(gap) <= 1.0 ? "isothermal"
+                                   : e.insulation_total_parallel
+                                       ? "non-isothermal: dry part from the ensemble's It per zone"
+                                       : "non-isothermal without an insulation test of the ensemble: dry part not removed";
+            if (std::abs(gap) > 1.0 && !e.insulation_total_parallel)
+                out.warnings.push_back(fmt::format("{}: evaporative test {:.1f} K from isothermal with no insulation test of the "
+                                                   "same ensemble: Ret includes dry heat loss (run the insulation test too)",
+                                                   id, gap));
+            e.evaporative_replicates = reps_of("Ret_par");
+            e.evaporative_total_parallel = make_value(value_of("Ret_par"), type_a(reps_of("Ret_par")), u_b(id, "Ret_par"), "m2kPa/W", conf);
+            e.evaporative_total_serial = make_value(value_of("Ret_ser"), type_a(reps_of("Ret_ser")), u_b(id, "Ret_ser"), "m2kPa/W", conf);
+            e.evaporative_cv = cv_of(e.evaporative_replicates);
+            if (e.evaporative_cv) e.evaporative_cv_pass = *e.evaporative_cv <= options.cv_limit_evaporative;
+            if (std::isfinite(value_of("Recl_par")))
+                e.evaporative_intrinsic_parallel =
+                    make_value(value_of("Recl_par"), combine({{1.0, type_a(reps_of("Ret_par"))}, {1.0 / e.fcl, nude_a("Ret_par")}}),
+                               u_b(id, "Recl_par"), "m2kPa/W", conf);
+        }
+        if (std::isfinite(value_of("im"))) {
+            const double it = value_of("It_par"), ret = value_of("Ret_par");
+            const TypeA a = combine({{value_of("im") / it, type_a(reps_of("It_par"))}, {value_of("im") / ret, type_a(reps_of("Ret_par"))}});
+            e.permeability_index = make_value(value_of("im"), a, u_b(id, "im"), "1", conf);
+        }
+        for (const auto& region : regions) {
+            RegionValues rv;
+            rv.region = region;
+            for (const auto& z : map.zones)
+                if (z.region == region) rv.area_m2 += z.area_m2;
+            if (std::isfinite(value_of("It_par:" + region)))
+                rv.insulation_total = make_value(value_of("It_par:" + region), type_a(reps_of("It_par:" + region)),
+                                                 u_b(id, "It_par:" + region), "m2K/W", conf);
+            if (std::isfinite(value_of("Icle_par:" + region)))
+                rv.insulation_effective = make_value(value_of("Icle_par:" + region),
+                                                     combine({{1.0, type_a(reps_of("It_par:" + region))}, {1.0, nude_a("It_par:" + region)}}),
+                                                     u_b(id, "Icle_par:" + region), "m2K/W", conf);
+            if (std::isfinite(value_of("Ret_par:" + region)))
+                rv.evaporative_total = make_value(value_of("Ret_par:" + region), type_a(reps_of("Ret_par:" + region)),
+                                                  u_b(id, "Ret_par:" + region), "m2kPa/W", conf);
+            if (rv.insulation_total || rv.evaporative_total) e.regions.push_back(std::move(rv));
+        }
+        if (id != "nude" && !measured.value.count("nude"))
+            e.notes.push_back("no nude trials (here or --baseline): effective and intrinsic values need Ia and Rea");
+        if (e.insulation_replicates.size() == 1 || e.evaporative_replicates.size() == 1)
+            e.notes.push_back("one replicate: no Type A, U from the instruments alone with k = 2, no replicate criterion");
+        out.ensembles.push_back(std::move(e));
+    }
+    // Conditions against the standards (warnings, never a refusal: a lab may test otherwise on purpose).
+    for (const auto& e : out.ensembles) {
+        if (const auto& c = e.insulation_conditions) {
+            if (c->mean_skin_temp_c - c->air_temp_c < 12.0)
+                out.warnings.push_back(fmt::format("{}: insulation test with skin {:.1f} °C and air {:.1f} °C: ASTM F1291 and "
+                                                   "ISO 15831 ask the air at least 12 K below the skin",
+                                                   e.id, c->mean_skin_temp_c, c->air_temp_c));
+            if (std::isfinite(c->air_speed_m_s) && std::abs(c->air_speed_m_s - 0.4) > 0.1)
+                out.warnings.push_back(fmt::format("{}: insulation test at {:.2f} m/s; the standards ask 0.4 ± 0.1 m/s", e.id, c->air_speed_m_s));
+        }
+        if (const auto& c = e.evaporative_conditions)
+            if (std::isfinite(c->air_speed_m_s) && std::abs(c->air_speed_m_s - 0.4) > 0.1)
+                out.warnings.push_back(fmt::format("{}: evaporative test at {:.2f} m/s; ASTM F2370 asks 0.4 ± 0.1 m/s", e.id, c->air_speed_m_s));
+    }
+    return out;
+}
+
+namespace {
+
+nlohmann::json value_json(const std::optional<Value>& v) {
+    if (!v) return nullptr;
+    return {{"value", v->value}, {"U95", v->U95}, {"unit", v->unit}, {"u_a", std::isfinite(v->u_a) ? nlohmann::json(v->u_a) : nlohmann::json()},
+            {"u_b", v->u_b}, {"u_c", v->u_c}, {"k", v->k}, {"dof", v->dof > 1e8 ? nlohmann::json() : nlohmann::json(v->dof)},
+            {"clo", v->unit == "m2K/W" ? nlohmann::json(v->value / kClo_m2k_w) : nlohmann::json()},
+            {"U95_clo", v->unit == "m2K/W" ? nlohmann::json(v->U95 / kClo_m2k_w) : nlohmann::json()},
+            {"value_m2pa_w", v->unit == "m2kPa/W" ? nlohmann::json(v->value * 1000.0) : nlohmann::json()}};
+}
+
+nlohmann::json conditions_json(const std::optional<Conditions>& c) {
+    if (!c) return nullptr;
+    auto num = [](double x) { return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json(); };
+    return {{"air_temp_c", num(c->air_temp_c)}, {"air_rh_pct", num(c->air_rh_pct)}, {"air_speed_m_s", num(c->air_speed_m_s)},
+            {"mean_skin_temp_c", num(c->mean_skin_temp_c)}, {"trials", c->trials}};
+}
+
+std::string fmt_value(const std::optional<Value>& v, bool clo = false) {
+    if (!v) return "-";
+    if (clo) return fmt::format("{:.4f} ± {:.4f} m²K/W ({:.3f} ± {:.3f} clo)", v->value, v->U95, v->value / kClo_m2k_w, v->U95 / kClo_m2k_w);
+    if (v->unit == "m2kPa/W") return fmt::format("{:.4f} ± {:.4f} m²kPa/W ({:.1f} ± {:.1f} m²Pa/W)", v->value, v->U95, 1000 * v->value, 1000 * v->U95);
+    return fmt::format("{:.3f} ± {:.3f}", v->value, v->U95);
+}
+
+}  // namespace
+
+nlohmann::json to_json(const Result& r) {
+    nlohmann::json j;
+    j["campaign"] = r.campaign;
+    j["baseline"] = r.baseline.empty() ? nlohmann::json() : nlohmann::json(r.baseline);
+    j["method"] = {{"insulation", "ASTM F1291 / ISO 15831: parallel (global) and serial; effective and intrinsic per ISO 9920"},
+                   {"evaporative", "ASTM F2370: parallel and serial, fully wet skin at the zone's skin temperature"},
+                   {"type_a", "re-dressed replicates: s/sqrt(n), n - 1 dof"},
+                   {"type_b", fmt::format("Monte Carlo over the instruments' shared errors, {} draws (GUM Supplement 1)",
+                                          r.options.monte_carlo_draws)},
+                   {"confidence", r.options.confidence},
+                   {"cv_limit_insulation", r.options.cv_limit_insulation},
+                   {"cv_limit_evaporative", r.options.cv_limit_evaporative},
+                   {"lewis_relation_k_kpa", kLewisRelation_k_kpa},
+                   {"clo_m2k_w", kClo_m2k_w}};
+    j["ensembles"] = nlohmann::json::array();
+    for (const auto& e : r.ensembles) {
+        nlohmann::json x;
+        x["id"] = e.id;
+        x["description"] = e.description;
+        x["fcl"] = e.fcl;
+        x["fcl_source"] = e.fcl_source;
+        x["insulation"] = {{"total_parallel", value_json(e.insulation_total_parallel)},
+                           {"total_serial", value_json(e.insulation_total_serial)},
+                           {"effective_parallel", value_json(e.insulation_effective_parallel)},
+                           {"intrinsic_parallel", value_json(e.insulation_intrinsic_parallel)},
+                           {"replicates", e.insulation_replicates},
+                           {"cv", e.insulation_cv ? nlohmann::json(*e.insulation_cv) : nlohmann::json()},
+                           {"cv_pass", e.insulation_cv_pass ? nlohmann::json(*e.insulation_cv_pass) : nlohmann::json()},
+                           {"conditions", conditions_json(e.insulation_conditions)}};
+        x["evaporative"] = {{"total_parallel", value_json(e.evaporative_total_parallel)},
+                            {"total_serial", value_json(e.evaporative_total_serial)},
+                            {"intrinsic_parallel", value_json(e.evaporative_intrinsic_parallel)},
+                            {"replicates", e.evaporative_replicates},
+                            {"cv", e.evaporative_cv ? nlohmann::json(*e.evaporative_cv) : nlohmann::json()},
+                            {"cv_pass", e.evaporative_cv_pass ? nlohmann::json(*e.evaporative_cv_pass) : nlohmann::json()},
+                            {"method", e.evaporative_method},
+                            {"conditions", conditions_json(e.evaporative_conditions)}};
+        x["permeability_index"] = value_json(e.permeability_index);
+        x["regions"] = nlohmann::json::array();
+        for (const auto& rv : e.regions)
+            x["regions"].push_back({{"region", rv.region}, {"area_m2", rv.area_m2},
+                                    {"insulation_total_parallel", value_json(rv.insulation_total)},
+                                    {"insulation_effective_parallel", value_json(rv.insulation_effective)},
+                                    {"evaporative_total_parallel", value_json(rv.evaporative_total)}});
+        x["notes"] = e.notes;
+        j["ensembles"].push_back(x);
+    }
+    j["warnings"] = r.warnings;
+    return j;
+}
+
+std::string to_text(const Result& r) {
+    std::ostringstream o;
+    o << fmt::format("Clothing tests: {}{}\n", r.campaign, r.baseline.empty() ? "" : " (nude baseline from " + r.baseline + ")");
+    o << fmt::format("Values ± U95 ({:.0f} %: Type A from re-dressed replicates, Type B from the instruments by Monte Carlo)\n\n",
+                     100.0 * r.options.confidence);
+    for (const auto& e : r.ensembles) {
+        o << fmt::format("{}{}{}\n", e.id, e.description.empty() ? "" : ": ", e.description);
+        if (e.id != "nude" && e.insulation_effective_parallel) o << fmt::format("  fcl {:.3f} ({})\n", e.fcl, e.fcl_source);
+        if (const auto& c = e.insulation_conditions)
+            o << fmt::format("  insulation, {} trial{}: air {:.1f} °C, {:.0f} % RH, {:.2f} m/s, mean skin {:.1f} °C\n", c->trials,
+                             c->trials == 1 ? "" : "s", c->air_temp_c, c->air_rh_pct, c->air_speed_m_s, c->mean_skin_temp_c);
+        if (e.insulation_total_parallel) {
+            o << "    It  total, parallel    " << fmt_value(e.insulation_total_parallel, true) << "\n";
+            o << "    It  total, serial      " << fmt_value(e.insulation_total_serial, true) << "\n";
+            if (e.insulation_effective_parallel) o << "    Icle effective         " << fmt_value(e.insulation_effective_parallel, true) << "\n";
+            if (e.insulation_intrinsic_parallel) o << "    Icl intrinsic          " << fmt_value(e.insulation_intrinsic_parallel, true) << "\n";
+            if (e.insulation_cv)
+                o << fmt::format("    replicates {}: CV {:.1f} % (limit {:.0f} %): {}\n", e.insulation_replicates.size(), 100 * *e.insulation_cv,
+                                 100 * r.options.cv_limit_insulation, *e.insulation_cv_pass ? "pass" : "FAIL");
+        }
+        if (const auto& c = e.evaporative_conditions)
+            o << fmt::format("  evaporative ({}), {} trial{}: air {:.1f} °C, {:.0f} % RH, {:.2f} m/s, mean skin {:.1f} °C\n",
+                             e.evaporative_method, c->trials, c->trials == 1 ? "" : "s", c->air_temp_c, c->air_rh_pct,
+                             c->air_speed_m_s, c->mean_skin_temp_c);
+        if (e.evaporative_total_parallel) {
+            o << "    Ret total, parallel    " << fmt_value(e.evaporative_total_parallel) << "\n";
+            o << "    Ret total, serial      " << fmt_value(e.evaporative_total_serial) << "\n";
+            if (e.evaporative_intrinsic_parallel) o << "    Recl intrinsic         " << fmt_value(e.evaporative_intrinsic_parallel) << "\n";
+            if (e.evaporative_cv)
+                o << fmt::format("    replicates {}: CV {:.1f} % (limit {:.0f} %): {}\n", e.evaporative_replicates.size(),
+                                 100 * *e.evaporative_cv, 100 * r.options.cv_limit_evaporative, *e.evaporative_cv_pass ? "pass" : "FAIL");
+        }
+        if (e.permeability_index) o << "    im permeability index  " << fmt_value(e.permeability_index) << "\n";
+        for (const auto& n : e.notes) o << "  note: " << n << "\n";
+        o << "\n";
+    }
+    for (const auto& w : r.warnings) o << "warning: " << w << "\n";
+    return o.str();
+}
+
+}  // namespace manikind::analysis::clothing

@@ -1,0 +1,108 @@
+#pragma once
+// Standard clothing tests on a heated, sweating manikin (docs/clothing.md): thermal insulation
+// (ASTM F1291, ISO 15831) and evaporative resistance (ASTM F2370, ISO 9920's definitions), each
+// with a 95 % interval from the re-dressed replicates (Type A) and the instruments' specs
+// (Type B, by Monte Carlo with the errors every trial shares drawn once: GUM Supplement 1).
+//
+//   total insulation, parallel (global):  It = (sum f_z T_z - T_a) / sum f_z q_z        (F1291 / ISO 15831)
+//   total insulation, serial:             It = sum f_z (T_z - T_a) / q_z
+//   effective:   Icle = It - Ia;   intrinsic:   Icl = It - Ia / fcl                    (ISO 9920 4.2)
+//   evaporative, parallel:  Ret = (sum f_z p_z - p_a) / sum f_z q_e,z;  serial likewise  (F2370)
+//                q_e = q - (T_z - T_a) / It_z   (the dry part; 0 in the isothermal test)
+//   intrinsic:   Recl = Ret - Rea / fcl;   permeability index  im = It / (LR Ret), LR = 16.5 K/kPa
+// f_z is the zone's area fraction, p_z the saturation vapour pressure at the zone's skin
+// temperature (a fully wet skin), p_a the air's vapour pressure. Values per ensemble; the nude
+// manikin's (Ia, Rea) come from trials with ensemble "nude", in this campaign or a baseline.
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "analysis/analyze.hpp"
+
+namespace manikind::analysis::clothing {
+
+inline constexpr double kClo_m2k_w = 0.155;        // 1 clo = 0.155 m²K/W (ASTM F1291 3.1, ISO 9920)
+inline constexpr double kLewisRelation_k_kpa = 16.5;  // LR, K/kPa (ISO 9920, Woodcock's im)
+
+struct Options {
+    // Replicate acceptance: the coefficient of variation of the re-dressed replicates' total
+    // (parallel) value may not exceed this (docs/clothing.md, "Acceptance"; configurable because
+    // the standards' texts are not public and labs differ).
+    double cv_limit_insulation = 0.05;
+    double cv_limit_evaporative = 0.10;
+    int monte_carlo_draws = 4000;
+    unsigned seed = 20261126;
+    double confidence = 0.95;
+};
+
+// A result with its uncertainty: value, combined standard uncertainty from Type A (replicates)
+// and Type B (instruments), effective degrees of freedom, k and the expanded U.
+struct Value {
+    double value = 0.0;
+    double u_a = 0.0;           // NaN where there is one replicate (not estimable)
+    double u_b = 0.0;
+    double u_c = 0.0;
+    double dof = 0.0;           // Welch-Satterthwaite (Type B infinite)
+    double k = 2.0;
+    double U95 = 0.0;
+    std::string unit;
+    double lo() const { return value - U95; }
+    double hi() const { return value + U95; }
+};
+
+struct RegionValues {
+    std::string region;
+    double area_m2 = 0.0;
+    std::optional<Value> insulation_total;       // parallel within the region
+    std::optional<Value> insulation_effective;   // minus the nude region's
+    std::optional<Value> evaporative_total;
+};
+
+struct Conditions {
+    double air_temp_c = 0.0, air_rh_pct = 0.0, air_speed_m_s = 0.0, mean_skin_temp_c = 0.0;
+    int trials = 0;
+};
+
+struct EnsembleResult {
+    std::string id;
+    std::string description;
+    double fcl = 1.0;
+    std::string fcl_source;                      // "given" or "ISO 9920 estimate 1 + 0.28 Icl (clo)" or "nude"
+    std::optional<Conditions> insulation_conditions, evaporative_conditions;
+    std::optional<Value> insulation_total_parallel, insulation_total_serial, insulation_effective_parallel,
+        insulation_intrinsic_parallel;
+    std::optional<Value> evaporative_total_parallel, evaporative_total_serial, evaporative_intrinsic_parallel;
+    std::optional<Value> permeability_index;
+    std::vector<double> insulation_replicates;   // It (parallel) per re-dressing, m²K/W
+    std::vector<double> evaporative_replicates;  // Ret (parallel) per re-dressing, m²kPa/W
+    std::optional<double> insulation_cv, evaporative_cv;
+    std::optional<bool> insulation_cv_pass, evaporative_cv_pass;
+    std::string evaporative_method;              // "isothermal" or "non-isothermal (dry part from It per zone)"
+    std::vector<RegionValues> regions;
+    std::vector<std::string> notes;
+};
+
+struct Result {
+    std::string campaign;
+    std::string baseline;                        // where the nude values came from ("" = this campaign)
+    Options options;
+    std::vector<EnsembleResult> ensembles;       // "nude" first when present
+    std::vector<std::string> warnings;           // conditions outside a standard's, trials left out
+};
+
+// `baseline` (optional): another campaign with the nude manikin's trials (ensemble "nude"),
+// recorded with the same manikin and probes (its instrument errors are the same draws).
+// Throws UserError-like std::invalid_argument when nothing in the campaign is a clothing test.
+Result compute(const Campaign& campaign, const CampaignResult& analysis, const Campaign* baseline,
+               const CampaignResult* baseline_analysis, const Options& options = {});
+
+nlohmann::json to_json(const Result& r);
+std::string to_text(const Result& r);
+// A one-page report per ensemble (HTML with inline SVG: values with intervals, conditions, the
+// replicate criterion, a body map of local insulation).
+std::string to_html(const Result& r, const ZoneMap& map);
+
+}  // namespace manikind::analysis::clothing

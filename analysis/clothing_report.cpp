@@ -1,0 +1,182 @@
+// The clothing test report (`manikin clothing --report`): one page per ensemble a lab can send to
+// a client. Plain HTML with inline SVG, printable (one ensemble per printed page), no scripts
+// and nothing loaded from elsewhere.
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <sstream>
+
+#include <fmt/core.h>
+
+#include "analysis/clothing.hpp"
+#include "analysis/plot/svg_figure.hpp"
+
+namespace manikind::analysis::clothing {
+namespace {
+
+using plot::xml_escape;
+
+// Where each ANDI zone is drawn (the console's body map, web/console.js): view, x, y, w, h.
+struct Shape {
+    bool front;
+    double x, y, w, h;
+};
+const std::map<std::string, Shape>& zone_shapes() {
+    static const std::map<std::string, Shape> shapes = {
+        {"face", {true, 82, 8, 36, 42}},            {"scalp", {false, 82, 8, 36, 42}},
+        {"neck", {true, 90, 50, 20, 14}},           {"upper_chest", {true, 68, 64, 64, 46}},
+        {"abdomen", {true, 70, 110, 60, 40}},       {"pelvis_front", {true, 70, 150, 60, 30}},
+        {"crotch", {true, 92, 180, 16, 14}},        {"upper_back", {false, 68, 64, 64, 50}},
+        {"lower_back", {false, 70, 114, 60, 40}},   {"buttock_l", {false, 70, 154, 30, 40}},
+        {"buttock_r", {false, 100, 154, 30, 40}},   {"shoulder_l", {true, 132, 64, 20, 20}},
+        {"shoulder_r", {true, 48, 64, 20, 20}},     {"upper_arm_front_l", {true, 134, 84, 18, 56}},
+        {"upper_arm_front_r", {true, 48, 84, 18, 56}}, {"upper_arm_back_l", {false, 48, 70, 18, 70}},
+        {"upper_arm_back_r", {false, 134, 70, 18, 70}}, {"forearm_front_l", {true, 137, 140, 16, 58}},
+        {"forearm_front_r", {true, 47, 140, 16, 58}}, {"forearm_back_l", {false, 47, 140, 16, 58}},
+        {"forearm_back_r", {false, 137, 140, 16, 58}}, {"hand_l", {true, 138, 198, 18, 30}},
+        {"hand_r", {true, 44, 198, 18, 30}},        {"thigh_front_l", {true, 102, 194, 27, 96}},
+        {"thigh_front_r", {true, 71, 194, 27, 96}}, {"thigh_back_l", {false, 71, 194, 27, 96}},
+        {"thigh_back_r", {false, 102, 194, 27, 96}}, {"calf_front_l", {true, 104, 290, 23, 88}},
+        {"calf_front_r", {true, 73, 290, 23, 88}},  {"calf_back_l", {false, 73, 290, 23, 88}},
+        {"calf_back_r", {false, 104, 290, 23, 88}}, {"foot_top_l", {true, 102, 378, 30, 20}},
+        {"foot_top_r", {true, 68, 378, 30, 20}},    {"foot_sole_l", {false, 68, 378, 30, 20}},
+        {"foot_sole_r", {false, 102, 378, 30, 20}},
+    };
+    return shapes;
+}
+
+// The body map's fixed scale: total local insulation 0 to 4 clo (docs/clothing.md), light to dark.
+constexpr double kScaleMaxClo = 4.0;
+std::string colour_for(double clo) {
+    const double t = std::clamp(clo / kScaleMaxClo, 0.0, 1.0);
+    // From pale yellow (bare) to deep blue (heavily insulated).
+    const int r = static_cast<int>(std::lround(255 - t * (255 - 8)));
+    const int g = static_cast<int>(std::lround(247 - t * (247 - 48)));
+    const int b = static_cast<int>(std::lround(188 + t * (107 - 188 + 60)));
+    return fmt::format("#{:02x}{:02x}{:02x}", std::clamp(r, 0, 255), std::clamp(g, 0, 255), std::clamp(b, 0, 255));
+}
+
+std::string body_map_svg(const EnsembleResult& e, const ZoneMap& map) {
+    std::map<std::string, double> clo_by_region;
+    for (const auto& rv : e.regions)
+        if (rv.insulation_total) clo_by_region[rv.region] = rv.insulation_total->value / kClo_m2k_w;
+    std::ostringstream o;
+    o << R"(<svg xmlns="http://www.w3.org/2000/svg" width="470" height="430" viewBox="0 0 470 430" role="img" )"
+      << R"(aria-label="local total insulation, clo">)";
+    o << R"(<text x="100" y="420" text-anchor="middle" font-size="12">front</text>)"
+      << R"(<text x="300" y="420" text-anchor="middle" font-size="12">back</text>)";
+    for (const auto& z : map.zones) {
+        const auto it = zone_shapes().find(z.name);
+        if (it == zone_shapes().end()) continue;
+        const Shape& s = it->second;
+        const double x = s.x + (s.front ? 0.0 : 200.0);
+        const auto v = clo_by_region.find(z.region);
+        const std::string fill = v == clo_by_region.end() ? "#dddddd" : colour_for(v->second);
+        o << fmt::format(R"(<rect x="{}" y="{}" width="{}" height="{}" rx="{:.1f}" fill="{}" stroke="#555" stroke-width="0.6">)",
+                         x, s.y, s.w, s.h, std::min(s.w, s.h) / 3.0, fill);
+        o << "<title>" << xml_escape(fmt::format("{} {} ({}): {}", z.zone, z.name, z.region,
+                                                  v == clo_by_region.end() ? "no value" : fmt::format("{:.2f} clo", v->second)))
+          << "</title></rect>";
+    }
+    // Colour bar with its unit and fixed scale.
+    for (int i = 0; i < 40; ++i)
+        o << fmt::format(R"(<rect x="420" y="{}" width="16" height="9" fill="{}"/>)", 390 - i * 9, colour_for(kScaleMaxClo * i / 39.0));
+    for (int c = 0; c <= 4; ++c)
+        o << fmt::format(R"(<text x="440" y="{}" font-size="11">{}</text>)", 399 - c * 9 * 39 / 4.0, c);
+    o << R"(<text x="412" y="20" font-size="11">It, clo</text></svg>)";
+    return o.str();
+}
+
+std::string row(const char* name, const std::optional<Value>& v, bool insulation) {
+    if (!v) return "";
+    const std::string si = fmt::format("{:.4f} ± {:.4f}", v->value, v->U95);
+    const std::string alt = insulation ? fmt::format("{:.3f} ± {:.3f} clo", v->value / kClo_m2k_w, v->U95 / kClo_m2k_w)
+                            : v->unit == "m2kPa/W" ? fmt::format("{:.1f} ± {:.1f} m²Pa/W", 1000 * v->value, 1000 * v->U95)
+                                                   : "";
+    const std::string unit = v->unit == "m2K/W" ? "m²K/W" : v->unit == "m2kPa/W" ? "m²kPa/W" : "";
+    return fmt::format("<tr><td>{}</td><td class=num>{} {}</td><td class=num>{}</td><td class=num>{:.2f}</td><td class=num>{}</td></tr>\n",
+                       name, si, unit, alt, v->k, std::isfinite(v->u_a) ? fmt::format("{:.2g}", v->u_a) : "—");
+}
+
+}  // namespace
+
+std::string to_html(const Result& r, const ZoneMap& map) {
+    std::ostringstream o;
+    o << "<!doctype html><html lang=en><head><meta charset=utf-8><title>"
+      << xml_escape("Clothing test report: " + r.campaign) << "</title><style>"
+      << "body{font:14px/1.4 system-ui,sans-serif;margin:2em;color:#111}"
+      << "section{page-break-after:always;max-width:980px}h1{font-size:20px}h2{font-size:17px;margin-top:1.6em}"
+      << "table{border-collapse:collapse;margin:.5em 0}td,th{border-bottom:1px solid #ccc;padding:3px 8px;text-align:left}"
+      << ".num{text-align:right;font-variant-numeric:tabular-nums}.pass{color:#070}.fail{color:#b00;font-weight:bold}"
+      << ".cols{display:flex;gap:2em;flex-wrap:wrap}.small{color:#555;font-size:12px}</style></head><body>\n";
+    for (const auto& e : r.ensembles) {
+        o << "<section><h1>" << xml_escape(fmt::format("Clothing test report: {}", e.id)) << "</h1>\n";
+        o << "<p>" << xml_escape(e.description) << "<br><span class=small>"
+          << xml_escape(fmt::format("campaign {}{}", r.campaign, r.baseline.empty() ? "" : "; nude baseline from " + r.baseline))
+          << "</span></p>\n<div class=cols><div>";
+        auto conditions = [&](const char* what, const std::optional<Conditions>& c) {
+            if (!c) return;
+            o << fmt::format("<p><b>{}</b>: {} trial{} (re-dressed between replicates); air {:.1f} °C, {:.0f} % RH, "
+                             "{:.2f} m/s; mean skin {:.1f} °C</p>\n",
+                             what, c->trials, c->trials == 1 ? "" : "s", c->air_temp_c, c->air_rh_pct, c->air_speed_m_s,
+                             c->mean_skin_temp_c);
+        };
+        conditions("Insulation (ASTM F1291 / ISO 15831)", e.insulation_conditions);
+        conditions(e.evaporative_method.empty() ? "Evaporative resistance (ASTM F2370)"
+                                                : ("Evaporative resistance (ASTM F2370, " + e.evaporative_method + ")").c_str(),
+                   e.evaporative_conditions);
+        o << "<table><tr><th>quantity</th><th>value ± U95</th><th></th><th>k</th><th>u<sub>A</sub></th></tr>\n";
+        o << row("total insulation I<sub>t</sub>, parallel", e.insulation_total_parallel, true);
+        o << row("total insulation I<sub>t</sub>, serial", e.insulation_total_serial, true);
+        o << row("effective insulation I<sub>cle</sub>", e.insulation_effective_parallel, true);
+        o << row("intrinsic insulation I<sub>cl</sub>", e.insulation_intrinsic_parallel, true);
+        o << row("total evaporative resistance R<sub>et</sub>, parallel", e.evaporative_total_parallel, false);
+        o << row("total evaporative resistance R<sub>et</sub>, serial", e.evaporative_total_serial, false);
+        o << row("intrinsic evaporative resistance R<sub>ecl</sub>", e.evaporative_intrinsic_parallel, false);
+        o << row("permeability index i<sub>m</sub>", e.permeability_index, false);
+        o << "</table>\n";
+        if (e.id != "nude" && e.insulation_effective_parallel)
+            o << "<p>" << xml_escape(fmt::format("Clothing area factor fcl = {:.3f} ({}).", e.fcl, e.fcl_source)) << "</p>\n";
+        auto criterion = [&](const char* what, const std::optional<double>& cv, const std::optional<bool>& pass, double limit,
+                             std::size_t n) {
+            if (!cv) return;
+            o << fmt::format("<p>{}: {} replicates, coefficient of variation {:.1f} % (limit {:.0f} %): <span class={}>{}</span></p>\n",
+                             what, n, 100 * *cv, 100 * limit, *pass ? "pass" : "fail", *pass ? "pass" : "FAIL");
+        };
+        criterion("Replicates, insulation", e.insulation_cv, e.insulation_cv_pass, r.options.cv_limit_insulation,
+                  e.insulation_replicates.size());
+        criterion("Replicates, evaporative resistance", e.evaporative_cv, e.evaporative_cv_pass, r.options.cv_limit_evaporative,
+                  e.evaporative_replicates.size());
+        for (const auto& n : e.notes) o << "<p class=small>Note: " << xml_escape(n) << "</p>\n";
+        o << "</div><div><h2>Local total insulation</h2>" << body_map_svg(e, map)
+          << "<p class=small>Each zone coloured by its region's total insulation (parallel), fixed scale 0-4 clo; grey: no value.</p></div></div>\n";
+        o << "<h2>By region</h2><table><tr><th>region</th><th>I<sub>t</sub> ± U95 (clo)</th><th>I<sub>cle</sub> ± U95 (clo)</th>"
+             "<th>R<sub>et</sub> ± U95 (m²Pa/W)</th></tr>\n";
+        for (const auto& rv : e.regions) {
+            auto clo = [](const std::optional<Value>& v) {
+                return v ? fmt::format("{:.2f} ± {:.2f}", v->value / kClo_m2k_w, v->U95 / kClo_m2k_w) : std::string("—");
+            };
+            o << fmt::format("<tr><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td></tr>\n",
+                             xml_escape(rv.region), clo(rv.insulation_total), clo(rv.insulation_effective),
+                             rv.evaporative_total ? fmt::format("{:.1f} ± {:.1f}", 1000 * rv.evaporative_total->value,
+                                                                1000 * rv.evaporative_total->U95)
+                                                  : std::string("—"));
+        }
+        o << "</table>\n<p class=small>"
+          << xml_escape(fmt::format("U95: {:.0f} % intervals, Type A from the re-dressed replicates (s/√n), Type B from the "
+                                    "instruments' specifications by Monte Carlo with errors shared by every trial (GUM "
+                                    "Supplement 1), k from Student's t on the Welch-Satterthwaite degrees of freedom. 1 clo = "
+                                    "0.155 m²K/W; i_m = I_t / (16.5 K/kPa × R_et). Method: docs/clothing.md.",
+                                    100 * r.options.confidence))
+          << "</p></section>\n";
+    }
+    if (!r.warnings.empty()) {
+        o << "<section><h2>Warnings</h2><ul>";
+        for (const auto& w : r.warnings) o << "<li>" << xml_escape(w) << "</li>";
+        o << "</ul></section>";
+    }
+    o << "</body></html>\n";
+    return o.str();
+}
+
+}  // namespace manikind::analysis::clothing

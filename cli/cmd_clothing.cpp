@@ -1,0 +1,87 @@
+// `manikin clothing <campaign>`: a garment's thermal insulation and evaporative resistance from a
+// standard clothing test (ASTM F1291, ISO 15831, ASTM F2370; analysis/clothing.hpp), with 95 %
+// intervals, the replicate criterion and a one-page report per ensemble.
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+#include <fmt/core.h>
+#include <spdlog/spdlog.h>
+
+#include "analysis/analyze.hpp"
+#include "analysis/clothing.hpp"
+#include "base/user_error.hpp"
+#include "cli/campaign_source.hpp"
+#include "cli/commands.hpp"
+
+namespace manikind::cli {
+
+void add_clothing_command(CLI::App& app) {
+    struct Opts {
+        CampaignSource source;
+        std::string baseline, report;
+        bool json = false;
+        analysis::clothing::Options options;
+    };
+    auto o = std::make_shared<Opts>();
+    auto* cmd = app.add_subcommand("clothing", "Clothing insulation (It, Icle, Icl) and evaporative resistance (Ret, Recl, "
+                                               "im) from a standard manikin test, with 95 % intervals");
+    add_campaign_source_options(cmd, o->source);
+    cmd->add_option("--baseline", o->baseline,
+                    "A campaign with the nude manikin's trials (ensemble \"nude\"), when this one has none: a folder, or "
+                    "with --db a campaign in the same database");
+    cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 5) instead of the table");
+    cmd->add_option("--report", o->report, "Write the one-page-per-ensemble report (HTML with SVG) to this file");
+    cmd->add_option("--cv-limit-insulation", o->options.cv_limit_insulation,
+                    "Largest coefficient of variation of the re-dressed replicates' total insulation (fraction)")
+        ->check(CLI::Range(0.001, 1.0))
+        ->capture_default_str();
+    cmd->add_option("--cv-limit-evaporative", o->options.cv_limit_evaporative,
+                    "Largest coefficient of variation of the replicates' total evaporative resistance (fraction)")
+        ->check(CLI::Range(0.001, 1.0))
+        ->capture_default_str();
+    cmd->add_option("--draws", o->options.monte_carlo_draws, "Monte Carlo draws for the Type B uncertainty")
+        ->check(CLI::Range(100, 1000000))
+        ->capture_default_str();
+    cmd->footer("Trials take part when campaign.json names their `ensemble` (an id of `ensembles`, or \"nude\") and\n"
+                "`test` (\"insulation\" or \"evaporative\"); docs/clothing.md has the equations, the standards' conditions\n"
+                "and where each number comes from. Exit status 0 even when a replicate criterion fails (it is reported).\n"
+                "Example: manikin clothing lab-day --baseline nude-baseline --report report.html\n"
+                "         manikin clothing --db manikind.db --campaign jackets-20261126 --json");
+    cmd->callback([o] {
+        const analysis::Campaign campaign = read_campaign_source(o->source);
+        for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
+        const auto result = analysis::analyze_campaign(campaign);
+        std::optional<analysis::Campaign> baseline;
+        std::optional<analysis::CampaignResult> baseline_result;
+        if (!o->baseline.empty()) {
+            CampaignSource from = o->source;
+            from.campaign = o->baseline;
+            baseline = read_campaign_source(from);
+            baseline_result = analysis::analyze_campaign(*baseline);
+        }
+        analysis::clothing::Result r;
+        try {
+            r = analysis::clothing::compute(campaign, result, baseline ? &*baseline : nullptr,
+                                            baseline_result ? &*baseline_result : nullptr, o->options);
+        } catch (const std::invalid_argument& e) {
+            throw UserError(e.what());
+        }
+        if (!o->report.empty()) {
+            std::ofstream out(o->report, std::ios::binary | std::ios::trunc);
+            if (!out) throw UserError(fmt::format("--report {}: cannot write there", o->report));
+            out << analysis::clothing::to_html(r, campaign.zone_map);
+            if (!out) throw UserError(fmt::format("--report {}: write failed", o->report));
+            spdlog::info("wrote {}", o->report);
+        }
+        if (o->json)
+            std::printf("%s\n", analysis::clothing::to_json(r).dump(2).c_str());
+        else
+            std::printf("%s", analysis::clothing::to_text(r).c_str());
+    });
+}
+
+}  // namespace manikind::cli

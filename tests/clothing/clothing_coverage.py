@@ -1,0 +1,91 @@
+#!/usr/bin/env python3
+"""Issue 33's proof: campaigns written by make_clothing_campaign.py (physics outside manikind)
+go through `manikin clothing --json`; the 95 % intervals must hold the truth in at least 90 % of
+all (campaign, ensemble, quantity) cases pooled, and in at least 85 % for each quantity alone
+(the instruments' calibration errors are drawn once per campaign and shared by every ensemble
+and quantity, so the campaigns, not the quantities, are the independent units: with 60 of
+them a correct 95 % interval falls below 85 % with probability 6e-4), and the intervals must
+not be inflated (relative U95 of the total insulation under 8 %). Seeds 1..N,
+fixed. Prints the coverage per quantity and the parallel-serial difference.
+
+Usage: clothing_coverage.py <manikin binary> [campaigns=60] [work dir]
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+KEYS = [("insulation", "total_parallel", "It_par"), ("insulation", "total_serial", "It_ser"),
+        ("insulation", "effective_parallel", "Icle_par"), ("insulation", "intrinsic_parallel", "Icl_par"),
+        ("evaporative", "total_parallel", "Ret_par"), ("evaporative", "total_serial", "Ret_ser"),
+        ("evaporative", "intrinsic_parallel", "Recl_par"), (None, "permeability_index", "im")]
+
+
+def main():
+    manikin = sys.argv[1]
+    n = int(sys.argv[2]) if len(sys.argv) > 2 else 60
+    work = sys.argv[3] if len(sys.argv) > 3 else tempfile.mkdtemp(prefix="manikind-clothing-")
+    here = os.path.dirname(os.path.abspath(__file__))
+    covered, total, worst_rel_u = {}, {}, 0.0
+    par_ser = {}
+    for seed in range(1, n + 1):
+        out = os.path.join(work, f"c{seed}")
+        shutil.rmtree(out, ignore_errors=True)
+        subprocess.run([sys.executable, os.path.join(here, "make_clothing_campaign.py"), "--out", out, "--seed", str(seed)], check=True)
+        truth = json.load(open(os.path.join(out, "truth.json")))
+        r = subprocess.run([manikin, "clothing", out, "--json"], capture_output=True, text=True)
+        if r.returncode != 0:
+            print(f"seed {seed}: manikin clothing failed ({r.returncode}): {r.stderr}")
+            sys.exit(1)
+        doc = json.loads(r.stdout)
+        if seed == 1:
+            # The report and the table a user reads, once.
+            report = os.path.join(work, "report.html")
+            t = subprocess.run([manikin, "clothing", out, "--report", report], capture_output=True, text=True)
+            html = open(report, encoding="utf-8").read()
+            for needle in ("Clothing test report: jacket", "<svg", "It, clo", "coefficient of variation"):
+                if needle not in html:
+                    print(f"report lacks {needle!r}")
+                    sys.exit(1)
+            for needle in ("It  total, parallel", "Icl intrinsic", "Ret total, parallel", "im permeability index", "pass"):
+                if needle not in t.stdout:
+                    print(f"table lacks {needle!r}")
+                    sys.exit(1)
+        for e in doc["ensembles"]:
+            t = truth[e["id"]]
+            for group, key, tkey in KEYS:
+                v = e[group][key] if group else e[key]
+                if tkey not in t:
+                    continue
+                if v is None:
+                    print(f"seed {seed}: {e['id']} {tkey} missing")
+                    sys.exit(1)
+                name = f"{e['id']} {tkey}"
+                total[name] = total.get(name, 0) + 1
+                inside = abs(v["value"] - t[tkey]) <= v["U95"]
+                covered[name] = covered.get(name, 0) + (1 if inside else 0)
+            it = e["insulation"]["total_parallel"]
+            worst_rel_u = max(worst_rel_u, it["U95"] / it["value"])
+            par_ser.setdefault(e["id"], []).append(e["insulation"]["total_serial"]["value"] / it["value"] - 1.0)
+        shutil.rmtree(out, ignore_errors=True)
+    ok = True
+    for name in sorted(total):
+        rate = covered[name] / total[name]
+        flag = "" if rate >= 0.85 else "  <- below 85 %"
+        ok = ok and rate >= 0.85
+        print(f"coverage {name:22s} {covered[name]:3d} of {total[name]} ({100 * rate:.0f} %){flag}")
+    pooled = sum(covered.values()) / sum(total.values())
+    print(f"coverage pooled: {sum(covered.values())} of {sum(total.values())} ({100 * pooled:.1f} %, need 90 %)")
+    ok = ok and pooled >= 0.9
+    for e, d in par_ser.items():
+        print(f"serial above parallel, {e}: {100 * sum(d) / len(d):.0f} % (mean of {len(d)})")
+    print(f"largest relative U95 of the total insulation (parallel): {100 * worst_rel_u:.1f} % (limit 8 %)")
+    ok = ok and worst_rel_u < 0.08
+    print("ok" if ok else "FAILED")
+    sys.exit(0 if ok else 1)
+
+
+if __name__ == "__main__":
+    main()
