@@ -287,10 +287,14 @@ void add_daemon_commands(CLI::App& app) {
                     throw UserError::check_failed(fmt::format("{}: {}", *check_file, why));
                 if (*json) {
                     nlohmann::json cases = nlohmann::json::array();
-                    for (const auto& pc : plan.cases)
-                        cases.push_back({{"id", pc.id}, {"chamber_temp_c", pc.chamber_temp_c}, {"chamber_rh_pct", pc.chamber_rh_pct},
-                                         {"skin_setpoint_c", pc.skin_setpoint_c}, {"wet", pc.wet},
-                                         {"sweat_rate_g_m2_h", pc.sweat_rate_g_m2_h}});
+                    for (const auto& pc : plan.cases) {
+                        nlohmann::json one = {{"id", pc.id}, {"chamber_temp_c", pc.chamber_temp_c}, {"chamber_rh_pct", pc.chamber_rh_pct},
+                                              {"skin_setpoint_c", pc.skin_setpoint_c}, {"wet", pc.wet},
+                                              {"sweat_rate_g_m2_h", pc.sweat_rate_g_m2_h}};
+                        if (!pc.ensemble.empty()) one["ensemble"] = pc.ensemble;
+                        if (!pc.test.empty()) one["test"] = pc.test;
+                        cases.push_back(one);
+                    }
                     std::printf("%s\n", nlohmann::json{{"ok", true}, {"name", plan.name}, {"replicates", plan.replicates},
                                                         {"trial_duration_s", plan.trial_duration_s},
                                                         {"settle_window_s", plan.settle_window_s},

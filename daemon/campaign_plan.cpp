@@ -18,12 +18,25 @@
 namespace manikind {
 
 nlohmann::json campaign_definition_json(const CampaignPlan& plan) {
-    return {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
+    nlohmann::json j = {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
+    // Only clothing campaigns carry ensembles: earlier campaigns' stored definitions stay equal.
+    if (!plan.ensembles.empty()) {
+        nlohmann::json e = nlohmann::json::object();
+        for (const auto& [id, ens] : plan.ensembles) {
+            e[id] = {{"description", ens.description}};
+            if (ens.fcl) e[id]["fcl"] = *ens.fcl;
+        }
+        j["ensembles"] = e;
+    }
+    return j;
 }
 
 nlohmann::json case_conditions_json(const PlannedCase& c) {
-    return {{"id", c.id},           {"chamber_temp_c", c.chamber_temp_c}, {"chamber_rh_pct", c.chamber_rh_pct},
-            {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
+    nlohmann::json j = {{"id", c.id},           {"chamber_temp_c", c.chamber_temp_c}, {"chamber_rh_pct", c.chamber_rh_pct},
+                        {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
+    if (!c.ensemble.empty()) j["ensemble"] = c.ensemble;
+    if (!c.test.empty()) j["test"] = c.test;
+    return j;
 }
 
 std::vector<std::string> plan_differences(const CampaignPlan& plan, const nlohmann::json& definition,
@@ -61,7 +74,7 @@ CampaignPlan table_s3_plan(const std::string& name) {
     p.name = name;
     for (const auto& c : sim::table_s3_cases()) {
         p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
-                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt});
+                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", ""});
     }
     return p;
 }
@@ -108,7 +121,8 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
     auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
     refuse_unknown_keys(root,
                         {"name", "replicates", "trial_duration_min", "settle_window_min", "settle_band_c", "settle_tolerance_c",
-                         "settle_tolerance_rh_pct", "settle_timeout_min", "excursion_limit_min", "builtin_cases", "cases"},
+                         "settle_tolerance_rh_pct", "settle_timeout_min", "excursion_limit_min", "builtin_cases", "cases",
+                         "ensembles"},
                         source, "");
     auto number = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
         const auto* n = t.get(key);
@@ -155,7 +169,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             const auto* t = node.as_table();
             if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
             refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h",
-                                     "enclosure_temp_c", "enclosure_rh_pct"},
+                                     "enclosure_temp_c", "enclosure_rh_pct", "ensemble", "test"},
                                 source, "cases.");
             PlannedCase c;
             c.id = whole(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6);
@@ -180,9 +194,50 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
                 throw UserError(fmt::format("{}: cases.sweat_rate_g_m2_h: {} g/m²/h on a dry case (wet = false); set "
                                             "wet = true, or leave the rate out",
                                             where(*t->get("sweat_rate_g_m2_h")), c.sweat_rate_g_m2_h));
+            // Clothing tests: the ensemble and the test go together; an evaporative test sweats,
+            // an insulation test is dry (ASTM F2370, F1291).
+            for (const char* key : {"ensemble", "test"})
+                if (const auto* v = t->get(key); v && !v->is_string())
+                    throw UserError(fmt::format("{}: cases.{}: expected a string", where(*v), key));
+            if (const auto* v = t->get("ensemble")) c.ensemble = v->as_string()->get();
+            if (const auto* v = t->get("test")) c.test = v->as_string()->get();
+            if (!c.test.empty() && c.test != "insulation" && c.test != "evaporative")
+                throw UserError(fmt::format("{}: cases.test: \"{}\" is not a test (\"insulation\" or \"evaporative\")",
+                                            where(*t->get("test")), c.test));
+            if (c.ensemble.empty() != c.test.empty())
+                throw UserError(fmt::format("{}: cases: a clothing test names both ensemble and test (found only {})", where(node),
+                                            c.ensemble.empty() ? "test" : "ensemble"));
+            if (c.test == "evaporative" && !c.wet)
+                throw UserError(fmt::format("{}: cases: an evaporative test needs the wet textile skin (wet = true)", where(node)));
+            if (c.test == "insulation" && c.wet)
+                throw UserError(fmt::format("{}: cases: an insulation test is dry (wet = false)", where(node)));
             p.cases.push_back(c);
         }
     }
+    if (const auto* ens = root.get("ensembles")) {
+        const auto* tab = ens->as_table();
+        if (!tab) throw UserError(fmt::format("{}: ensembles: expected [ensembles.<id>] tables", where(*ens)));
+        for (const auto& [key, node] : *tab) {
+            const std::string id(key.str());
+            const auto* e = node.as_table();
+            if (!e) throw UserError(fmt::format("{}: ensembles.{}: expected a table with description and fcl", where(node), id));
+            if (id == "nude" || id.empty() || id.size() > 60)
+                throw UserError(fmt::format("{}: ensembles.{}: an ensemble id must be 1-60 characters and not \"nude\" (the "
+                                            "bare manikin needs no entry)", where(node), id));
+            refuse_unknown_keys(*e, {"description", "fcl"}, source, "ensembles." + id + ".");
+            PlanEnsemble pe;
+            if (const auto* d = e->get("description")) {
+                if (!d->is_string()) throw UserError(fmt::format("{}: ensembles.{}.description: expected a string", where(*d), id));
+                pe.description = d->as_string()->get();
+            }
+            if (e->get("fcl")) pe.fcl = number(*e, "fcl", 1.0, 1.0, 3.0);
+            p.ensembles[id] = pe;
+        }
+    }
+    for (const auto& c : p.cases)
+        if (!c.ensemble.empty() && c.ensemble != "nude" && !p.ensembles.count(c.ensemble))
+            throw UserError(fmt::format("{}: case {}: ensemble \"{}\" is not defined (add [ensembles.{}], or \"nude\")", source,
+                                        c.id, c.ensemble, c.ensemble));
     if (p.cases.empty()) throw UserError(fmt::format("{}: no cases (give [[cases]] or builtin_cases = \"table-s3\")", source));
     return p;
 }

@@ -2,6 +2,7 @@
 // A campaign to run: cases (chamber setpoints, skin setpoint, wet or dry) x replicates, from a
 // TOML file or the built-in Table S3 list. Every setpoint is checked against the configured
 // safety limits before anything starts; an error names the file, line and key.
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -26,6 +27,16 @@ struct PlannedCase {
     // setpoints (within 0.5 °C, 1 %), else the setpoints themselves (enclosure_target()).
     std::optional<double> enclosure_temp_c;
     std::optional<double> enclosure_rh_pct;
+    // Clothing tests (docs/clothing.md): what the manikin wears (an id of CampaignPlan::ensembles
+    // or "nude") and the test ("insulation" or "evaporative"); both empty for other campaigns.
+    std::string ensemble;
+    std::string test;
+};
+
+// A clothing ensemble a campaign's cases may wear (campaign TOML `[ensembles.<id>]`).
+struct PlanEnsemble {
+    std::string description;
+    std::optional<double> fcl;        // clothing area factor; absent: ISO 9920's estimate at analysis
 };
 
 struct EnclosureTarget {
@@ -56,6 +67,7 @@ struct CampaignPlan {
     double excursion_limit_s = 120.0;
     double acquire_timeout_s = 4.0 * 3600.0;
     std::vector<PlannedCase> cases;
+    std::map<std::string, PlanEnsemble> ensembles;
 };
 
 // What the database stores of a plan (campaigns.definition_json, cases.conditions_json): what a

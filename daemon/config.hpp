@@ -75,6 +75,7 @@ struct SimulationConfig {
     std::string runtime_dir;                  // pty links; empty: a fresh directory under /tmp
     double step_s = 1.0;                      // virtual-clock step
     double manikin_period_s = 5.0;            // the manikin's zone report interval (Text S3.2: 5 s)
+    double air_speed_m_s = 0.01;              // the enclosure's air speed: sealed < 0.02 (Text S3.1); 0.4 for clothing tests
     sim::ReplicateScatter scatter;            // per-trial replicate scatter (keys replicate_*, probe_*)
 };
 

@@ -934,6 +934,20 @@ void LabDaemon::advance_locked() {
             settle_timeout_alarmed_ = false;
             settle_off_history_.clear();
             target_ = enclosure_target(current_->c);  // once a trial: settling and excursions read it each tick
+            // A clothing test: the operator dresses the manikin for this trial (re-dressed for
+            // every replicate). On the simulated lab the world puts the wardrobe's ensemble on.
+            if (auto* lab = acq_ ? acq_->lab() : nullptr; lab && current_->c.ensemble.empty()) {
+                lab->dress("");  // not a clothing test: bare
+            } else if (!current_->c.ensemble.empty()) {
+                if (lab) {
+                    if (!lab->dress(current_->c.ensemble))
+                        event("warn", "clothing",
+                              fmt::format("the simulated lab's wardrobe has no ensemble '{}': the manikin runs bare",
+                                          current_->c.ensemble));
+                } else {
+                    event("info", "clothing", fmt::format("dress the manikin: {} ({} test)", current_->c.ensemble, current_->c.test));
+                }
+            }
             enter(Stage::chamber_settling,
                   fmt::format("waiting for the enclosure at {} ± {} °C, {} ± {} % RH, stable for {:.0f} min",
                               target_.air_c, plan_->settle_tolerance_c, target_.rh_pct,

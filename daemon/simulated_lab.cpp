@@ -25,6 +25,7 @@ sim::SimLabOptions simulated_lab_options(const config::Config& config) {
     o.world.seed = config.simulation.seed;
     o.world.scatter = config.simulation.scatter;
     o.manikin_period_s = config.simulation.manikin_period_s;
+    o.world.air_speed_m_s = config.simulation.air_speed_m_s;
     o.world.enclosure_table = sim::table_s3_cases();
     o.world.watchdog_s = config.safety.watchdog_timeout_s;
     o.world.max_heater_power_w_m2 = config.devices.manikin_max_heater_power_w_m2;

@@ -106,6 +106,19 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
     c.name = name;
     c.zone_map = analysis::andi35_zone_map();
     c.instruments = analysis::default_instrument_specs();
+    // Clothing campaigns: the ensembles of the campaign's definition (docs/clothing.md).
+    for (const auto& row : db.campaigns())
+        if (row.id == *campaign_id) {
+            const auto def = nlohmann::json::parse(row.definition_json, nullptr, false);
+            if (def.is_object() && def.contains("ensembles") && def.at("ensembles").is_object())
+                for (const auto& [id, e] : def.at("ensembles").items()) {
+                    analysis::Ensemble ens;
+                    if (e.is_object() && e.contains("description") && e.at("description").is_string())
+                        ens.description = e.at("description").get<std::string>();
+                    if (e.is_object() && e.contains("fcl") && e.at("fcl").is_number()) ens.fcl = e.at("fcl").get<double>();
+                    c.ensembles[id] = ens;
+                }
+        }
     std::map<std::int64_t, nlohmann::json> conditions;
     std::map<std::int64_t, int> case_number;
     for (const auto& cs : db.cases(campaign_id.value())) {
@@ -184,6 +197,8 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         trial.info.file = "trials/" + trial.info.id + ".csv";
         trial.info.skin_setpoint_c = cond.value("skin_setpoint_c", 35.0);
         trial.info.wettedness = cond.value("wet", false) ? 1.0 : 0.0;
+        trial.info.ensemble = cond.value("ensemble", "");
+        trial.info.test = cond.value("test", "");
         trial.info.chamber_setpoint_temp_c = cond.value("chamber_temp_c", 0.0);
         trial.info.chamber_setpoint_rh_pct = cond.value("chamber_rh_pct", 0.0);
         trial.info.started_utc = sp.row.started_utc_ns ? iso_utc(*sp.row.started_utc_ns) : "";

@@ -29,6 +29,9 @@ const std::vector<TermSpec>& term_specs() {
         {"partial_wettedness", {{"fraction", 1.0}}},      // w -> fraction w in one region
         {"heat_leak", {{"q_w_m2", 0.0}}},                 // a constant extra flux on some zones
         {"zone_gain", {{"gain", 0.0}}},                   // some zones' flux sensors read (1 + gain) q
+        // A garment over one region (ISO 9920): intrinsic insulation, intrinsic evaporative
+        // resistance and the clothing area factor.
+        {"clothing", {{"icl_m2k_w", 0.0}, {"recl_m2kpa_w", 0.0}, {"fcl", 1.0}}},
     };
     return specs;
 }
@@ -57,6 +60,11 @@ struct Knobs {
     std::vector<std::pair<std::string, double>> wettedness_by_region;
     std::vector<std::pair<std::vector<int>, double>> leaks;
     std::vector<std::pair<std::vector<int>, double>> gains;
+    struct Garment {
+        std::string region;
+        double icl_m2k_w = 0.0, recl_m2kpa_w = 0.0, fcl = 1.0;
+    };
+    std::vector<Garment> garments;
 };
 
 Knobs resolve(const TwinVersion& v) {
@@ -72,6 +80,9 @@ Knobs resolve(const TwinVersion& v) {
         else if (t.name == "partial_wettedness") k.wettedness_by_region.emplace_back(t.region, param(t, "fraction", 1.0));
         else if (t.name == "heat_leak") k.leaks.emplace_back(t.zones, param(t, "q_w_m2", 0.0));
         else if (t.name == "zone_gain") k.gains.emplace_back(t.zones, param(t, "gain", 0.0));
+        else if (t.name == "clothing")
+            k.garments.push_back({t.region, std::max(0.0, param(t, "icl_m2k_w", 0.0)), std::max(0.0, param(t, "recl_m2kpa_w", 0.0)),
+                                  std::clamp(param(t, "fcl", 1.0), 1.0, 3.0)});
     }
     return k;
 }
@@ -103,8 +114,8 @@ void validate_term(const Term& term) {
         if (!known) throw std::invalid_argument("twin term '" + term.name + "' has no parameter '" + key + "'");
         if (!std::isfinite(value)) throw std::invalid_argument("twin term '" + term.name + "': " + key + " is not finite");
     }
-    if (term.name == "partial_wettedness" && term.region.empty())
-        throw std::invalid_argument("twin term 'partial_wettedness' needs a region");
+    if ((term.name == "partial_wettedness" || term.name == "clothing") && term.region.empty())
+        throw std::invalid_argument("twin term '" + term.name + "' needs a region");
     if ((term.name == "heat_leak" || term.name == "zone_gain") && term.zones.empty())
         throw std::invalid_argument("twin term '" + term.name + "' needs zones");
 }
@@ -155,10 +166,46 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
             return f;
         };
 
+        const Knobs::Garment* garment = nullptr;
+        for (const auto& g : k.garments)
+            if (g.region == z.region) garment = &g;
         ZoneFlux f = fluxes_at(z.skin_temp_c);
+        const bool clothed = garment && (garment->icl_m2k_w > 0.0 || garment->recl_m2kpa_w > 0.0);
+        if (clothed) {
+            // Clothed (ISO 9920): the garment's outer surface, fcl times the skin's area, exchanges
+            // with the room as a bare surface would; the skin reaches it through Icl. Dry: the
+            // surface temperature T_cl where (T_s - T_cl)/Icl = fcl q_dry(T_cl) (bisection: the
+            // left side falls and the right side rises with T_cl). Evaporation: through Recl in
+            // series with the outer boundary layer, q_e = w (p_s - p_a) / (Recl + 1/(fcl LR h_c)).
+            const double icl = std::max(garment->icl_m2k_w, 1e-6), fcl = garment->fcl;
+            auto dry_out = [&](double t) {
+                const ZoneFlux o = fluxes_at(t);
+                return o.q_convection_w_m2 + o.q_radiation_w_m2;
+            };
+            double lo = std::min(z.skin_temp_c, air_c) - 40.0, hi = std::max(z.skin_temp_c, air_c) + 40.0;
+            for (int i = 0; i < 40; ++i) {  // 120 K / 2^40: far below any sensor
+                const double mid = 0.5 * (lo + hi);
+                ((z.skin_temp_c - mid) / icl - fcl * dry_out(mid) > 0.0 ? lo : hi) = mid;
+            }
+            const double t_cl = 0.5 * (lo + hi);
+            ZoneFlux c = fluxes_at(t_cl);
+            f = ZoneFlux{};
+            f.zone = z.zone;
+            f.surface_temp_c = t_cl;
+            f.h_c_w_m2k = c.h_c_w_m2k;
+            f.q_convection_w_m2 = fcl * c.q_convection_w_m2;
+            f.q_radiation_w_m2 = fcl * c.q_radiation_w_m2;
+            const double p_skin_pa = saturation_vapour_pressure_pa(z.skin_temp_c);
+            const double h_e = baseline_lewis_k_kpa * std::max(c.h_c_w_m2k, 1e-9);  // W/m²kPa
+            f.q_evaporation_w_m2 = p_skin_pa > p_air_pa
+                                       ? wettedness * (p_skin_pa - p_air_pa) / 1000.0 / (garment->recl_m2kpa_w + 1.0 / (fcl * h_e))
+                                       : 0.0;
+            f.q_other_w_m2 = leak_w_m2;
+            f.q_total_w_m2 = f.q_convection_w_m2 + f.q_radiation_w_m2 + f.q_evaporation_w_m2 + f.q_other_w_m2;
+        }
         // The textile skin is worn only for the wet trials (the paper's Fig. 1A inset, Text S3):
         // a dry trial's surface is the manikin's own shell.
-        if (k.textile_r_m2k_w > 0.0 && trial.wettedness > 0.0) {
+        if (!clothed && k.textile_r_m2k_w > 0.0 && trial.wettedness > 0.0) {
             // Surface temperature: root of g(T) = T - T_s + R q(T). q rises with T, so g' > 1 and
             // Newton (secant derivative) converges in a few steps; kept within ±30 K of the skin.
             const double r = k.textile_r_m2k_w;

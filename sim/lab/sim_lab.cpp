@@ -1,4 +1,5 @@
 #include "sim/lab/sim_lab.hpp"
+#include "sim/world/wardrobe.hpp"
 
 #include <fcntl.h>
 #include <sys/socket.h>
@@ -186,6 +187,17 @@ std::vector<ServedRegister> SimLab::bind_datalogger(const std::vector<RegisterDe
         out.push_back(std::move(r));
     }
     return out;
+}
+
+bool SimLab::dress(const std::string& ensemble) {
+    std::lock_guard lk(world_lock_);
+    if (ensemble.empty() || ensemble == "nude") {
+        world_.wear({});
+        return true;
+    }
+    const auto e = wardrobe_ensemble(ensemble);
+    world_.wear(e ? e->garments : std::vector<physics::twin::Term>{});
+    return e.has_value();
 }
 
 void SimLab::inject(const FaultSpec& f) {

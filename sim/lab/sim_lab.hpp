@@ -86,6 +86,9 @@ public:
     std::uint64_t can_frames_last_step() const { return can_frames_last_step_; }
 
     void inject(const FaultSpec& fault);   // starts now unless start_s is in the future
+    // The operator dresses the manikin (clothing tests): a wardrobe ensemble by id ("nude" or
+    // empty: bare). Returns false for an id the wardrobe does not have (the manikin stays bare).
+    bool dress(const std::string& ensemble);
     void clear_faults(const std::string& device);
     std::vector<std::string> active_faults() const;
 

@@ -63,6 +63,12 @@ void World::apply_enclosure_offsets() {
         }
 }
 
+void World::wear(std::vector<physics::twin::Term> clothing) {
+    clothing_ = std::move(clothing);
+    dressed_ = o_.physics;
+    dressed_.terms.insert(dressed_.terms.end(), clothing_.begin(), clothing_.end());
+}
+
 void World::step(double dt_s) {
     // Sub-steps keep the explicit PI/shell integration stable for any requested dt.
     const int n = std::max(1, static_cast<int>(std::ceil(dt_s / 1.0)));
@@ -91,7 +97,7 @@ void World::step(double dt_s) {
             any_wet = any_wet || (zones_[z].sweating && heating);
         }
         conditions_.wettedness = any_wet ? 1.0 : 0.0;
-        const auto fluxes = physics::twin::predict(o_.physics, conditions_);
+        const auto fluxes = physics::twin::predict(clothing_.empty() ? o_.physics : dressed_, conditions_);
         for (std::size_t z = 0; z < zones_.size(); ++z) {
             ZoneState& s = zones_[z];
             // This replicate's fit and wetting change the heat transfer itself; the PI loop pays for it.

@@ -97,6 +97,9 @@ public:
     // Manikin.
     void manikin_command(const protocol::manikin_can::Setpoint& sp);
     void manikin_control(bool run);              // a host Control frame (also the heartbeat)
+    // The operator dresses the manikin (clothing tests): `clothing` twin terms over the world's
+    // physics from now on; empty = nude.
+    void wear(std::vector<physics::twin::Term> clothing);
     bool manikin_running() const { return run_; }
     bool watchdog_tripped() const { return watchdog_tripped_; }
     int zone_count() const { return static_cast<int>(zones_.size()); }
@@ -130,6 +133,8 @@ private:
     // polling in real time) never changes a trial's draw, only the seed and trial number do.
     std::mt19937_64 scatter_rng_;
     TrialScatter scatter_;
+    std::vector<physics::twin::Term> clothing_;  // worn now (wear())
+    physics::twin::TwinVersion dressed_;         // o_.physics + clothing_
 };
 
 }  // namespace manikind::sim
