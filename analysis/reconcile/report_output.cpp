@@ -141,7 +141,8 @@ std::string power_to_text(const PowerReport& plan) {
          "    fraction: the wet fraction below which a region's dryness is found. Each value is checked by simulating\n"
          "    400 campaigns with that effect: the right term's evidence must be the largest, beyond reconcile's\n"
          "    family-wise threshold at n replicates, and beyond any zone's offset or gain. A fast model of the\n"
-         "    decision (docs/reconcile.md, \"Detection limits\", has how often reconcile itself names each).\n";
+         "    decision: optimistic where terms share evidence (gamma and an air-probe bias: read their limits as\n"
+         "    lower bounds; docs/reconcile.md, \"Detection limits\", has how often reconcile itself names each).\n";
     return o.str();
 }
 

@@ -113,7 +113,7 @@ const cl::EnsembleResult& ensemble(const cl::Result& r, const std::string& id) {
 
 }  // namespace
 
-TEST_CASE("clothing: parallel and serial insulation and evaporative resistance follow their definitions; effective, "
+TEST_CASE("clothing: parallel and serial insulation and evaporative resistance follow their definitions, and effective, "
           "intrinsic and im from the nude values (ISO 9920 4.2)", "[clothing]") {
     const Lab lab;
     const auto campaign = lab.campaign(3, 1.3);
@@ -194,7 +194,7 @@ TEST_CASE("clothing: the Monte Carlo Type B of the total insulation agrees with 
     CHECK(nude.insulation_total_parallel->k == Approx(1.96).epsilon(0.01));
 }
 
-TEST_CASE("clothing: a nude baseline from another campaign; a campaign without clothing tests is refused with why",
+TEST_CASE("clothing: a nude baseline from another campaign, and a campaign without clothing tests is refused with why",
           "[clothing]") {
     const Lab lab;
     auto both = lab.campaign(2, 1.3);
@@ -220,7 +220,7 @@ TEST_CASE("clothing: a nude baseline from another campaign; a campaign without c
                       Catch::Contains("no clothing test"));
 }
 
-TEST_CASE("clothing: ensembles and each trial's ensemble and test survive a write and read; hostile values are refused "
+TEST_CASE("clothing: ensembles and each trial's ensemble and test survive a write and read, and hostile values are refused "
           "with the field named", "[clothing][recording]") {
     const Lab lab;
     const auto campaign = lab.campaign(1, 1.25);
