@@ -24,6 +24,7 @@ void add_clothing_command(CLI::App& app) {
         CampaignSource source;
         std::string baseline, report;
         bool json = false;
+        bool require_flux_stability = false;
         analysis::clothing::Options options;
     };
     auto o = std::make_shared<Opts>();
@@ -43,6 +44,9 @@ void add_clothing_command(CLI::App& app) {
                     "Largest coefficient of variation of the replicates' total evaporative resistance (fraction)")
         ->check(CLI::Range(0.001, 1.0))
         ->capture_default_str();
+    cmd->add_flag("--require-flux-stability", o->require_flux_stability,
+                  "Steady also in heat flux (each zone's drift and scatter over the window within manikin analyze's "
+                  "defaults), as the standards ask a steady heat loss, not only a steady skin temperature");
     cmd->add_option("--draws", o->options.monte_carlo_draws, "Monte Carlo draws for the Type B uncertainty")
         ->check(CLI::Range(100, 1000000))
         ->capture_default_str();
@@ -54,14 +58,16 @@ void add_clothing_command(CLI::App& app) {
     cmd->callback([o] {
         const analysis::Campaign campaign = read_campaign_source(o->source);
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
-        const auto result = analysis::analyze_campaign(campaign);
+        analysis::AnalysisOptions analysis_options;
+        analysis_options.steady.require_flux_stability = o->require_flux_stability;
+        const auto result = analysis::analyze_campaign(campaign, analysis_options);
         std::optional<analysis::Campaign> baseline;
         std::optional<analysis::CampaignResult> baseline_result;
         if (!o->baseline.empty()) {
             CampaignSource from = o->source;
             from.campaign = o->baseline;
             baseline = read_campaign_source(from);
-            baseline_result = analysis::analyze_campaign(*baseline);
+            baseline_result = analysis::analyze_campaign(*baseline, analysis_options);
         }
         analysis::clothing::Result r;
         try {

@@ -53,6 +53,12 @@ def main():
                 if needle not in t.stdout:
                     print(f"table lacks {needle!r}")
                     sys.exit(1)
+            # Steady in heat flux too (the standards' steady heat loss): these trials are.
+            f = subprocess.run([manikin, "clothing", out, "--json", "--require-flux-stability"], capture_output=True, text=True)
+            strict = json.loads(f.stdout)
+            if [e["id"] for e in strict["ensembles"]] != [e["id"] for e in doc["ensembles"]] or strict["warnings"]:
+                print(f"--require-flux-stability changed the result: {strict['warnings']}")
+                sys.exit(1)
         for e in doc["ensembles"]:
             t = truth[e["id"]]
             for group, key, tkey in KEYS:
