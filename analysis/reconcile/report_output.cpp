@@ -171,11 +171,14 @@ std::string report_to_text(const Report& r) {
     for (const auto& note : n.notes) o << "        " << note << "\n";
     if (std::isfinite(r.null_threshold))
         o << fmt::format("Claim:  evidence (chi2 drop) of any term or zone beyond {:.1f}, what noise alone exceeds in {:.0f} % of "
-                         "{} simulated campaigns ({}); observed best {:.1f}, p = {:.3f}\n\n",
+                         "{} simulated campaigns ({}); observed best {:.1f} under the first noise model, p {}\n\n",
                          r.null_threshold, 100.0 * r.alpha, r.null_simulations,
                          r.covariance_draws > 0 ? fmt::format("judged by {} re-estimations of the noise model", r.covariance_draws)
                                                 : std::string("the noise model taken as exact"),
-                         r.family_evidence, r.null_p);
+                         r.family_evidence,
+                         r.null_p * static_cast<double>(r.null_simulations + 1) <= 1.0 + 1e-9
+                             ? fmt::format("< {:.2g}", 1.0 / static_cast<double>(r.null_simulations))
+                             : fmt::format("= {:.3f}", r.null_p));
     else
         o << "Claim:  none possible (one replicate per case, no scatter carried: --noise-from)\n\n";
     o << "Located:\n";
