@@ -22,8 +22,9 @@ int main() {
     };
     // Warmed up (caches, page faults, CPU clock), then the median of interleaved runs, so the
     // floor and the runs it bounds see the same machine state.
-    const ModelOptions floor_options{ConvectionModel::constant_stolwijk, false}, coupled_options{ConvectionModel::coupled, false},
-        seed_options{ConvectionModel::coupled, true};
+    const ModelOptions floor_options{ConvectionModel::constant_stolwijk, false, default_clo},
+        coupled_options{ConvectionModel::coupled, false, default_clo},
+        seed_options{ConvectionModel::coupled, true, default_clo};
     for (int i = 0; i < 3; ++i) run_ms(floor_options), run_ms(coupled_options), run_ms(seed_options);
     const int reps = 31;
     std::vector<double> floor_runs, coupled_runs, seed_runs;

@@ -185,6 +185,7 @@ struct RunOpts {
     tr::Exposure exposure;
     std::string duration = "2h", convection = "coupled", csv, plot;
     bool seed_compatible = false, json = false;
+    double clo = tr::default_clo;
 };
 
 void add_exposure_options(CLI::App* cmd, RunOpts& o) {
@@ -199,6 +200,11 @@ void add_exposure_options(CLI::App* cmd, RunOpts& o) {
     cmd->add_option("--step", o.exposure.time_step_s, "Time step, s (explicit scheme; at most 5 s)")->capture_default_str();
     cmd->add_option("--convection", o.convection, "coupled | dt-only | constant | constant-jos")->capture_default_str();
     cmd->add_flag("--seed-compatible", o.seed_compatible, "Reproduce the published MATLAB code exactly (docs/thermoregulation.md)");
+    cmd->add_option("--clo", o.clo,
+                    "Whole-body clothing insulation, clo: the model's clothing (trunk, legs, feet) scaled to it; 0 = "
+                    "bare, as the manikin undressed")
+        ->check(CLI::Range(0.0, 4.0))
+        ->capture_default_str();
 }
 
 }  // namespace
@@ -210,7 +216,7 @@ void add_thermoreg_command(CLI::App& app) {
     cmd->add_flag("--json", o->json, "Print the time series as JSON (docs/formats.md section 4)");
     cmd->add_option("--csv", o->csv, "Write the time series as CSV");
     cmd->add_option("--plot", o->plot, "Write a Fig. 4-like SVG");
-    cmd->footer("Defaults are Fig. 4: 41 °C, 20 % RH, MRT 55 °C, still air, 1.5 met, 0.25 clo, 2 h.\n"
+    cmd->footer("Defaults are Fig. 4: 41 °C, 20 % RH, MRT 55 °C, still air, 1.5 met, 0.26 clo, 2 h.\n"
                 "Heat rates: " + rates_sign_text() + "\n(Fig. 4 plots the opposite sign). Core = trunk core.\n"
                 "Examples:\n  manikin thermoreg --seed-compatible --plot fig4.svg\n"
                 "  manikin thermoreg --convection dt-only --mrt 41 --json\n"
@@ -218,7 +224,7 @@ void add_thermoreg_command(CLI::App& app) {
     cmd->callback([o, cmd] {
         if (!cmd->get_subcommands().empty()) return;  // a subcommand ran
         o->exposure.duration_s = parse_duration_s(o->duration);
-        tr::ModelOptions m{parse_model(o->convection), o->seed_compatible};
+        tr::ModelOptions m{parse_model(o->convection), o->seed_compatible, o->clo};
         const auto t0 = std::chrono::steady_clock::now();
         const auto r = run_checked(o->exposure, m);
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -243,6 +249,7 @@ void add_thermoreg_command(CLI::App& app) {
             nlohmann::json series = nlohmann::json::array();
             for (const auto& s : r.series) series.push_back(sample_json(s));
             std::printf("%s\n", nlohmann::json{{"convection", tr::to_string(m.convection)}, {"seed_compatible", m.seed_compatible},
+                                               {"clo", m.clo},
                                                {"heat_flux_sign", rates_sign_text()},
                                                {"series", series}, {"final", sample_json(r.final)},
                                                {"max_energy_residual_w", r.max_abs_energy_residual_w}, {"compute_ms", ms}}

@@ -38,8 +38,8 @@ constexpr Segments df_vasoconstriction = {0.0500, 0.1500, 0.0500, 0.3500, 0.0500
 constexpr Segments df_sweat = {0.0810, 0.4810, 0.1540, 0.0310, 0.2180, 0.0350};
 constexpr Segments df_shiver = {0.0200, 0.8500, 0.0500, 0.0000, 0.0700, 0.0000};
 // Clothing: 0.26 clo concentrated on trunk, legs and feet (the code's Rc_cl, Re_cl).
-constexpr Segments clothing_r_m2k_w = {0.0, 0.054, 0.0, 0.0, 0.054, 0.054};
-constexpr Segments clothing_re_m2pa_w = {0.0, 9.4, 0.0, 0.0, 9.4, 9.4};
+constexpr Segments clothing_layout_r_m2k_w = {0.0, 0.054, 0.0, 0.0, 0.054, 0.054};
+constexpr Segments clothing_layout_re_m2pa_w = {0.0, 9.4, 0.0, 0.0, 9.4, 9.4};
 // Heat transfer coefficients: forced (de Dear, a v^b), radiation, Table 2 free convection.
 constexpr Segments forced_a = {3.20, 8.1, 11.09, 14.40, 11.10, 12.00};
 constexpr Segments forced_b = {0.97, 0.62, 0.59, 0.55, 0.51, 0.49};
@@ -117,6 +117,13 @@ void validate(const Exposure& e) {
 
 SimulationResult simulate(const Exposure& e, const ModelOptions& opt) {
     validate(e);
+    if (!(opt.clo >= 0.0 && opt.clo <= 4.0)) throw std::domain_error("clo must be within 0..4");
+    // The clothing layout scaled to the requested whole-body insulation (default: the code's).
+    Segments clothing_r_m2k_w = clothing_layout_r_m2k_w, clothing_re_m2pa_w = clothing_layout_re_m2pa_w;
+    for (std::size_t i = 0; i < clothing_r_m2k_w.size(); ++i) {
+        clothing_r_m2k_w[i] *= opt.clo / default_clo;
+        clothing_re_m2pa_w[i] *= opt.clo / default_clo;
+    }
     const bool seed = opt.seed_compatible;
     const double air_k = e.air_temp_c + 273.15;
     const double mrt_k = e.mrt_c + 273.15;

@@ -45,9 +45,16 @@ struct Exposure {
     double output_interval_s = 60.0;
 };
 
+// The code's clothing: 0.054 m²K/W (and 9.4 m²Pa/W) on trunk, legs and feet, 0.26 clo
+// area-weighted over the body.
+inline constexpr double default_clo = 0.26;
+
 struct ModelOptions {
     ConvectionModel convection = ConvectionModel::coupled;
     bool seed_compatible = false;
+    // Whole-body (area-weighted) intrinsic clothing insulation in clo: the code's layout scaled,
+    // dry and evaporative alike, by clo / default_clo; 0 = bare (the manikin undressed).
+    double clo = default_clo;
 };
 
 // Fig. 4's quantities; heat rates in W with Fig. 4's sign: positive = heat gained by the body.

@@ -162,3 +162,27 @@ TEST_CASE("Seed-compatible mode reproduces the published code's own output (GNU 
     }
     CHECK(rows == 121);
 }
+
+TEST_CASE("clothing: the default clo is the code's layout (0.26 clo area-weighted), 0 clo undresses it, and in 41 C "
+          "heat the bare body gains more heat and ends warmer in its skin", "[physics][thermoreg]") {
+    // 0.054 m²K/W on trunk, legs and feet, area-weighted over the six segments' areas, in clo.
+    const double areas[] = {0.133, 0.680, 0.254, 0.095, 0.597, 0.130};
+    const double r[] = {0.0, 0.054, 0.0, 0.0, 0.054, 0.054};
+    double num = 0.0, den = 0.0;
+    for (int i = 0; i < 6; ++i) num += areas[i] * r[i], den += areas[i];
+    CHECK(num / den / 0.155 == Approx(default_clo).margin(0.005));
+    Exposure e;  // Fig. 4: 41 C air, MRT 55 C
+    ModelOptions dressed;
+    ModelOptions same = dressed;
+    same.clo = default_clo;
+    CHECK(simulate(e, same).final.core_temp_c == simulate(e, dressed).final.core_temp_c);
+    ModelOptions bare = dressed;
+    bare.clo = 0.0;
+    const auto d = simulate(e, dressed), b = simulate(e, bare);
+    // Air and walls hotter than the skin: clothing shields, so undressed gains more dry heat.
+    CHECK(b.final.convection_w + b.final.radiation_w > d.final.convection_w + d.final.radiation_w);
+    CHECK(b.final.mean_skin_temp_c > d.final.mean_skin_temp_c);
+    ModelOptions silly = dressed;
+    silly.clo = -1.0;
+    CHECK_THROWS_AS(simulate(e, silly), std::domain_error);
+}
