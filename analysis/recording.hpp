@@ -13,6 +13,8 @@
 #include <string_view>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "analysis/zone_map.hpp"
 #include "physics/sign_convention.hpp"
 
@@ -153,6 +155,9 @@ TrialData read_trial_csv(const std::filesystem::path& file, const ZoneMap& map, 
 // ISO 8601 UTC with milliseconds ("2026-11-24T01:35:07.250Z") and back; nullopt when malformed.
 std::string iso_utc_ms(std::int64_t utc_ns);
 std::optional<std::int64_t> parse_iso_utc(std::string_view text);
+
+// campaign.json's `ensembles` object: {"<id>": {"description": ..., "fcl": ...}} (fcl when given).
+nlohmann::json ensembles_json(const std::map<std::string, Ensemble>& ensembles);
 
 // Writes campaign.json and trials/<id>.csv into `folder` (created if needed). Numbers are
 // written with the shortest representation that reads back to the same double, so a

@@ -136,6 +136,15 @@ void write_trial_csv(const std::filesystem::path& path, const ZoneMap& map, cons
 
 }  // namespace
 
+nlohmann::json ensembles_json(const std::map<std::string, Ensemble>& ensembles) {
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto& [id, e] : ensembles) {
+        out[id] = {{"description", e.description}};
+        if (e.fcl) out[id]["fcl"] = *e.fcl;
+    }
+    return out;
+}
+
 void write_campaign(const std::filesystem::path& folder, const Campaign& campaign) {
     using nlohmann::json;
     std::filesystem::create_directories(folder / "trials");
@@ -166,14 +175,7 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
         doc["channels"] = channels;
     }
     if (!campaign.provenance.empty()) doc["provenance"] = campaign.provenance;
-    if (!campaign.ensembles.empty()) {
-        nlohmann::json ens = nlohmann::json::object();
-        for (const auto& [id, e] : campaign.ensembles) {
-            ens[id] = {{"description", e.description}};
-            if (e.fcl) ens[id]["fcl"] = *e.fcl;
-        }
-        doc["ensembles"] = ens;
-    }
+    if (!campaign.ensembles.empty()) doc["ensembles"] = ensembles_json(campaign.ensembles);
     json trials = json::array();
     for (const auto& t : campaign.trials) {
         const auto& i = t.info;

@@ -20,14 +20,7 @@ namespace manikind {
 nlohmann::json campaign_definition_json(const CampaignPlan& plan) {
     nlohmann::json j = {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
     // Only clothing campaigns carry ensembles: earlier campaigns' stored definitions stay equal.
-    if (!plan.ensembles.empty()) {
-        nlohmann::json e = nlohmann::json::object();
-        for (const auto& [id, ens] : plan.ensembles) {
-            e[id] = {{"description", ens.description}};
-            if (ens.fcl) e[id]["fcl"] = *ens.fcl;
-        }
-        j["ensembles"] = e;
-    }
+    if (!plan.ensembles.empty()) j["ensembles"] = analysis::ensembles_json(plan.ensembles);
     return j;
 }
 
@@ -225,7 +218,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
                 throw UserError(fmt::format("{}: ensembles.{}: an ensemble id must be 1-60 characters and not \"nude\" (the "
                                             "bare manikin needs no entry)", where(node), id));
             refuse_unknown_keys(*e, {"description", "fcl"}, source, "ensembles." + id + ".");
-            PlanEnsemble pe;
+            analysis::Ensemble pe;
             if (const auto* d = e->get("description")) {
                 if (!d->is_string()) throw UserError(fmt::format("{}: ensembles.{}.description: expected a string", where(*d), id));
                 pe.description = d->as_string()->get();

@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "analysis/recording.hpp"
 #include "daemon/config.hpp"
 
 namespace manikind {
@@ -33,11 +34,7 @@ struct PlannedCase {
     std::string test;
 };
 
-// A clothing ensemble a campaign's cases may wear (campaign TOML `[ensembles.<id>]`).
-struct PlanEnsemble {
-    std::string description;
-    std::optional<double> fcl;        // clothing area factor; absent: ISO 9920's estimate at analysis
-};
+
 
 struct EnclosureTarget {
     double air_c = 0.0;
@@ -67,7 +64,7 @@ struct CampaignPlan {
     double excursion_limit_s = 120.0;
     double acquire_timeout_s = 4.0 * 3600.0;
     std::vector<PlannedCase> cases;
-    std::map<std::string, PlanEnsemble> ensembles;
+    std::map<std::string, analysis::Ensemble> ensembles;  // campaign TOML `[ensembles.<id>]`: what cases may wear
 };
 
 // What the database stores of a plan (campaigns.definition_json, cases.conditions_json): what a

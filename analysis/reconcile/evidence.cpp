@@ -29,17 +29,23 @@ Eigen::VectorXd Subset::whiten(const std::vector<double>& v) const { return llt.
 
 double Subset::chi2(const std::vector<double>& prediction) const { return (y - whiten(prediction)).squaredNorm(); }
 
+Eigen::MatrixXd restrict_to(const Eigen::MatrixXd& covariance, const std::vector<std::size_t>& idx) {
+    const auto n = static_cast<Eigen::Index>(idx.size());
+    Eigen::MatrixXd sub(n, n);
+    for (Eigen::Index a = 0; a < n; ++a)
+        for (Eigen::Index b = 0; b < n; ++b)
+            sub(a, b) = covariance(static_cast<Eigen::Index>(idx[static_cast<std::size_t>(a)]),
+                                   static_cast<Eigen::Index>(idx[static_cast<std::size_t>(b)]));
+    return sub;
+}
+
 Subset make_subset(const ForwardModel& model, const Eigen::MatrixXd& covariance, std::vector<std::size_t> idx,
                    const std::vector<double>& base_prediction) {
     Subset s;
     s.idx = std::move(idx);
     const auto& pts = model.points();
     const Eigen::Index n = s.size();
-    Eigen::MatrixXd sub(n, n);
-    for (Eigen::Index a = 0; a < n; ++a)
-        for (Eigen::Index b = 0; b < n; ++b)
-            sub(a, b) = covariance(static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(a)]),
-                                   static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(b)]));
+    const Eigen::MatrixXd sub = restrict_to(covariance, s.idx);
     s.llt.compute(sub);
     if (s.llt.info() != Eigen::Success) throw std::runtime_error("reconcile: the noise covariance is not positive definite");
     std::map<int, std::size_t> case_pos;

@@ -31,6 +31,9 @@ struct Subset {
     double chi2(const std::vector<double>& prediction) const;
     Eigen::Index size() const { return static_cast<Eigen::Index>(idx.size()); }
 };
+// The covariance restricted to the points idx (rows and columns in that order).
+Eigen::MatrixXd restrict_to(const Eigen::MatrixXd& covariance, const std::vector<std::size_t>& idx);
+
 // Throws std::runtime_error when the covariance is not positive definite.
 Subset make_subset(const ForwardModel& model, const Eigen::MatrixXd& covariance, std::vector<std::size_t> idx,
                    const std::vector<double>& base_prediction);

@@ -207,11 +207,9 @@ public:
 
     // This campaign's scatter model: estimated from its replicates, else carried from an earlier
     // campaign, else not estimable.
-    ScatterModel scatter_of(const NoiseParts& parts, const CarriedNoise* carried_override = nullptr) const {
-        ScatterModel own = estimate_scatter(parts.data);
-        if (own.estimable) return own;
-        const CarriedNoise* c = carried_override ? carried_override : carried_ ? &*carried_ : nullptr;
-        return c ? to_scatter(*c) : own;
+    ScatterModel scatter_of(const ScatterModel& own) const {
+        if (own.estimable || !carried_) return own;
+        return to_scatter(*carried_);
     }
 
     ScatterModel to_scatter(const CarriedNoise& c) const {
@@ -284,7 +282,7 @@ public:
         NoiseParts parts = noise_parts(instruments, shared_fraction, with);
         NoiseModel out = parts.meta;
         const ScatterModel own = estimate_scatter(parts.data);
-        const ScatterModel scatter = scatter_of(parts);
+        const ScatterModel scatter = scatter_of(own);
         out.from_replicates = own.estimable;
         out.carried_from = !own.estimable && carried_ ? carried_->source : "";
         out.random_dof = scatter.dof;

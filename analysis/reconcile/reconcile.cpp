@@ -222,6 +222,27 @@ CandidateResult describe(const ForwardModel& model, const ev::Subset& s, const s
     return r;
 }
 
+// The last parameter whose 95 % interval includes its "no effect" value, if any: a claim must
+// exclude it for every parameter it names.
+std::optional<std::size_t> includes_no_effect(const CandidateResult& r) {
+    std::optional<std::size_t> weak;
+    std::size_t j = 0;
+    for (const auto& t : r.terms)
+        for (const auto& p : t.parameters) {
+            if (r.interval_lo[j] <= p.null_value && p.null_value <= r.interval_hi[j]) weak = j;
+            ++j;
+        }
+    return weak;
+}
+
+const ParameterSpec& parameter_at(const CandidateResult& r, std::size_t index) {
+    std::size_t j = 0;
+    for (const auto& t : r.terms)
+        for (const auto& p : t.parameters)
+            if (j++ == index) return p;
+    throw std::out_of_range("parameter index");
+}
+
 // Jackknife over cases with real refits (not linearised): where the physics is strongly
 // nonlinear (the kink of |dT|^(1/4) at dT = 0) a few cases can carry most of the information,
 // and only refitting without them shows how much the value leans on them. Used for the claimed
@@ -309,16 +330,7 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const NoiseR
     } else {
         std::function<Eigen::MatrixXd(std::uint64_t)> draw;
         if (resampler)
-            draw = [&](std::uint64_t seed) {
-                const Eigen::MatrixXd full = resampler->draw(seed);
-                const Eigen::Index n = s.size();
-                Eigen::MatrixXd sub(n, n);
-                for (Eigen::Index a = 0; a < n; ++a)
-                    for (Eigen::Index b = 0; b < n; ++b)
-                        sub(a, b) = full(static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(a)]),
-                                         static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(b)]));
-                return sub;
-            };
+            draw = [&](std::uint64_t seed) { return ev::restrict_to(resampler->draw(seed), s.idx); };
         const ev::FamilyNull null = ev::family_null(s, st.grids, st.local, draw, opt.null_simulations, opt.seed);
         st.null_max = null.max_evidence;
         st.null_chi2 = null.chi2;
@@ -639,19 +651,11 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
                 // jackknife over cases) must exclude "no effect", else the single is kept.
                 CandidateResult pair = *best_pair;
                 widen_by_jackknife(model, rep.noise.covariance, sub, rep.predicted_before, pair);
-                std::string weak;
-                std::size_t j = 0;
-                for (const auto& t : pair.terms)
-                    for (const auto& p : t.parameters) {
-                        if (pair.interval_lo[j] <= p.null_value && p.null_value <= pair.interval_hi[j])
-                            weak = fmt::format("{} = {:.4g} ± {:.2g} is not distinguishable from no effect", p.name,
-                                               pair.values[j], pair.uncertainties[j]);
-                        ++j;
-                    }
-                if (weak.empty()) {
+                if (const auto j = includes_no_effect(pair); !j) {
                     chosen = pair;
                 } else {
-                    best_pair->reason = "one term is enough: " + weak;
+                    best_pair->reason = fmt::format("one term is enough: {} = {:.4g} ± {:.2g} is not distinguishable from no effect",
+                                                    parameter_at(pair, *j).name, pair.values[*j], pair.uncertainties[*j]);
                     rep.ambiguous_with.clear();
                 }
             }
@@ -687,17 +691,11 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
         } else {
             widen_by_jackknife(model, rep.noise.covariance, sub, rep.predicted_before, chosen);
             // A claim must exclude "no effect" at 95 % for every parameter it names.
-            std::string weak;
-            std::size_t j = 0;
-            for (const auto& t : chosen.terms)
-                for (const auto& p : t.parameters) {
-                    if (chosen.interval_lo[j] <= p.null_value && p.null_value <= chosen.interval_hi[j])
-                        weak = fmt::format("{} = {:.4g} [{:.4g}, {:.4g}] (95 %) includes no effect ({:g})", p.name,
-                                           chosen.values[j], chosen.interval_lo[j], chosen.interval_hi[j], p.null_value);
-                    ++j;
-                }
-            if (!weak.empty()) {
-                why_not = fmt::format("{} has evidence beyond the null, but its interval {}", chosen.label, weak);
+            if (const auto j = includes_no_effect(chosen)) {
+                const auto& p = parameter_at(chosen, *j);
+                why_not = fmt::format("{} has evidence beyond the null, but its interval {} = {:.4g} [{:.4g}, {:.4g}] (95 %) "
+                                      "includes no effect ({:g})", chosen.label, p.name, chosen.values[*j],
+                                      chosen.interval_lo[*j], chosen.interval_hi[*j], p.null_value);
             } else {
                 chosen.accepted = true;
                 chosen.reason = fmt::format("explains the residual: evidence {:.1f} beyond the null's {:.1f} ({:.0f} % level, "

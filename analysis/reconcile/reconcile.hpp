@@ -109,7 +109,6 @@ struct Options {
     double alpha = 0.01;                     // false-claim rate by construction (null bootstrap)
     int null_simulations = 2000;             // campaigns simulated under the twin as given
     int selection_simulations = 1000;        // per runner-up, to tell the winner from it
-    double max_chi2_per_dof_after = 1.5;     // a claimed term must leave the fit within the noise
     int max_anomalous_zones = 4;             // more than this is not a local anomaly
     bool try_pairs = true;
     std::uint64_t seed = 20261123;           // the simulations are reproducible
