@@ -2,6 +2,7 @@
 // standard clothing test (ASTM F1291, ISO 15831, ASTM F2370; analysis/clothing.hpp), with 95 %
 // intervals, the replicate criterion and a one-page report per ensemble.
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <optional>
@@ -16,6 +17,7 @@
 #include "base/user_error.hpp"
 #include "cli/campaign_source.hpp"
 #include "cli/commands.hpp"
+#include "store/export_target.hpp"
 
 namespace manikind::cli {
 
@@ -23,7 +25,7 @@ void add_clothing_command(CLI::App& app) {
     struct Opts {
         CampaignSource source;
         std::string baseline, report;
-        bool json = false;
+        bool json = false, force = false;
         bool require_flux_stability = false;
         analysis::clothing::Options options;
     };
@@ -35,7 +37,9 @@ void add_clothing_command(CLI::App& app) {
                     "A campaign with the nude manikin's trials (ensemble \"nude\"), when this one has none: a folder, or "
                     "with --db a campaign in the same database");
     cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 5) instead of the table");
-    cmd->add_option("--report", o->report, "Write the one-page-per-ensemble report (HTML with SVG) to this file");
+    cmd->add_option("--report", o->report, "Write the one-page-per-ensemble report (HTML with SVG) to this file (new; "
+                                           "never inside a campaign folder it reads, never over a database)");
+    cmd->add_flag("--force", o->force, "Replace an existing report file");
     cmd->add_option("--cv-limit-insulation", o->options.cv_limit_insulation,
                     "Largest coefficient of variation of the re-dressed replicates' total insulation (fraction)")
         ->check(CLI::Range(0.001, 1.0))
@@ -77,10 +81,29 @@ void add_clothing_command(CLI::App& app) {
             throw UserError(e.what());
         }
         if (!o->report.empty()) {
-            std::ofstream out(o->report, std::ios::binary | std::ios::trunc);
-            if (!out) throw UserError(fmt::format("--report {}: cannot write there", o->report));
-            out << analysis::clothing::to_html(r, campaign.zone_map);
-            if (!out) throw UserError(fmt::format("--report {}: write failed", o->report));
+            // The report never lands in a campaign folder it read (it could replace campaign.json
+            // or a trial's CSV) nor on a database (ExportTarget: also links, devices, and an
+            // existing file without --force); written whole, then renamed into place.
+            for (const auto* source : {&o->source.campaign, &o->baseline})
+                if (o->source.db.empty() && o->source.archive.empty() && !source->empty()) {
+                    std::error_code ec;
+                    const auto folder = std::filesystem::weakly_canonical(*source, ec);
+                    const auto target = std::filesystem::weakly_canonical(o->report, ec);
+                    const auto inside = target.lexically_relative(folder);
+                    if (!ec && !inside.empty() && *inside.begin() != "..")
+                        throw UserError(fmt::format("--report {}: is inside the campaign folder {} it reads: name a path "
+                                                    "outside it", o->report, *source), "output_refused");
+                }
+            std::vector<std::filesystem::path> inputs;
+            if (!o->source.db.empty()) inputs.emplace_back(o->source.db);
+            ExportTarget target(o->report, ExportShape::file, o->force, inputs);
+            {
+                std::ofstream out(target.staging(), std::ios::binary | std::ios::trunc);
+                out << analysis::clothing::to_html(r, campaign.zone_map);
+                out.flush();
+                if (!out) throw UserError(fmt::format("--report {}: write failed", o->report), "write_failed");
+            }
+            target.commit();
             spdlog::info("wrote {}", o->report);
         }
         if (o->json)

@@ -53,6 +53,19 @@ def main():
                 if needle not in t.stdout:
                     print(f"table lacks {needle!r}")
                     sys.exit(1)
+            # A careless --report never destroys an input or an earlier report.
+            before = open(os.path.join(out, "campaign.json"), "rb").read()
+            bad = subprocess.run([manikin, "clothing", out, "--report", os.path.join(out, "campaign.json"), "--force"],
+                                 capture_output=True, text=True)
+            if bad.returncode != 2 or "inside the campaign folder" not in bad.stderr or \
+                    open(os.path.join(out, "campaign.json"), "rb").read() != before:
+                print(f"--report over campaign.json was not refused: {bad.returncode} {bad.stderr}")
+                sys.exit(1)
+            again = subprocess.run([manikin, "clothing", out, "--report", report], capture_output=True, text=True)
+            forced = subprocess.run([manikin, "clothing", out, "--report", report, "--force"], capture_output=True, text=True)
+            if again.returncode != 2 or "--force" not in again.stderr or forced.returncode != 0:
+                print(f"an existing report: {again.returncode} {again.stderr} / --force {forced.returncode}")
+                sys.exit(1)
             # Steady in heat flux too (the standards' steady heat loss): these trials are.
             f = subprocess.run([manikin, "clothing", out, "--json", "--require-flux-stability"], capture_output=True, text=True)
             strict = json.loads(f.stdout)
