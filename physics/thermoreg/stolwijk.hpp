@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "physics/thermoreg/stepwise_math.hpp"
+
 namespace manikind::physics::thermoreg {
 
 inline constexpr int segment_count = 6;   // head, trunk, arms, hands, legs, feet
@@ -78,6 +80,72 @@ struct SimulationResult {
     OutputSample final;
     double max_abs_energy_residual_w = 0.0;
     std::array<double, node_count> final_node_temps_c{};
+};
+
+// One step's surroundings (what Exposure holds for a whole run).
+struct Environment {
+    double air_temp_c = 41.0;
+    double mrt_c = 55.0;
+    double rh_pct = 20.0;
+    double air_speed_m_s = 0.0;
+};
+using SegmentValues = std::array<double, segment_count>;
+
+// Latent heat of the sweat a segment's evaporation stands for (ISO 9886: 2430 J/g near 30 °C).
+inline constexpr double sweat_latent_heat_j_g = 2430.0;
+
+// What one step leaves, per segment as well as Fig. 4's whole-body quantities.
+struct StepState {
+    OutputSample sample;                  // t_s: the step's start; temperatures after it
+    SegmentValues skin_temp_c{};          // after the step
+    SegmentValues core_temp_c{};
+    SegmentValues skin_loss_w{};          // what the skin lost to the surroundings: measured when given, else modelled
+    SegmentValues modelled_loss_w{};      // the model's own sensible + evaporative loss, for comparison
+    SegmentValues evaporation_w{};        // the model's skin evaporation (diffusion + regulatory sweat)
+    SegmentValues sweat_rate_g_m2_h{};    // the same as a moisture supply per m² of the segment
+    SegmentValues skin_blood_flow_l_h{};
+};
+
+// The model stepped one time step at a time: what simulate() runs for a whole exposure, and what
+// a manikin in the loop runs fed the manikin's measured losses. State: the 25 node temperatures.
+class Body {
+public:
+    // At the JOS-3 set points; met is the metabolic rate (0.7-10). Throws std::domain_error.
+    Body(double met, const ModelOptions& options);
+    // One explicit step of dt_s (<= 5 s). With measured_skin_loss_w (W per segment, positive =
+    // lost: sensible + evaporative, as a manikin's heaters supply it), the skin nodes lose that
+    // instead of the model's own exchange; respiration and the sweat request stay the model's.
+    // Throws std::domain_error for inputs out of range or a step that goes unstable.
+    const StepState& step(double dt_s, const Environment& env, const SegmentValues* measured_skin_loss_w = nullptr);
+    double time_s() const { return time_s_; }
+    // Node temperatures, °C, in the code's order (per segment core, muscle, fat, skin; then blood).
+    std::array<double, node_count> node_temps_c() const;
+    // Continue from a recorded state (a restarted daemon); throws std::domain_error for a
+    // temperature outside 20-45 °C or not finite.
+    void restore(double time_s, const std::array<double, node_count>& node_temps_c);
+    double max_abs_energy_residual_w() const { return max_abs_residual_w_; }
+    static const SegmentValues& segment_areas_m2();
+
+private:
+    void prepare(double dt_s, const Environment& env);  // per-environment constants, when it changes
+    ModelOptions options_;
+    double met_;
+    double time_s_ = 0.0;
+    std::array<double, node_count> t_k_{};
+    double max_abs_residual_w_ = 0.0;
+    StepState state_;
+    // Per segment: ln T_skin, the saturation pressure's exponentials and the local vasomotor
+    // factor, each updated from its previous step's value (stepwise_math.hpp).
+    std::array<SteppedLog, segment_count> ln_skin_k_;
+    std::array<SteppedExp, segment_count> psat_growth_exp_, psat_scale_exp_, local_factor_exp_;
+    // What depends only on the environment and the step, computed when either changes.
+    bool prepared_ = false;
+    Environment env_;
+    double dt_s_ = 0.0;
+    double air_k_ = 0.0, mrt_k_ = 0.0, p_air_pa_ = 0.0, c_air_ = 0.0, q_total_w_ = 0.0, q_work_w_ = 0.0;
+    double per_step_1_s_ = 0.0;
+    SegmentValues h_forced_w_m2k_{}, clothing_r_m2k_w_{}, clothing_re_m2pa_w_{};
+    std::array<double, node_count> step_per_capacity_s_k_j_{};
 };
 
 // Throws std::domain_error naming the input for non-physical or unstable inputs: RH outside
