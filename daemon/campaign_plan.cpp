@@ -29,6 +29,15 @@ nlohmann::json case_conditions_json(const PlannedCase& c) {
                         {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
     if (!c.ensemble.empty()) j["ensemble"] = c.ensemble;
     if (!c.test.empty()) j["test"] = c.test;
+    // Only physiological cases carry these: earlier campaigns' stored conditions stay equal.
+    if (c.model) {
+        j["control"] = "physiological";
+        nlohmann::json phases = nlohmann::json::array();
+        for (const auto& ph : c.model->phases)
+            phases.push_back({{"after_s", ph.after_s}, {"chamber_temp_c", ph.chamber_temp_c}, {"chamber_rh_pct", ph.chamber_rh_pct}});
+        j["model"] = {{"name", c.model->name}, {"metabolic_met", c.model->metabolic_met},
+                      {"duration_s", c.model->duration_s}, {"phases", phases}};
+    }
     return j;
 }
 
@@ -67,7 +76,7 @@ CampaignPlan table_s3_plan(const std::string& name) {
     p.name = name;
     for (const auto& c : sim::table_s3_cases()) {
         p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
-                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", ""});
+                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt});
     }
     return p;
 }
@@ -105,6 +114,79 @@ void refuse_unknown_keys(const toml::table& table, std::initializer_list<std::st
         throw UserError(fmt::format("{}: {}{}: unknown key{}", toml_input::where(source, key.source()), prefix, k,
                                     close ? fmt::format(" (did you mean '{}'?)", nearest) : std::string()));
     }
+}
+
+// control = "physiological" and its [cases.model] table (docs/daemon.md, "Physiological trials").
+void parse_physiological(const toml::table& t, const toml::node& node, PlannedCase& c, const std::string& source) {
+    auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
+    std::string control = "constant-skin";
+    if (const auto* v = t.get("control")) {
+        if (!v->is_string()) throw UserError(fmt::format("{}: cases.control: expected a string", where(*v)));
+        control = v->as_string()->get();
+        if (control != "constant-skin" && control != "physiological")
+            throw UserError(fmt::format("{}: cases.control: \"{}\" is not a control mode (\"constant-skin\", the default, "
+                                        "or \"physiological\")",
+                                        where(*v), control));
+    }
+    const auto* model = t.get("model");
+    if (control != "physiological") {
+        if (model)
+            throw UserError(fmt::format("{}: cases.model: a model is for control = \"physiological\" (add it to the case)",
+                                        where(*model)));
+        return;
+    }
+    if (!model || !model->is_table())
+        throw UserError(fmt::format("{}: cases: control = \"physiological\" needs a [cases.model] table (name, "
+                                    "metabolic_met, duration_min)",
+                                    where(model ? *model : node)));
+    // The model decides the skin and the sweat: a value here would be silently overridden.
+    for (const char* key : {"skin_setpoint_c", "wet", "sweat_rate_g_m2_h", "ensemble", "test"})
+        if (const auto* v = t.get(key))
+            throw UserError(fmt::format("{}: cases.{}: a physiological case's skin temperature and sweating are the "
+                                        "model's to decide (remove {})",
+                                        where(*v), key, key));
+    const auto& m = *model->as_table();
+    refuse_unknown_keys(m, {"name", "metabolic_met", "duration_min", "phases"}, source, "cases.model.");
+    auto number = [&](const toml::table& tab, const char* key, double fallback, double lo, double hi, const char* prefix) {
+        const auto* n = tab.get(key);
+        if (!n) return fallback;
+        if (!n->is_number()) throw UserError(fmt::format("{}: {}{}: expected a number", where(*n), prefix, key));
+        const double v = n->is_integer() ? static_cast<double>(n->as_integer()->get()) : n->as_floating_point()->get();
+        if (!(v >= lo && v <= hi))
+            throw UserError(fmt::format("{}: {}{}: {} is outside {}..{}", where(*n), prefix, key, v, lo, hi));
+        return v;
+    };
+    PhysiologicalModel pm;
+    if (const auto* n = m.get("name")) {
+        if (!n->is_string() || n->as_string()->get() != "stolwijk-2026")
+            throw UserError(fmt::format("{}: cases.model.name: the model manikind runs is \"stolwijk-2026\" (the paper's "
+                                        "Stolwijk model, docs/thermoregulation.md)",
+                                        where(*n)));
+    }
+    pm.metabolic_met = number(m, "metabolic_met", 1.5, 0.8, 4.0, "cases.model.");
+    pm.duration_s = 60.0 * number(m, "duration_min", 120, 5, 24 * 60, "cases.model.");
+    if (const auto* ph = m.get("phases")) {
+        const auto* arr = ph->as_array();
+        if (!arr) throw UserError(fmt::format("{}: cases.model.phases: expected [[cases.model.phases]] tables", where(*ph)));
+        for (const auto& item : *arr) {
+            const auto* pt = item.as_table();
+            if (!pt) throw UserError(fmt::format("{}: cases.model.phases: expected tables", where(item)));
+            refuse_unknown_keys(*pt, {"after_min", "chamber_temp_c", "chamber_rh_pct"}, source, "cases.model.phases.");
+            if (!pt->get("after_min") || !pt->get("chamber_temp_c") || !pt->get("chamber_rh_pct"))
+                throw UserError(fmt::format("{}: cases.model.phases: after_min, chamber_temp_c and chamber_rh_pct are required",
+                                            where(item)));
+            ChamberPhase phase;
+            phase.after_s = 60.0 * number(*pt, "after_min", 0, 0, pm.duration_s / 60.0, "cases.model.phases.");
+            phase.chamber_temp_c = number(*pt, "chamber_temp_c", 0, -40, 80, "cases.model.phases.");
+            phase.chamber_rh_pct = number(*pt, "chamber_rh_pct", 0, 0, 100, "cases.model.phases.");
+            if (!pm.phases.empty() && phase.after_s <= pm.phases.back().after_s)
+                throw UserError(fmt::format("{}: cases.model.phases.after_min: phases must come in time order", where(item)));
+            pm.phases.push_back(phase);
+        }
+    }
+    c.model = pm;
+    c.wet = false;  // the sweat is the model's, zone by zone; "wet" is the constant-skin flood
+    c.sweat_rate_g_m2_h = 0.0;
 }
 
 }  // namespace
@@ -162,7 +244,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             const auto* t = node.as_table();
             if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
             refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h",
-                                     "enclosure_temp_c", "enclosure_rh_pct", "ensemble", "test"},
+                                     "enclosure_temp_c", "enclosure_rh_pct", "ensemble", "test", "control", "model"},
                                 source, "cases.");
             PlannedCase c;
             c.id = whole(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6);
@@ -204,6 +286,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
                 throw UserError(fmt::format("{}: cases: an evaporative test needs the wet textile skin (wet = true)", where(node)));
             if (c.test == "insulation" && c.wet)
                 throw UserError(fmt::format("{}: cases: an insulation test is dry (wet = false)", where(node)));
+            parse_physiological(*t, node, c, source);
             p.cases.push_back(c);
         }
     }
@@ -250,7 +333,18 @@ std::string check_plan_against_limits(const CampaignPlan& plan, const config::Sa
         if (c.chamber_rh_pct < l.min_chamber_rh_pct || c.chamber_rh_pct > l.max_chamber_rh_pct)
             return fmt::format("case {}: chamber_rh_pct {} is outside the safety limits {}..{} % (safety.min/max_chamber_rh_pct)",
                                c.id, c.chamber_rh_pct, l.min_chamber_rh_pct, l.max_chamber_rh_pct);
-        if (c.skin_setpoint_c < l.min_skin_temp_c || c.skin_setpoint_c > l.max_skin_temp_c)
+        if (c.model)
+            for (const auto& ph : c.model->phases) {
+                if (ph.chamber_temp_c < l.min_chamber_temp_c || ph.chamber_temp_c > l.max_chamber_temp_c)
+                    return fmt::format("case {}: model phase after {:.0f} min: chamber_temp_c {} is outside the safety limits "
+                                       "{}..{} °C (safety.min/max_chamber_temp_c)",
+                                       c.id, ph.after_s / 60, ph.chamber_temp_c, l.min_chamber_temp_c, l.max_chamber_temp_c);
+                if (ph.chamber_rh_pct < l.min_chamber_rh_pct || ph.chamber_rh_pct > l.max_chamber_rh_pct)
+                    return fmt::format("case {}: model phase after {:.0f} min: chamber_rh_pct {} is outside the safety limits "
+                                       "{}..{} % (safety.min/max_chamber_rh_pct)",
+                                       c.id, ph.after_s / 60, ph.chamber_rh_pct, l.min_chamber_rh_pct, l.max_chamber_rh_pct);
+            }
+        if (!c.model && (c.skin_setpoint_c < l.min_skin_temp_c || c.skin_setpoint_c > l.max_skin_temp_c))
             return fmt::format("case {}: skin_setpoint_c {} is outside the safety limits {}..{} °C (safety.min/max_skin_temp_c)",
                                c.id, c.skin_setpoint_c, l.min_skin_temp_c, l.max_skin_temp_c);
     }
@@ -261,6 +355,9 @@ std::string check_plan_against_devices(const CampaignPlan& plan, const config::C
     const double rating = config.devices.manikin_max_heater_power_w_m2;
     const double limit = config.safety.max_heater_power_w_m2;
     for (const auto& c : plan.cases) {
+        // Not for a physiological case: its skin is the model's, known only as the trial runs;
+        // the loop's bounds, the heater limit and the follow check guard it then.
+        if (c.model) continue;
         physics::twin::TrialConditions t;
         t.air_temp_c = c.chamber_temp_c;
         t.air_rh_pct = c.chamber_rh_pct;

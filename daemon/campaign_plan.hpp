@@ -15,6 +15,24 @@
 
 namespace manikind {
 
+// A change of the chamber's setpoints during a physiological trial ([[cases.model.phases]]): the
+// protocol's step from one climate to another, `after_s` from the model's start.
+struct ChamberPhase {
+    double after_s = 0.0;
+    double chamber_temp_c = 0.0;
+    double chamber_rh_pct = 0.0;
+};
+
+// A physiological trial (control = "physiological", [cases.model]): a thermoregulation model
+// decides every zone's skin setpoint and sweat rate from the manikin's measured losses
+// (docs/thermoregulation.md, "The manikin in the loop").
+struct PhysiologicalModel {
+    std::string name = "stolwijk-2026";
+    double metabolic_met = 1.5;
+    double duration_s = 7200.0;
+    std::vector<ChamberPhase> phases;
+};
+
 struct PlannedCase {
     int id = 0;
     double chamber_temp_c = 0.0;
@@ -32,6 +50,8 @@ struct PlannedCase {
     // or "nude") and the test ("insulation" or "evaporative"); both empty for other campaigns.
     std::string ensemble;
     std::string test;
+    // Set for control = "physiological": skin_setpoint_c, wet and the sweat rate are then the model's.
+    std::optional<PhysiologicalModel> model;
 };
 
 

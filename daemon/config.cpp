@@ -276,6 +276,38 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*a, "archive", "lab_name", c.archive.lab_name);
         r.number(*a, "archive", "interval_s", c.archive.interval_s, 0.5, 3600.0, "s");
     }
+    if (const auto* ph = r.table(root, "", "physiological")) {
+        auto& p = c.physiological;
+        r.number(*ph, "physiological", "coupling_period_s", p.coupling_period_s, 1.0, 600.0, "s");
+        r.number(*ph, "physiological", "max_setpoint_rate_c_min", p.max_setpoint_rate_c_min, 0.01, 10.0, "°C/min");
+        r.number(*ph, "physiological", "min_skin_setpoint_c", p.min_skin_setpoint_c, 20.0, 45.0, "°C");
+        r.number(*ph, "physiological", "max_skin_setpoint_c", p.max_skin_setpoint_c, 20.0, 45.0, "°C");
+        r.number(*ph, "physiological", "max_sweat_rate_g_m2_h", p.max_sweat_rate_g_m2_h, 0.0, 2000.0, "g/m²/h");
+        r.number(*ph, "physiological", "follow_tolerance_c", p.follow_tolerance_c, 0.05, 10.0, "°C");
+        r.number(*ph, "physiological", "follow_timeout_s", p.follow_timeout_s, 1.0, 7200.0, "s");
+        r.number(*ph, "physiological", "stale_after_s", p.stale_after_s, 1.0, 3600.0, "s");
+        r.number(*ph, "physiological", "min_core_temp_c", p.min_core_temp_c, 30.0, 45.0, "°C");
+        r.number(*ph, "physiological", "max_core_temp_c", p.max_core_temp_c, 30.0, 45.0, "°C");
+        if (p.min_skin_setpoint_c >= p.max_skin_setpoint_c || p.min_core_temp_c >= p.max_core_temp_c)
+            throw UserError(fmt::format("{}: [physiological]: every min_* must be below its max_*", source_name));
+        if (const auto* seg = r.table(*ph, "physiological", "segments")) {
+            static const std::set<std::string> model_segments = {"head", "trunk", "arms", "hands", "legs", "feet"};
+            std::map<std::string, std::vector<std::string>> map;
+            for (const auto& [key, node] : *seg) {
+                const std::string name(key.str());
+                if (!model_segments.count(name))
+                    throw UserError(fmt::format("{}: physiological.segments.{}: not a model segment (head, trunk, arms, "
+                                                "hands, legs, feet)",
+                                                where(source_name, node.source()), name));
+                r.strings(*seg, "physiological.segments", name.c_str(), map[name]);
+            }
+            if (map.size() != model_segments.size())
+                throw UserError(fmt::format("{}: physiological.segments: give all six model segments (head, trunk, arms, "
+                                            "hands, legs, feet), each with its zone-map segments",
+                                            where(source_name, seg->source())));
+            p.segments = std::move(map);
+        }
+    }
     r.warn_unknown(root, "");
     return c;
 }

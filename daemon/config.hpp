@@ -110,6 +110,25 @@ struct ArchiveConfig {
     double interval_s = 5.0;  // between forwarding passes while the server answers
 };
 
+// [physiological]: the manikin under a thermoregulation model's control (docs/thermoregulation.md,
+// "The manikin in the loop"). The limits are the daemon's, enforced whatever the model asks.
+struct PhysiologicalConfig {
+    double coupling_period_s = 60.0;          // the model advances and the setpoints are sent this often
+    double max_setpoint_rate_c_min = 0.5;     // per zone, either way
+    double min_skin_setpoint_c = 30.0;        // the model's skin temperatures are clamped here ([safety] still applies)
+    double max_skin_setpoint_c = 40.0;
+    double max_sweat_rate_g_m2_h = 500.0;     // the sweat pumps' range
+    double follow_tolerance_c = 1.0;          // a zone this far off its setpoint ...
+    double follow_timeout_s = 600.0;          // ... for this long cannot follow: fallback
+    double stale_after_s = 30.0;              // a zone's heat flux older than this is stale: fallback
+    double min_core_temp_c = 35.0;            // the model's core outside these has diverged: fallback
+    double max_core_temp_c = 40.5;
+    // Which zone-map segments make each model segment (head, trunk, arms, hands, legs, feet).
+    std::map<std::string, std::vector<std::string>> segments = {
+        {"head", {"head"}},        {"trunk", {"chest", "back", "pelvis"}}, {"arms", {"upper_arm", "forearm"}},
+        {"hands", {"hand"}},       {"legs", {"thigh", "calf"}},            {"feet", {"foot"}}};
+};
+
 struct Config {
     std::string lab_name = "simulated lab";
     std::string mode = "simulated";        // simulated | real
@@ -144,6 +163,7 @@ struct Config {
     ApiConfig api;
     HttpConfig http;
     ArchiveConfig archive;
+    PhysiologicalConfig physiological;
     std::filesystem::path source_dir;      // relative paths in the file resolve from here
     std::vector<std::string> warnings;     // unknown keys and similar, with file:line
     // Where each key present in the text was: "devices.chamber.register_map" -> "file:line:column";

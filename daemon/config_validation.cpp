@@ -142,6 +142,12 @@ void check_limits_fit_devices(const Config& c, std::vector<std::string>& problem
     if (l.min_skin_temp_c >= l.max_skin_temp_c)
         problems.push_back(fmt::format("{}: safety.min_skin_temp_c = {} °C is not below max_skin_temp_c = {} °C",
                                        where_of(c, "safety.min_skin_temp_c"), l.min_skin_temp_c, l.max_skin_temp_c));
+    const auto& ph = c.physiological;
+    if (ph.min_skin_setpoint_c < l.min_skin_temp_c || ph.max_skin_setpoint_c > l.max_skin_temp_c)
+        problems.push_back(fmt::format("{}: physiological skin setpoints {}..{} °C reach outside the safety limits {}..{} °C "
+                                       "(safety.min/max_skin_temp_c): the model could ask for a skin the daemon must stop",
+                                       where_of(c, "physiological"), ph.min_skin_setpoint_c, ph.max_skin_setpoint_c,
+                                       l.min_skin_temp_c, l.max_skin_temp_c));
     const auto& sb = c.standby;
     if (sb.chamber_temp_c < l.min_chamber_temp_c || sb.chamber_temp_c > l.max_chamber_temp_c)
         problems.push_back(fmt::format("{}: standby.chamber_temp_c = {} °C is outside the safety limits {}..{} °C",

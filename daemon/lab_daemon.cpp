@@ -691,6 +691,7 @@ void LabDaemon::finish_trial(const std::string& state, const std::string& reason
                                            reason.empty() ? "" : " (" + reason + ")"));
     trial_id_ = 0;
     current_.reset();
+    loop_.reset();
     ++trials_done_;
     stage_ = Stage::idle;
     if (state == "done" && interim_results_.value_or(!o_.virtual_clock) && !queue_.empty()) start_interim_results();
@@ -993,6 +994,28 @@ void LabDaemon::advance_locked() {
             return;
         }
         case Stage::manikin_starting: {
+            if (current_->c.model) {
+                // Physiological control: the loop preconditions the zones, then the model decides.
+                try {
+                    loop_ = std::make_unique<PhysiologicalLoop>(*current_->c.model, o_.config.physiological,
+                                                                analysis::andi35_zone_map());
+                } catch (const std::exception& e) {
+                    event("error", "physiological", fmt::format("the trial cannot run under the model: {}", e.what()));
+                    finish_trial("failed", e.what());
+                    return;
+                }
+                if (!acq_->manikin().set_run(true)) {
+                    loop_.reset();
+                    setpoint_refused("the manikin bus refused the run command", "");
+                    return;
+                }
+                steady_since_ns_.reset();
+                acquiring_since_ns_ = now;
+                enter(Stage::acquiring, fmt::format("physiological control: {}, {} met, {:.0f} min", current_->c.model->name,
+                                                    current_->c.model->metabolic_met, current_->c.model->duration_s / 60));
+                physiological_tick_locked(now);
+                return;
+            }
             mc::Setpoint sp;
             sp.zone = 0;
             sp.mode = mc::ControlMode::constant_skin_temp;
@@ -1012,6 +1035,10 @@ void LabDaemon::advance_locked() {
             return;
         }
         case Stage::acquiring: {
+            if (loop_) {  // no steady state and no excursions: the chamber follows the protocol
+                physiological_tick_locked(now);
+                return;
+            }
             // Excursions (issue 31): the enclosure off its target for longer than the plan allows.
             {
                 const EnclosureTarget& target = target_;
@@ -1065,11 +1092,73 @@ void LabDaemon::advance_locked() {
         }
         case Stage::stopping: {
             acq_->manikin().set_run(false);
-            finish_trial("done", steady_since_ns_ ? "" : "never steady");
+            const bool physiological = loop_ != nullptr;
+            loop_.reset();
+            finish_trial("done", physiological || steady_since_ns_ ? "" : "never steady");
             return;
         }
         case Stage::computing: return;
     }
+}
+
+// One tick of a physiological trial: the loop gets the zones' latest readings and the
+// enclosure's, and what it returns is sent (setpoints), recorded (device "model") and raised.
+void LabDaemon::physiological_tick_locked(std::int64_t now) {
+    const auto& zones = analysis::andi35_zone_map().zones;
+    LoopInputs in;
+    in.now_ns = now;
+    in.zones.resize(zones.size());
+    for (std::size_t z = 0; z < zones.size(); ++z) {
+        const std::string prefix = fmt::format("manikin/z{:02d}.", zones[z].zone);
+        const auto skin = live_.find(prefix + "skin_temp_c");
+        const auto flux = live_.find(prefix + "heat_flux_w_m2");
+        auto& r = in.zones[z];
+        r.good = skin != live_.end() && flux != live_.end() && skin->second.quality == drivers::Quality::good &&
+                 flux->second.quality == drivers::Quality::good;
+        if (skin != live_.end()) r.skin_temp_c = skin->second.value;
+        if (flux != live_.end()) {
+            r.heat_flux_w_m2 = flux->second.value;
+            r.flux_mono_ns = flux->second.quality == drivers::Quality::good ? flux->second.mono_ns : -1;
+        }
+    }
+    in.air_temp_c = enclosure_air_c();
+    in.rh_pct = enclosure_rh_pct();
+    double wall_sum = 0.0;
+    int walls = 0;
+    for (const auto& [key, smp] : live_)
+        if (key.starts_with("datalogger/wall_tc_") && key.ends_with(".wall_temp_c") && smp.quality == drivers::Quality::good)
+            wall_sum += smp.value, ++walls;
+    in.wall_temp_c = walls ? wall_sum / walls : std::nan("");
+    const auto speed = live_.find("windsonic/air_speed_m_s");
+    in.air_speed_m_s = speed != live_.end() && speed->second.quality == drivers::Quality::good ? speed->second.value : 0.0;
+    LoopOutput out;
+    try {
+        out = loop_->tick(in);
+    } catch (const std::exception& e) {
+        internal_error_locked("physiological loop", e.what());
+        return;
+    }
+    for (const auto& cmd : out.commands) {
+        mc::Setpoint sp;
+        sp.zone = cmd.zone;
+        sp.mode = mc::ControlMode::constant_skin_temp;
+        sp.value = cmd.skin_setpoint_c;
+        sp.sweating = cmd.sweat_rate_g_m2_h > 0.0;
+        sp.sweat_rate_g_m2_h = cmd.sweat_rate_g_m2_h;
+        if (!acq_->manikin().send(sp)) {
+            event("warn", "physiological", fmt::format("the manikin bus refused zone {}'s setpoint; sent again next period", cmd.zone));
+            break;
+        }
+    }
+    const std::int64_t utc = clock_->utc_ns();
+    for (const auto& [channel, value] : out.model_channels)
+        record_sample_locked({"model", channel, value, drivers::Quality::good, now, utc});
+    for (const auto& a : out.alarms) event(a.severity, "physiological", a.message);
+    if (out.fell_back) write([trial = trial_id_](recorder::Database& db) { db.add_trial_flag(trial, flag_model_fallback); });
+    if (out.chamber_change)
+        if (const auto why = set_chamber(out.chamber_change->chamber_temp_c, out.chamber_change->chamber_rh_pct); !why.empty())
+            event("error", "physiological", fmt::format("the chamber refused the protocol's next phase: {}", why));
+    if (out.finished) enter(Stage::stopping, fmt::format("the model's {:.0f} min are done", loop_->model_time_s() / 60));
 }
 
 void LabDaemon::step_virtual(double dt_s) {
@@ -1184,6 +1273,7 @@ nlohmann::json LabDaemon::status_json() {
         j["trial"] = {{"case", current_->c.id}, {"replicate", current_->replicate}, {"id", trial_id_},
                       {"wet", current_->c.wet}, {"stage_elapsed_s", stage_elapsed_s()}};
         if (stage_ == Stage::chamber_settling) j["trial"]["settling"] = settling_json_locked(clock_->mono_ns());
+        if (loop_) j["trial"]["model"] = loop_->status_json();  // a physiological trial: the model beside the zones
         if (stage_ == Stage::acquiring) {
             const SteadyCheck c = check_steady_window_locked(paused_ ? paused_at_ns_ : clock_->mono_ns());
             const double limit_c = o_.config.steady_state.max_skin_fluctuation_c;

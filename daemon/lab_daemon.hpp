@@ -23,6 +23,7 @@
 #include "analysis/sliding_range.hpp"
 #include "daemon/acquisition.hpp"
 #include "daemon/campaign_plan.hpp"
+#include "daemon/physiological_loop.hpp"
 #include "daemon/config.hpp"
 #include "daemon/instance_lock.hpp"
 #include "store/database.hpp"
@@ -39,6 +40,7 @@ enum TrialFlag : std::int64_t {
     flag_safety_stop = 2,
     flag_never_steady = 4,
     flag_dropped_samples = 8,
+    flag_model_fallback = 32,       // a physiological trial fell back to constant skin temperature
     flag_enclosure_excursion = 16,  // the enclosure left its target while acquiring (longer than excursion_limit_min)
 };
 
@@ -159,6 +161,7 @@ private:
     double stage_elapsed_s() const;
     std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
     double enclosure_mean(const char* quantity_suffix) const;
+    void physiological_tick_locked(std::int64_t now_ns);  // acquiring, control = "physiological"
     double enclosure_air_c() const { return enclosure_mean(".air_temp_c"); }
     double enclosure_rh_pct() const { return enclosure_mean(".air_rh_pct"); }
     // Where settling stands: targets, distances, the window, an ETA (status trial.settling).
@@ -224,6 +227,7 @@ private:
     // the air's distance from its target over the last minutes (for the ETA).
     EnclosureTarget target_;  // the running trial's enclosure target, resolved when it starts settling
     std::optional<std::int64_t> on_target_since_ns_;
+    std::unique_ptr<PhysiologicalLoop> loop_;  // the running trial's, when it is physiological
     std::optional<std::int64_t> off_target_since_ns_;  // acquiring: when the enclosure left its target
     bool in_excursion_ = false;                         // ... for longer than the plan allows
     bool settle_timeout_alarmed_ = false;

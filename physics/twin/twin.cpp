@@ -131,10 +131,13 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
 
     std::vector<ZoneFlux> out;
     out.reserve(trial.zones.size());
-    for (const ZoneInput& z : trial.zones) {
+    if (!trial.zone_wettedness.empty() && trial.zone_wettedness.size() != trial.zones.size())
+        throw std::invalid_argument("zone_wettedness: one value per zone, or none");
+    for (std::size_t zi = 0; zi < trial.zones.size(); ++zi) {
+        const ZoneInput& z = trial.zones[zi];
         const auto seg = baseline_segment(z.segment);
         if (!seg) throw std::invalid_argument("zone " + std::to_string(z.zone) + ": unknown segment '" + z.segment + "'");
-        double wettedness = trial.wettedness;
+        double wettedness = trial.zone_wettedness.empty() ? trial.wettedness : std::clamp(trial.zone_wettedness[zi], 0.0, 1.0);
         for (const auto& [region, fraction] : k.wettedness_by_region)
             if (region == z.region) wettedness *= std::clamp(fraction, 0.0, 1.0);
         double leak_w_m2 = 0.0;
@@ -205,7 +208,8 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
         }
         // The textile skin is worn only for the wet trials (the paper's Fig. 1A inset, Text S3):
         // a dry trial's surface is the manikin's own shell.
-        if (!clothed && k.textile_r_m2k_w > 0.0 && trial.wettedness > 0.0) {
+        // Metered sweat (zone_wettedness) is worn on the textile skin too.
+        if (!clothed && k.textile_r_m2k_w > 0.0 && (trial.wettedness > 0.0 || !trial.zone_wettedness.empty())) {
             // Surface temperature: root of g(T) = T - T_s + R q(T). q rises with T, so g' > 1 and
             // Newton (secant derivative) converges in a few steps; kept within ±30 K of the skin.
             const double r = k.textile_r_m2k_w;

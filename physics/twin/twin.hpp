@@ -37,6 +37,9 @@ struct TrialConditions {
     std::optional<double> air_speed_m_s;  // 0 where not recorded
     double wettedness = 0.0;              // campaign: wet -> 1, dry -> 0
     std::vector<ZoneInput> zones;
+    // Per zone (same order as zones), where the sweat is metered zone by zone (a manikin under a
+    // thermoregulation model's control); empty: every zone has `wettedness`.
+    std::vector<double> zone_wettedness;
 };
 
 // A physics term: a name from the library and its parameters. `zones` and `region` scope a

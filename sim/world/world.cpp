@@ -91,13 +91,36 @@ void World::step(double dt_s) {
         conditions_.air_rh_pct = rh_;
         conditions_.wall_temp_c = wall_c_;
         conditions_.air_speed_m_s = o_.air_speed_m_s;
-        bool any_wet = false;
+        bool any_wet = false, any_metered = false;
         for (std::size_t z = 0; z < zones_.size(); ++z) {
             conditions_.zones[z].skin_temp_c = zones_[z].skin_temp_c;
-            any_wet = any_wet || (zones_[z].sweating && heating);
+            any_wet = any_wet || (zones_[z].sweating && heating && !zones_[z].metered);
+            any_metered = any_metered || zones_[z].metered;
         }
         conditions_.wettedness = any_wet ? 1.0 : 0.0;
-        const auto fluxes = physics::twin::predict(clothing_.empty() ? o_.physics : dressed_, conditions_);
+        const auto& physics = clothing_.empty() ? o_.physics : dressed_;
+        conditions_.zone_wettedness.clear();
+        if (any_metered) {
+            // Metered zones evaporate their supply up to what the air takes: w = supply / E_max.
+            // E_max = q_e(w) / w (Eq. 1 is linear in w at a given h, and h carries w's own
+            // buoyancy, Eq. 7): three passes of the fixed point from w = 1.
+            auto& w = conditions_.zone_wettedness;
+            w.assign(zones_.size(), conditions_.wettedness);
+            for (std::size_t z = 0; z < zones_.size(); ++z)
+                if (zones_[z].metered) w[z] = zones_[z].sweating && heating && zones_[z].sweat_rate_g_m2_h > 0.0 ? 1.0 : 0.0;
+            for (int pass = 0; pass < 3; ++pass) {
+                const auto at_w = physics::twin::predict(physics, conditions_);
+                for (std::size_t z = 0; z < zones_.size(); ++z) {
+                    if (!zones_[z].metered || w[z] == 0.0) continue;
+                    const double supply_w_m2 = zones_[z].sweat_rate_g_m2_h * 2430.0 / 3600.0;  // latent heat 2430 J/g
+                    const double e_max_w_m2 = at_w[z].q_evaporation_w_m2 / w[z];
+                    w[z] = e_max_w_m2 > 0.0 ? std::clamp(supply_w_m2 / e_max_w_m2, 1e-6, 1.0) : 1.0;
+                }
+            }
+        }
+        for (std::size_t z = 0; z < zones_.size(); ++z)
+            zones_[z].wettedness = conditions_.zone_wettedness.empty() ? conditions_.wettedness : conditions_.zone_wettedness[z];
+        const auto fluxes = physics::twin::predict(physics, conditions_);
         for (std::size_t z = 0; z < zones_.size(); ++z) {
             ZoneState& s = zones_[z];
             // This replicate's fit and wetting change the heat transfer itself; the PI loop pays for it.
@@ -140,6 +163,7 @@ void World::manikin_command(const mc::Setpoint& sp) {
         z.setpoint = sp.value;
         z.sweating = sp.sweating;
         z.sweat_rate_g_m2_h = sp.sweating ? sp.sweat_rate_g_m2_h : 0.0;
+        z.metered = sp.zone != 0;
     };
     if (sp.zone == 0) {
         for (auto& z : zones_) apply(z);

@@ -53,6 +53,11 @@ struct ZoneState {
     double setpoint = 35.0;                      // °C or W/m² by mode
     bool sweating = false;
     double sweat_rate_g_m2_h = 0.0;
+    // Set by a command addressed to this zone alone (a physiological model's per-zone rates): the
+    // supply is metered and evaporates up to what the air takes (w = supply / E_max, at most 1).
+    // An all-zones command floods the textile skin (w = 1), as in the paper's wet trials.
+    bool metered = false;
+    double wettedness = 0.0;                     // this step's, as the physics used it
     bool heater_failed = false;
 };
 
