@@ -22,6 +22,7 @@ void add_all_commands(CLI::App& app) {
     add_simulate_command(app);
     add_reconcile_command(app);
     add_clothing_command(app);
+    add_physio_command(app);
     add_demo_command(app);
     add_thermoreg_command(app);
     add_daemon_commands(app);

@@ -293,6 +293,7 @@ void add_daemon_commands(CLI::App& app) {
                                               {"sweat_rate_g_m2_h", pc.sweat_rate_g_m2_h}};
                         if (!pc.ensemble.empty()) one["ensemble"] = pc.ensemble;
                         if (!pc.test.empty()) one["test"] = pc.test;
+                        if (pc.model) one["model"] = case_conditions_json(pc).at("model");
                         cases.push_back(one);
                     }
                     std::printf("%s\n", nlohmann::json{{"ok", true}, {"name", plan.name}, {"replicates", plan.replicates},
@@ -302,13 +303,27 @@ void add_daemon_commands(CLI::App& app) {
                                                 .dump(2)
                                                 .c_str());
                 } else {
-                    // Settling dominates a lab day: each trial waits for the enclosure first.
+                    // Settling dominates a lab day: each trial waits for the enclosure first. A
+                    // physiological case lasts its model's duration (plus the zones' preconditioning).
                     const std::size_t trials = plan.cases.size() * static_cast<std::size_t>(plan.replicates);
-                    std::printf("%s: ok: campaign '%s', %zu case(s) x %d replicate(s) = %zu trials of %.0f min, each after "
+                    double minutes = 0.0;
+                    std::size_t physiological = 0;
+                    for (const auto& pc : plan.cases) {
+                        minutes += (pc.model ? pc.model->duration_s : plan.trial_duration_s) / 60.0;
+                        physiological += pc.model ? 1 : 0;
+                    }
+                    const auto n_cases = static_cast<double>(plan.cases.size());
+                    const std::string length =
+                        physiological == 0 ? fmt::format("trials of {:.0f} min", plan.trial_duration_s / 60.0)
+                        : physiological == plan.cases.size()
+                            ? fmt::format("physiological trials of {:.0f} min of model time each on average", minutes / n_cases)
+                            : fmt::format("trials ({} case(s) physiological) of {:.0f} min on average", physiological,
+                                          minutes / n_cases);
+                    std::printf("%s: ok: campaign '%s', %zu case(s) x %d replicate(s) = %zu %s, each after "
                                 "chamber settling (at least %.0f min, at most %.0f min): %.1f h or more in all\n",
-                                check_file->c_str(), plan.name.c_str(), plan.cases.size(), plan.replicates, trials,
-                                plan.trial_duration_s / 60.0, plan.settle_window_s / 60.0, plan.settle_timeout_s / 60.0,
-                                static_cast<double>(trials) * (plan.trial_duration_s + plan.settle_window_s) / 3600.0);
+                                check_file->c_str(), plan.name.c_str(), plan.cases.size(), plan.replicates, trials, length.c_str(),
+                                plan.settle_window_s / 60.0, plan.settle_timeout_s / 60.0,
+                                static_cast<double>(plan.replicates) * (minutes + n_cases * plan.settle_window_s / 60.0) / 60.0);
                 }
             });
         }

@@ -113,7 +113,7 @@ struct ArchiveConfig {
 // [physiological]: the manikin under a thermoregulation model's control (docs/thermoregulation.md,
 // "The manikin in the loop"). The limits are the daemon's, enforced whatever the model asks.
 struct PhysiologicalConfig {
-    double coupling_period_s = 60.0;          // the model advances and the setpoints are sent this often
+    double coupling_period_s = 20.0;          // the model advances and the setpoints are sent this often (measured: docs/thermoregulation.md)
     double max_setpoint_rate_c_min = 0.5;     // per zone, either way
     double min_skin_setpoint_c = 30.0;        // the model's skin temperatures are clamped here ([safety] still applies)
     double max_skin_setpoint_c = 40.0;

@@ -1115,6 +1115,8 @@ void LabDaemon::physiological_tick_locked(std::int64_t now) {
         auto& r = in.zones[z];
         r.good = skin != live_.end() && flux != live_.end() && skin->second.quality == drivers::Quality::good &&
                  flux->second.quality == drivers::Quality::good;
+        r.flagged = (skin != live_.end() && skin->second.quality == drivers::Quality::out_of_range) ||
+                    (flux != live_.end() && flux->second.quality == drivers::Quality::out_of_range);
         if (skin != live_.end()) r.skin_temp_c = skin->second.value;
         if (flux != live_.end()) {
             r.heat_flux_w_m2 = flux->second.value;

@@ -40,8 +40,8 @@ enum TrialFlag : std::int64_t {
     flag_safety_stop = 2,
     flag_never_steady = 4,
     flag_dropped_samples = 8,
-    flag_model_fallback = 32,       // a physiological trial fell back to constant skin temperature
     flag_enclosure_excursion = 16,  // the enclosure left its target while acquiring (longer than excursion_limit_min)
+    flag_model_fallback = 32,       // a physiological trial fell back to constant skin temperature
 };
 
 struct DaemonOptions {

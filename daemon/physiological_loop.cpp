@@ -73,6 +73,9 @@ void PhysiologicalLoop::command_towards(const std::vector<double>& target_c, con
         setpoint_c_[z] = std::clamp(setpoint_c_[z], cfg_.min_skin_setpoint_c, cfg_.max_skin_setpoint_c);
         sweat_g_m2_h_[z] = std::clamp(std::isfinite(sweat_g_m2_h[z]) ? sweat_g_m2_h[z] : 0.0, 0.0, cfg_.max_sweat_rate_g_m2_h);
         out.commands.push_back({map_.zones[z].zone, setpoint_c_[z], sweat_g_m2_h_[z]});
+        // What was commanded, recorded beside what the zone did (its manikin channels).
+        out.model_channels.emplace_back(fmt::format("z{:02d}.skin_setpoint_c", map_.zones[z].zone), setpoint_c_[z]);
+        out.model_channels.emplace_back(fmt::format("z{:02d}.sweat_setpoint_g_m2_h", map_.zones[z].zone), sweat_g_m2_h_[z]);
     }
 }
 
@@ -89,7 +92,8 @@ void PhysiologicalLoop::fall_back(const std::string& why, LoopOutput& out) {
     out.model_channels.emplace_back("fallback", 1.0);
 }
 
-void PhysiologicalLoop::record(const tr::StepState& st, const tr::SegmentValues& loss_w, LoopOutput& out) {
+void PhysiologicalLoop::record(const tr::StepState& st, const tr::SegmentValues& loss_w, const tr::Environment& env,
+                               LoopOutput& out) {
     auto& c = out.model_channels;
     const auto nodes = body_.node_temps_c();
     const auto& names = tr::segment_names();
@@ -118,6 +122,12 @@ void PhysiologicalLoop::record(const tr::StepState& st, const tr::SegmentValues&
     c.emplace_back("storage_w", st.sample.storage_w);
     c.emplace_back("modelled_evaporation_w", -st.sample.evaporation_w);
     c.emplace_back("sweat_rate_g_h", sweat_g_h);
+    // What the model was given besides the losses: `manikin physio` replays the run from these.
+    c.emplace_back("air_temp_c", env.air_temp_c);
+    c.emplace_back("air_rh_pct", env.rh_pct);
+    c.emplace_back("mrt_c", env.mrt_c);
+    c.emplace_back("air_speed_m_s", env.air_speed_m_s);
+    c.emplace_back("metabolic_met", model_.metabolic_met);
     c.emplace_back("fallback", 0.0);
 }
 
@@ -210,10 +220,11 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
     // ---- Running: one coupling step ----
     for (std::size_t z = 0; z < n; ++z)
         if (last_flux_ns_[z] < 0 || static_cast<double>(now - last_flux_ns_[z]) * 1e-9 > cfg_.stale_after_s) {
-            fall_back(fmt::format("zone {} ({}): its heat flux is stale ({}; physiological.stale_after_s = {} s)",
+            fall_back(fmt::format("zone {} ({}): its heat flux is {} ({}; physiological.stale_after_s = {} s)",
                                   map_.zones[z].zone, map_.zones[z].name,
+                                  in.zones[z].flagged ? "flagged by the manikin (a heater or sensor fault)" : "stale",
                                   last_flux_ns_[z] < 0 ? std::string("never read")
-                                                       : fmt::format("last read {:.0f} s ago",
+                                                       : fmt::format("last good reading {:.0f} s ago",
                                                                      static_cast<double>(now - last_flux_ns_[z]) * 1e-9),
                                   cfg_.stale_after_s),
                       out);
@@ -258,7 +269,7 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
         sweat[z] = st->sweat_rate_g_m2_h[m];
     }
     command_towards(target_c, sweat, dt_s, out);
-    record(*st, loss_w, out);
+    record(*st, loss_w, env, out);
     while (next_phase_ < model_.phases.size() && body_.time_s() >= model_.phases[next_phase_].after_s) {
         out.chamber_change = model_.phases[next_phase_];
         out.alarms.push_back({"info", fmt::format("physiological trial: the protocol's next phase at {:.0f} min: chamber {} °C, "

@@ -27,6 +27,7 @@ struct LoopZoneReading {
     double heat_flux_w_m2 = 0.0;       // heat supplied = heat lost (positive), the manikin's convention
     std::int64_t flux_mono_ns = -1;    // when the flux was read; -1: never
     bool good = false;
+    bool flagged = false;              // the manikin flags the zone (a heater or sensor fault)
 };
 
 struct LoopInputs {
@@ -81,7 +82,8 @@ private:
     void command_towards(const std::vector<double>& target_c, const std::vector<double>& sweat_g_m2_h, double dt_s,
                          LoopOutput& out);
     void fall_back(const std::string& why, LoopOutput& out);
-    void record(const physics::thermoreg::StepState& st, const physics::thermoreg::SegmentValues& loss_w, LoopOutput& out);
+    void record(const physics::thermoreg::StepState& st, const physics::thermoreg::SegmentValues& loss_w,
+                const physics::thermoreg::Environment& env, LoopOutput& out);
 
     PhysiologicalModel model_;
     config::PhysiologicalConfig cfg_;

@@ -1,0 +1,375 @@
+#include "analysis/physio.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <random>
+
+#include <fmt/core.h>
+
+#include "analysis/input_error.hpp"
+#include "analysis/plot/svg_figure.hpp"
+#include "analysis/uncertainty.hpp"
+#include "physics/thermoreg/stolwijk.hpp"
+
+namespace manikind::analysis::physio {
+
+namespace tr = physics::thermoreg;
+
+namespace {
+
+// One coupling step as the trial recorded it: what the model was given and what it gave.
+struct CouplingStep {
+    double t_s = 0.0;
+    tr::SegmentValues loss_w{};
+    tr::Environment env;
+    double core_c = 0.0, skin_c = 0.0, sweat_g_h = 0.0, metabolic_w = 0.0, respiration_w = 0.0, storage_w = 0.0;
+    bool fallback = false;
+};
+
+struct Recorded {
+    double met = 1.5;
+    bool fell_back = false;
+    std::vector<CouplingStep> steps;
+};
+
+// The model's channels of one trial at the rows where the loop recorded a coupling step.
+std::optional<Recorded> recorded_steps(const Campaign& c, const Trial& t) {
+    std::map<std::string, std::size_t> index;
+    for (std::size_t i = 0; i < c.channels.size(); ++i)
+        if (c.channels[i].device == "model") index[c.channels[i].name] = i;
+    if (!index.count("time_s") || t.data.channel_values.empty()) return std::nullopt;
+    const auto& names = tr::segment_names();
+    std::vector<std::string> needed = {"core_temp_c", "mean_skin_temp_c", "air_temp_c", "air_rh_pct", "mrt_c",
+                                       "air_speed_m_s", "metabolic_met", "sweat_rate_g_h", "metabolic_w",
+                                       "respiration_loss_w", "storage_w"};
+    for (const char* s : names) needed.push_back(std::string(s) + ".heat_loss_w");
+    for (const auto& n : needed)
+        if (!index.count(n))
+            throw InputError(t.info.file, 0, 0, "model." + n,
+                             "a physiological trial's model channels are incomplete: model." + n + " is missing");
+    auto value = [&](const std::string& name, std::size_t row) { return t.data.channel_values[index.at(name)][row]; };
+    auto present = [&](const std::string& name, std::size_t row) {
+        return t.data.channel_quality[index.at(name)][row] != kNoSample;
+    };
+    Recorded r;
+    const bool has_fallback = index.count("fallback") != 0;
+    for (std::size_t row = 0; row < t.data.rows(); ++row) {
+        // The loop records fallback = 1 when it falls back: the model no longer drove the manikin.
+        if (has_fallback && present("fallback", row) && value("fallback", row) > 0.0) {  // a 5-s bin may hold a 0 too
+            r.fell_back = true;
+            break;
+        }
+        if (!present("time_s", row)) continue;
+        CouplingStep s;
+        s.t_s = value("time_s", row);
+        for (const auto& n : needed)
+            if (!present(n, row) || !std::isfinite(value(n, row)))
+                throw InputError(t.info.file, row + 2, 0, "model." + n,
+                                 fmt::format("model.{} has no value where model.time_s = {} s", n, s.t_s));
+        for (std::size_t i = 0; i < names.size(); ++i) s.loss_w[i] = value(std::string(names[i]) + ".heat_loss_w", row);
+        s.env = {value("air_temp_c", row), value("mrt_c", row), value("air_rh_pct", row), value("air_speed_m_s", row)};
+        s.core_c = value("core_temp_c", row);
+        s.skin_c = value("mean_skin_temp_c", row);
+        s.sweat_g_h = value("sweat_rate_g_h", row);
+        s.metabolic_w = value("metabolic_w", row);
+        s.respiration_w = value("respiration_loss_w", row);
+        s.storage_w = value("storage_w", row);
+        r.met = value("metabolic_met", row);
+        if (!(s.t_s > (r.steps.empty() ? 0.0 : r.steps.back().t_s)) || s.t_s > 7.0 * 86400.0)
+            throw InputError(t.info.file, row + 2, 0, "model.time_s", fmt::format("model.time_s = {} s does not advance", s.t_s));
+        r.steps.push_back(s);
+    }
+    if (r.steps.empty() && !r.fell_back) return std::nullopt;
+    return r;
+}
+
+struct Replayed {
+    std::vector<double> core_c, skin_c;
+};
+
+// The model stepped 1 s at a time through the recorded coupling steps; `measured` false runs it
+// without the manikin (its own exchange) in the same conditions.
+Replayed replay(const Recorded& r, tr::ConvectionModel convection, bool measured,
+                const std::vector<tr::SegmentValues>& losses, const std::vector<tr::Environment>& envs) {
+    tr::ModelOptions o;
+    o.convection = convection;
+    o.clo = 0.0;
+    tr::Body body(r.met, o);
+    Replayed out;
+    for (std::size_t k = 0; k < r.steps.size(); ++k) {
+        const tr::StepState* st = nullptr;
+        while (body.time_s() + 1.0 <= r.steps[k].t_s + 1e-9) st = &body.step(1.0, envs[k], measured ? &losses[k] : nullptr);
+        out.core_c.push_back(st ? st->sample.core_temp_c : std::nan(""));
+        out.skin_c.push_back(st ? st->sample.mean_skin_temp_c : std::nan(""));
+    }
+    return out;
+}
+
+double draw_error(std::mt19937_64& rng, const InstrumentSpec& spec, double reading) {
+    const double a = spec.limit(reading);
+    switch (spec.distribution) {
+        case Distribution::rectangular: return std::uniform_real_distribution<double>(-a, a)(rng);
+        case Distribution::normal_k2: return std::normal_distribution<double>(0.0, a / 2.0)(rng);
+        case Distribution::triangular: {
+            std::uniform_real_distribution<double> u(-a / 2, a / 2);
+            return u(rng) + u(rng);
+        }
+    }
+    return 0.0;
+}
+
+double quantile(std::vector<double> v, double p) {
+    std::sort(v.begin(), v.end());
+    const double pos = p * static_cast<double>(v.size() - 1);
+    const auto i = static_cast<std::size_t>(pos);
+    return i + 1 < v.size() ? v[i] + (pos - static_cast<double>(i)) * (v[i + 1] - v[i]) : v.back();
+}
+
+}  // namespace
+
+Result compute(const Campaign& campaign, const Options& options) {
+    Result result;
+    const auto spec = [&](const char* channel) {
+        const auto it = campaign.instruments.find(channel);
+        return it != campaign.instruments.end() ? it->second : InstrumentSpec{};
+    };
+    const InstrumentSpec flux = spec("heat_flux_w_m2"), air = spec("air_temp_c"), rh = spec("air_rh_pct"), wall = spec("wall_temp_c");
+    // The zones' areas per model segment (the loop's map: the zone map's segments, config default).
+    const std::map<std::string, int> segment_of = {{"head", 0}, {"chest", 1}, {"back", 1}, {"pelvis", 1}, {"upper_arm", 2},
+                                                   {"forearm", 2}, {"hand", 3}, {"thigh", 4}, {"calf", 4}, {"foot", 5}};
+    const auto& model_areas = tr::Body::segment_areas_m2();
+    std::map<int, std::vector<std::size_t>> trials_of_case;
+    for (const auto& t : campaign.trials) {
+        const auto rec = recorded_steps(campaign, t);
+        if (!rec) continue;
+        TrialTrajectory tt;
+        tt.trial = t.info.id;
+        tt.case_id = t.info.case_id;
+        tt.replicate = t.info.replicate;
+        tt.coupling_period_s = rec->steps.size() > 1 ? rec->steps[1].t_s - rec->steps[0].t_s : rec->steps[0].t_s;
+        std::vector<tr::SegmentValues> losses;
+        std::vector<tr::Environment> envs;
+        for (const auto& s : rec->steps) losses.push_back(s.loss_w), envs.push_back(s.env);
+        tt.fell_back = rec->fell_back;
+        const Recorded& r = *rec;
+        const std::size_t used = r.steps.size();
+        const auto nominal = replay(r, tr::ConvectionModel::coupled, true, losses, envs);
+        const auto coupled = replay(r, tr::ConvectionModel::coupled, false, losses, envs);
+        const auto dt_only = replay(r, tr::ConvectionModel::dt_only, false, losses, envs);
+        // Type B: the replay under drawn instrument errors. The heat-flux gain (calibration) is
+        // common to every zone; offsets are per zone; the probes' offsets per draw.
+        std::mt19937_64 rng(options.seed ^ (static_cast<std::uint64_t>(t.info.case_id) << 20) ^ static_cast<std::uint64_t>(t.info.replicate));
+        std::vector<std::vector<double>> core_draws(used), skin_draws(used), loss_draws(used);
+        tr::SegmentValues zone_area{};
+        for (const auto& z : campaign.zone_map.zones)
+            if (const auto it = segment_of.find(z.segment); it != segment_of.end())
+                zone_area[static_cast<std::size_t>(it->second)] += z.area_m2;
+        const InstrumentSpec gain_spec{0.0, flux.accuracy_of_reading, flux.distribution};
+        const InstrumentSpec offset_spec{flux.accuracy, 0.0, flux.distribution};
+        for (int d = 0; d < options.draws; ++d) {
+            const double flux_gain = draw_error(rng, gain_spec, 1.0);  // a fraction of the reading
+            tr::SegmentValues offset_w{};  // per segment: its zones' offsets, area-weighted
+            for (const auto& z : campaign.zone_map.zones)
+                if (const auto it = segment_of.find(z.segment); it != segment_of.end())
+                    offset_w[static_cast<std::size_t>(it->second)] += draw_error(rng, offset_spec, 0.0) * z.area_m2;
+            const double air_e = draw_error(rng, air, envs[0].air_temp_c);
+            const double rh_e = draw_error(rng, rh, envs[0].rh_pct);
+            const double wall_e = draw_error(rng, wall, envs[0].mrt_c);
+            auto l = losses;
+            auto e = envs;
+            for (std::size_t k = 0; k < used; ++k) {
+                for (std::size_t i = 0; i < l[k].size(); ++i)
+                    l[k][i] = l[k][i] * (1.0 + flux_gain) + (zone_area[i] > 0 ? offset_w[i] / zone_area[i] * model_areas[i] : 0.0);
+                e[k].air_temp_c += air_e;
+                e[k].rh_pct = std::clamp(e[k].rh_pct + rh_e, 0.0, 100.0);
+                e[k].mrt_c += wall_e;
+            }
+            try {
+                const auto rp = replay(r, tr::ConvectionModel::coupled, true, l, e);
+                for (std::size_t k = 0; k < used; ++k) {
+                    core_draws[k].push_back(rp.core_c[k]);
+                    skin_draws[k].push_back(rp.skin_c[k]);
+                    double q = 0.0;
+                    for (double v : l[k]) q += v;
+                    loss_draws[k].push_back(q);
+                }
+            } catch (const std::domain_error&) {
+                // A draw the explicit scheme cannot take is not a trajectory: left out.
+            }
+        }
+        for (std::size_t k = 0; k < used; ++k) {
+            const auto& s = r.steps[k];
+            Point p;
+            p.t_s = s.t_s;
+            p.core_temp_c = s.core_c;
+            p.mean_skin_temp_c = s.skin_c;
+            double q = 0.0;
+            for (double v : s.loss_w) q += v;
+            p.heat_loss_w = q;
+            auto half_width = [](const std::vector<double>& v) {
+                return v.size() >= 20 ? 0.5 * (quantile(v, 0.975) - quantile(v, 0.025)) : std::nan("");
+            };
+            p.core_u95_c = half_width(core_draws[k]);
+            p.mean_skin_u95_c = half_width(skin_draws[k]);
+            p.heat_loss_u95_w = half_width(loss_draws[k]);
+            p.sweat_rate_g_h = s.sweat_g_h;
+            p.metabolic_w = s.metabolic_w;
+            p.respiration_loss_w = s.respiration_w;
+            p.storage_w = s.storage_w;
+            p.alone_coupled_core_c = coupled.core_c[k];
+            p.alone_coupled_skin_c = coupled.skin_c[k];
+            p.alone_dt_only_core_c = dt_only.core_c[k];
+            p.alone_dt_only_skin_c = dt_only.skin_c[k];
+            tt.replay_max_abs_diff_c = std::max({tt.replay_max_abs_diff_c, std::abs(nominal.core_c[k] - s.core_c),
+                                                 std::abs(nominal.skin_c[k] - s.skin_c)});
+            tt.points.push_back(p);
+        }
+        trials_of_case[tt.case_id].push_back(result.trials.size());
+        result.trials.push_back(std::move(tt));
+    }
+    // Per case: the replicates' mean at each model time they share; U95 from Type A (the
+    // replicates) and Type B (the mean of their Monte Carlo half-widths, taken as 95 % at k = 1.96).
+    for (const auto& [case_id, idx] : trials_of_case) {
+        CaseTrajectory ct;
+        ct.case_id = case_id;
+        ct.replicates = static_cast<int>(idx.size());
+        std::size_t shared = SIZE_MAX;
+        for (auto i : idx) shared = std::min(shared, result.trials[i].points.size());
+        for (std::size_t k = 0; k < shared; ++k) {
+            Point p = result.trials[idx[0]].points[k];
+            auto combine = [&](auto value, auto u95, double& mean_out, double& u95_out) {
+                std::vector<double> v;
+                double ub = 0.0;
+                for (auto i : idx) v.push_back(value(result.trials[i].points[k])), ub += u95(result.trials[i].points[k]) / 1.96;
+                ub /= static_cast<double>(idx.size());
+                mean_out = mean(v);
+                if (v.size() < 2) {
+                    u95_out = 1.96 * ub;
+                    return;
+                }
+                const double ua = type_a_of_mean(v);
+                const double uc = std::sqrt(ua * ua + ub * ub);
+                const double nu = welch_satterthwaite({{ua, static_cast<double>(v.size() - 1)}, {ub, kInfiniteDof}});
+                u95_out = coverage_factor(nu) * uc;
+            };
+            combine([](const Point& q) { return q.core_temp_c; }, [](const Point& q) { return q.core_u95_c; }, p.core_temp_c,
+                    p.core_u95_c);
+            combine([](const Point& q) { return q.mean_skin_temp_c; }, [](const Point& q) { return q.mean_skin_u95_c; },
+                    p.mean_skin_temp_c, p.mean_skin_u95_c);
+            combine([](const Point& q) { return q.heat_loss_w; }, [](const Point& q) { return q.heat_loss_u95_w; }, p.heat_loss_w,
+                    p.heat_loss_u95_w);
+            std::vector<double> sweat;
+            for (auto i : idx) sweat.push_back(result.trials[i].points[k].sweat_rate_g_h);
+            p.sweat_rate_g_h = mean(sweat);
+            ct.points.push_back(p);
+        }
+        result.cases.push_back(std::move(ct));
+    }
+    return result;
+}
+
+nlohmann::json to_json(const Result& r) {
+    auto points = [](const std::vector<Point>& ps) {
+        nlohmann::json a = nlohmann::json::array();
+        for (const auto& p : ps)
+            a.push_back({{"t_s", p.t_s},
+                         {"core_temp_c", p.core_temp_c},
+                         {"core_temp_U95_c", p.core_u95_c},
+                         {"mean_skin_temp_c", p.mean_skin_temp_c},
+                         {"mean_skin_temp_U95_c", p.mean_skin_u95_c},
+                         {"heat_loss_w", p.heat_loss_w},
+                         {"heat_loss_U95_w", p.heat_loss_u95_w},
+                         {"sweat_rate_g_h", p.sweat_rate_g_h},
+                         {"metabolic_w", p.metabolic_w},
+                         {"respiration_loss_w", p.respiration_loss_w},
+                         {"storage_w", p.storage_w},
+                         {"model_alone", {{"coupled", {{"core_temp_c", p.alone_coupled_core_c}, {"mean_skin_temp_c", p.alone_coupled_skin_c}}},
+                                          {"dt_only", {{"core_temp_c", p.alone_dt_only_core_c}, {"mean_skin_temp_c", p.alone_dt_only_skin_c}}}}}});
+        return a;
+    };
+    nlohmann::json j = {{"trials", nlohmann::json::array()}, {"cases", nlohmann::json::array()}};
+    for (const auto& t : r.trials)
+        j["trials"].push_back({{"trial", t.trial},
+                               {"case", t.case_id},
+                               {"replicate", t.replicate},
+                               {"coupling_period_s", t.coupling_period_s},
+                               {"replay_max_abs_diff_c", t.replay_max_abs_diff_c},
+                               {"fell_back", t.fell_back},
+                               {"points", points(t.points)}});
+    for (const auto& c : r.cases)
+        j["cases"].push_back({{"case", c.case_id}, {"replicates", c.replicates}, {"points", points(c.points)}});
+    return j;
+}
+
+std::string svg(const Result& r, const std::string& title) {
+    namespace pl = plot;
+    pl::Figure fig;
+    fig.width_px = 760;
+    fig.height_px = 720;
+    fig.title = title;
+    pl::XYPanel temps, heat;
+    temps.box = {0, 34, 760, 320};
+    heat.box = {0, 364, 760, 350};
+    temps.x.label = heat.x.label = "Model time (min)";
+    temps.y.label = "Temperature (°C)";
+    heat.y.label = "Heat loss (W, + = lost); sweat (g/h)";
+    const char* colours[] = {"#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"};
+    std::size_t ci = 0;
+    for (const auto& c : r.cases) {
+        const std::string tag = r.cases.size() > 1 ? fmt::format("case {} ", c.case_id) : "";
+        // The trajectory as a line at every coupling step; its 95 % band as bars every 10 min
+        // (bars at every step hide the line).
+        auto series = [&](pl::XYPanel& panel, const std::string& label, const std::string& colour, auto y, auto u, bool band) {
+            pl::Series s;
+            s.label = label;
+            s.colour = colour;
+            s.line = true;
+            s.markers = false;
+            pl::Series bars;
+            bars.colour = colour;
+            bars.markers = false;
+            double next_s = 0.0;
+            for (const auto& p : c.points) {
+                s.x.push_back(p.t_s / 60.0);
+                s.y.push_back(y(p));
+                if (band && p.t_s + 1e-9 >= next_s && std::isfinite(u(p))) {
+                    bars.x.push_back(p.t_s / 60.0);
+                    bars.y.push_back(y(p));
+                    bars.y_err.push_back(u(p));
+                    next_s = p.t_s + 600.0;
+                }
+            }
+            panel.series.push_back(s);
+            if (band && !bars.x.empty()) panel.series.push_back(bars);
+            return s;
+        };
+        const std::string a = colours[ci++ % 6], b = colours[ci++ % 6];
+        series(temps, tag + "core (± U95 every 10 min)", a, [](const Point& p) { return p.core_temp_c; },
+               [](const Point& p) { return p.core_u95_c; }, true);
+        series(temps, tag + "mean skin (± U95)", b, [](const Point& p) { return p.mean_skin_temp_c; },
+               [](const Point& p) { return p.mean_skin_u95_c; }, true);
+        pl::XYPanel scratch;
+        auto alone = series(scratch, tag + "model alone (coupled): core", a, [](const Point& p) { return p.alone_coupled_core_c; },
+                            [](const Point&) { return 0.0; }, false);
+        alone.dash = "5 4";
+        temps.series.push_back(alone);
+        auto alone_skin = series(scratch, tag + "model alone (coupled): skin", b,
+                                 [](const Point& p) { return p.alone_coupled_skin_c; }, [](const Point&) { return 0.0; }, false);
+        alone_skin.dash = "5 4";
+        temps.series.push_back(alone_skin);
+        series(heat, tag + "measured heat loss (± U95)", a, [](const Point& p) { return p.heat_loss_w; },
+               [](const Point& p) { return p.heat_loss_u95_w; }, true);
+        series(heat, tag + "sweat (g/h)", b, [](const Point& p) { return p.sweat_rate_g_h; }, [](const Point&) { return 0.0; },
+               false);
+    }
+    for (auto* panel : {&temps, &heat}) {
+        panel->legend_outside = true;
+        panel->min_left_margin_px = 70.0;
+        panel->min_legend_width_px = 190.0;
+    }
+    fig.xy_panels = {std::move(temps), std::move(heat)};
+    return pl::to_svg(fig);
+}
+
+}  // namespace manikind::analysis::physio

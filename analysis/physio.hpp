@@ -1,0 +1,67 @@
+#pragma once
+// Physiological trials' results (issue 34; docs/thermoregulation.md, "Results"): a trial run
+// under the thermoregulation model's control has no steady state, so its result is trajectories:
+// the model's core and mean skin temperature, the measured heat loss and the sweat, against the
+// model's time, with 95 % bands. The bands come from replaying the model (physics/thermoreg) from
+// what the trial recorded at every coupling step (each segment's measured loss and the enclosure
+// conditions): Type B by Monte Carlo over the instruments' specifications (heat-flux gain common
+// to all zones, offsets per zone, probe offsets per draw), Type A from the replicates of a case
+// (GUM; Welch-Satterthwaite for k). The same replay without the manikin (the model's own
+// exchange in the recorded conditions, coupled and temperature-only convection) shows what the
+// measured exchange changed. Pure: works on an analysis::Campaign.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "analysis/recording.hpp"
+
+namespace manikind::analysis::physio {
+
+struct Options {
+    int draws = 200;              // Monte Carlo draws for Type B
+    std::uint64_t seed = 1;
+};
+
+struct Point {
+    double t_s = 0.0;                       // the model's time
+    double core_temp_c = 0.0, core_u95_c = 0.0;
+    double mean_skin_temp_c = 0.0, mean_skin_u95_c = 0.0;
+    double heat_loss_w = 0.0, heat_loss_u95_w = 0.0;   // measured, all segments (+ = lost)
+    double sweat_rate_g_h = 0.0;
+    double metabolic_w = 0.0, respiration_loss_w = 0.0, storage_w = 0.0;
+    // The model alone in the recorded conditions (no manikin): coupled and temperature-only.
+    double alone_coupled_core_c = 0.0, alone_coupled_skin_c = 0.0;
+    double alone_dt_only_core_c = 0.0, alone_dt_only_skin_c = 0.0;
+};
+
+struct TrialTrajectory {
+    std::string trial;
+    int case_id = 0;
+    int replicate = 0;
+    double coupling_period_s = 0.0;
+    double replay_max_abs_diff_c = 0.0;  // the replay against the recorded model state (a check)
+    bool fell_back = false;              // the loop fell back to constant skin temperature
+    std::vector<Point> points;
+};
+
+struct CaseTrajectory {
+    int case_id = 0;
+    int replicates = 0;
+    std::vector<Point> points;  // mean over the replicates, U95 from Type A and B
+};
+
+struct Result {
+    std::vector<TrialTrajectory> trials;
+    std::vector<CaseTrajectory> cases;
+};
+
+// Trials without the model's channels are skipped; throws InputError when a trial's model
+// channels are present but incomplete (a channel missing or not a number where time_s is).
+Result compute(const Campaign& campaign, const Options& options = {});
+nlohmann::json to_json(const Result& result);
+// Fig. 4 from measured data: temperatures with bands (top), heat rates and sweat (bottom).
+std::string svg(const Result& result, const std::string& title);
+
+}  // namespace manikind::analysis::physio

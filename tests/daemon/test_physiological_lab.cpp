@@ -1,0 +1,201 @@
+// Issue 34: the manikin under the thermoregulation model's control, end to end on the simulated
+// lab and the virtual clock: the daemon drives the world's manikin zone by zone over the CAN bus
+// from the model, the world's physics (humidity buoyancy included) answers with measured losses,
+// the model is recorded as device "model", and the result is compared with the same model run
+// offline (physics/thermoreg's simulate(), the independent batch run) in the recorded conditions.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "analysis/physio.hpp"
+#include "daemon/campaign_plan.hpp"
+#include "daemon_fixture.hpp"
+#include "physics/thermoreg/stolwijk.hpp"
+#include "store/database_export.hpp"
+
+namespace tr = manikind::physics::thermoreg;
+namespace ph = manikind::analysis::physio;
+
+namespace {
+manikind::CampaignPlan physiological_plan(int case_id) {
+    auto plan = manikind::load_campaign_plan(MANIKIND_CONFIG_DIR "/campaign-physiological.toml");
+    plan.cases.erase(std::remove_if(plan.cases.begin(), plan.cases.end(), [&](const auto& c) { return c.id != case_id; }),
+                     plan.cases.end());
+    REQUIRE(plan.cases.size() == 1);
+    return plan;
+}
+
+// The mean of a recorded analysis column over the rows from t_from_s on.
+double mean_from(const std::vector<double>& t_s, const std::vector<double>& v, double t_from_s) {
+    double sum = 0.0;
+    int n = 0;
+    for (std::size_t i = 0; i < v.size(); ++i)
+        if (t_s[i] >= t_from_s && std::isfinite(v[i])) sum += v[i], ++n;
+    return n ? sum / n : std::nan("");
+}
+
+// Largest departure from the centred 10-min running mean, over points with t in [lo, hi).
+double wobble(const std::vector<ph::Point>& p, double (*value)(const ph::Point&), double lo_s, double hi_s) {
+    double worst = 0.0;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+        if (p[i].t_s < lo_s || p[i].t_s >= hi_s) continue;
+        double sum = 0.0;
+        int n = 0;
+        for (const auto& q : p)
+            if (std::abs(q.t_s - p[i].t_s) <= 300.0) sum += value(q), ++n;
+        if (p[i].t_s - 300.0 < p.front().t_s || p[i].t_s + 300.0 > p.back().t_s) continue;
+        worst = std::max(worst, std::abs(value(p[i]) - sum / n));
+    }
+    return worst;
+}
+}  // namespace
+
+TEST_CASE("physiological trial on the simulated lab: 2 h at 41 C, 20 % RH reproduce the offline coupled model within "
+          "0.2 C core and 0.3 C mean skin, and end closer to it than to temperature-only convection",
+          "[daemon][physiological]") {
+    manikind::test::DaemonFixture f;
+    const auto plan = physiological_plan(1);
+    REQUIRE(f.daemon().start_campaign(plan).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    const auto trials = db.trials(*db.find_campaign(plan.name));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) == 0);
+
+    const auto campaign = manikind::campaign_from_database(db, plan.name);
+    // Recorded like any device: the export's columns are model.<channel>.
+    std::map<std::string, bool> columns;
+    for (const auto& c : campaign.channels) columns[c.column()] = true;
+    for (const char* c : {"model.core_temp_c", "model.mean_skin_temp_c", "model.trunk.skin_temp_c", "model.hands.core_temp_c",
+                          "model.feet.sweat_rate_g_m2_h", "model.heat_loss_w", "model.metabolic_w", "model.legs.heat_loss_w"})
+        CHECK(columns.count(c) == 1);
+    const auto r = ph::compute(campaign);
+    REQUIRE(r.trials.size() == 1);
+    const auto& t = r.trials[0];
+    CHECK(t.replay_max_abs_diff_c < 1e-9);  // the record holds everything the model was given
+    CHECK(t.coupling_period_s == Approx(f.daemon().config().physiological.coupling_period_s));
+    REQUIRE(t.points.size() >= 300);
+    CHECK(t.points.back().t_s == Approx(7200.0));
+
+    // The offline model in the recorded conditions: the enclosure's air, RH and walls (its MRT)
+    // while the model ran, the manikin bare (clo 0).
+    const auto& data = campaign.trials[0].data;
+    const double model_start_s = data.t_s.back() - 7200.0;
+    tr::Exposure e;
+    e.air_temp_c = mean_from(data.t_s, data.air_temp_c, model_start_s);
+    e.rh_pct = mean_from(data.t_s, data.air_rh_pct, model_start_s);
+    e.mrt_c = mean_from(data.t_s, data.wall_temp_c, model_start_s);
+    CHECK(e.mrt_c == Approx(40.6).margin(0.4));  // walls 0.4 °C below the air (Text S3.3)
+    tr::ModelOptions coupled_o, dt_o;
+    coupled_o.clo = dt_o.clo = 0.0;
+    dt_o.convection = tr::ConvectionModel::dt_only;
+    const auto coupled = tr::simulate(e, coupled_o), dt_only = tr::simulate(e, dt_o);
+    double worst_core = 0.0, worst_skin = 0.0;
+    int compared = 0;
+    for (const auto& p : t.points) {
+        const auto minute = static_cast<std::size_t>(std::llround(p.t_s / 60.0));
+        if (std::abs(p.t_s - 60.0 * static_cast<double>(minute)) > 1e-6 || minute >= coupled.series.size()) continue;
+        worst_core = std::max(worst_core, std::abs(p.core_temp_c - coupled.series[minute].core_temp_c));
+        worst_skin = std::max(worst_skin, std::abs(p.mean_skin_temp_c - coupled.series[minute].mean_skin_temp_c));
+        ++compared;
+    }
+    INFO("worst core " << worst_core << " °C, worst mean skin " << worst_skin << " °C over " << compared << " minutes");
+    CHECK(compared >= 119);
+    CHECK(worst_core <= 0.2);
+    CHECK(worst_skin <= 0.3);
+    const double end_skin = t.points.back().mean_skin_temp_c;
+    INFO("end skin: loop " << end_skin << ", coupled " << coupled.final.mean_skin_temp_c << ", dt-only "
+                           << dt_only.final.mean_skin_temp_c);
+    CHECK(std::abs(end_skin - coupled.final.mean_skin_temp_c) < std::abs(end_skin - dt_only.final.mean_skin_temp_c));
+    // The manikin followed: its zones' mean skin at the end is the model's.
+    double zone_mean = 0.0, area = 0.0;
+    for (std::size_t z = 0; z < campaign.zone_map.size(); ++z) {
+        zone_mean += data.skin_temp_c[z].back() * campaign.zone_map.zones[z].area_m2;
+        area += campaign.zone_map.zones[z].area_m2;
+    }
+    CHECK(zone_mean / area == Approx(end_skin).margin(0.3));
+    // Stability in the heat: after the first half hour the model's mean skin stays within 0.1 °C,
+    // its core within 0.01 °C, of their 10-min running means (docs/thermoregulation.md).
+    CHECK(wobble(t.points, [](const ph::Point& p) { return p.mean_skin_temp_c; }, 1800, 7200) < 0.1);
+    CHECK(wobble(t.points, [](const ph::Point& p) { return p.core_temp_c; }, 1800, 7200) < 0.01);
+}
+
+TEST_CASE("physiological trial on the simulated lab: a step from 41 C to 25 C mid-trial is followed without "
+          "oscillation beyond the stated bound, and the model stays within 0.3 C of itself run alone in the same "
+          "recorded conditions", "[daemon][physiological]") {
+    manikind::test::DaemonFixture f;
+    const auto plan = physiological_plan(2);
+    REQUIRE(f.daemon().start_campaign(plan).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    const auto trials = db.trials(*db.find_campaign(plan.name));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) == 0);
+    const auto campaign = manikind::campaign_from_database(db, plan.name);
+    // The chamber followed the protocol: the enclosure ends near 25 °C.
+    const auto& data = campaign.trials[0].data;
+    CHECK(mean_from(data.t_s, data.air_temp_c, data.t_s.back() - 600.0) == Approx(25.0).margin(1.0));
+    const auto r = ph::compute(campaign);
+    REQUIRE(r.trials.size() == 1);
+    const auto& p = r.trials[0].points;
+    double worst_skin = 0.0;
+    for (const auto& q : p) worst_skin = std::max(worst_skin, std::abs(q.mean_skin_temp_c - q.alone_coupled_skin_c));
+    // In the heat the measured exchange holds the skin up to ~0.3 °C above the model alone (the
+    // first test); in the cool phase there is no humidity plume and the two meet.
+    CHECK(std::abs(p.back().mean_skin_temp_c - p.back().alone_coupled_skin_c) < 0.15);
+    CHECK(worst_skin < 0.4);
+    // The stated bound after the step (docs/thermoregulation.md): within 0.15 °C (mean skin) and
+    // 0.02 °C (core) of the 10-min running mean, which the step itself moves by ~0.05 °C/min.
+    CHECK(wobble(p, [](const ph::Point& q) { return q.mean_skin_temp_c; }, 3600, 7200) < 0.15);
+    CHECK(wobble(p, [](const ph::Point& q) { return q.core_temp_c; }, 3600, 7200) < 0.02);
+    // The commanded setpoints (recorded as model.zNN.skin_setpoint_c) never moved faster than the
+    // configured rate, the step included.
+    const double rate_c_s = f.daemon().config().physiological.max_setpoint_rate_c_min / 60.0;
+    std::size_t setpoint_channels = 0;
+    double fastest_c_s = 0.0;
+    for (std::size_t c = 0; c < campaign.channels.size(); ++c) {
+        if (campaign.channels[c].device != "model" || !campaign.channels[c].name.ends_with(".skin_setpoint_c")) continue;
+        ++setpoint_channels;
+        double last_t = -1.0, last_v = 0.0;
+        for (std::size_t i = 0; i < data.rows(); ++i) {
+            if (data.channel_quality[c][i] == manikind::analysis::kNoSample) continue;
+            if (last_t >= 0.0) fastest_c_s = std::max(fastest_c_s, std::abs(data.channel_values[c][i] - last_v) / (data.t_s[i] - last_t));
+            last_t = data.t_s[i];
+            last_v = data.channel_values[c][i];
+        }
+    }
+    CHECK(setpoint_channels == campaign.zone_map.size());
+    INFO("fastest setpoint change: " << fastest_c_s * 60.0 << " °C/min");
+    CHECK(fastest_c_s <= rate_c_s * 1.3);  // a 5-s bin's timing around the 20-s commands
+    CHECK(fastest_c_s >= rate_c_s * 0.5);  // the step did drive the setpoints at the limit
+}
+
+TEST_CASE("physiological trial on the simulated lab: a zone whose heater fails mid-trial is flagged by the manikin, the "
+          "loop falls back to constant skin temperature with an alarm naming it, and the trial is flagged",
+          "[daemon][physiological]") {
+    manikind::test::DaemonFixture f([](manikind::config::Config& c) {
+        c.simulation.faults = {"manikin:heater_fail=12@5400"};  // during the model's first hour
+    });
+    auto plan = physiological_plan(1);
+    plan.cases[0].model->duration_s = 3600.0;
+    REQUIRE(f.daemon().start_campaign(plan).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    const auto trials = db.trials(*db.find_campaign(plan.name));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) != 0);
+    bool alarmed = false;
+    for (const auto& e : db.events(std::nullopt))
+        alarmed = alarmed || (e.kind == "physiological" && e.severity == "error" &&
+                              e.message.find("zone 12") != std::string::npos &&
+                              e.message.find("constant skin temperature") != std::string::npos);
+    CHECK(alarmed);
+    const auto r = ph::compute(manikind::campaign_from_database(db, plan.name));
+    REQUIRE(r.trials.size() == 1);
+    CHECK(r.trials[0].fell_back);
+}
