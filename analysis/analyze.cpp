@@ -141,6 +141,11 @@ TrialResult summarize_trial(const Trial& trial, const ZoneMap& map, const Analys
         r.exclusion_reason = "empty trial: no samples";
         return r;
     }
+    if (trial.info.control == "physiological") {
+        r.exclusion_reason = "physiological trial (skin and sweat decided by the thermoregulation model): no steady state "
+                             "by design; its results are trajectories: manikin physio";
+        return r;
+    }
     const double start_s = r.steady.window_start_s - 1e-9 * std::max(1.0, std::fabs(r.steady.window_start_s));
     const auto first = static_cast<std::size_t>(std::lower_bound(d.t_s.begin(), d.t_s.end(), start_s) - d.t_s.begin());
     std::string missing;

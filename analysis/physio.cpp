@@ -154,9 +154,15 @@ Result compute(const Campaign& campaign, const Options& options) {
         tt.fell_back = rec->fell_back;
         const Recorded& r = *rec;
         const std::size_t used = r.steps.size();
-        const auto nominal = replay(r, tr::ConvectionModel::coupled, true, losses, envs);
-        const auto coupled = replay(r, tr::ConvectionModel::coupled, false, losses, envs);
-        const auto dt_only = replay(r, tr::ConvectionModel::dt_only, false, losses, envs);
+        Replayed nominal, coupled, dt_only;
+        try {
+            nominal = replay(r, tr::ConvectionModel::coupled, true, losses, envs);
+            coupled = replay(r, tr::ConvectionModel::coupled, false, losses, envs);
+            dt_only = replay(r, tr::ConvectionModel::dt_only, false, losses, envs);
+        } catch (const std::domain_error& e) {
+            // Values no model run could have recorded (a hand-edited or damaged file).
+            throw InputError(t.info.file, 0, 0, "model", fmt::format("the recorded model inputs cannot be replayed: {}", e.what()));
+        }
         // Type B: the replay under drawn instrument errors. The heat-flux gain (calibration) is
         // common to every zone; offsets are per zone; the probes' offsets per draw.
         std::mt19937_64 rng(options.seed ^ (static_cast<std::uint64_t>(t.info.case_id) << 20) ^ static_cast<std::uint64_t>(t.info.replicate));

@@ -70,6 +70,7 @@ struct TrialInfo {
     std::optional<std::int64_t> t0_utc_ns;  // wall time at t_s = 0 (format 2: "t0_utc")
     std::string ensemble;              // clothing worn: an id of Campaign::ensembles, "nude", or empty (not a clothing test)
     std::string test;                  // "insulation", "evaporative", or empty
+    std::string control;               // "physiological" (the thermoregulation model's control), or empty
 };
 
 // A clothing ensemble a campaign's trials wear (docs/formats.md, "ensembles").

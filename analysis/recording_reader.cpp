@@ -672,9 +672,16 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
         if (info.test != "insulation" && info.test != "evaporative")
             cj.fail(path + "test", fmt::format("expected \"insulation\" or \"evaporative\", found '{}'", info.test), at_key("test"));
     }
+    if (t.contains("control")) {
+        info.control = cj.string(t, "control", path, at_key("control"));
+        if (info.control != "physiological" && info.control != "constant-skin")
+            cj.fail(path + "control", fmt::format("expected \"physiological\" or \"constant-skin\", found '{}'", info.control),
+                    at_key("control"));
+        if (info.control == "constant-skin") info.control.clear();
+    }
     static const std::set<std::string> known{"id",        "case",        "replicate", "file",     "skin_setpoint_c",
                                              "wet",       "wettedness",  "chamber_setpoint",      "started_utc",
-                                             "t0_utc",    "ensemble",    "test"};
+                                             "t0_utc",    "ensemble",    "test",      "control"};
     for (const auto& [key, value] : t.items()) {
         (void)value;
         if (!known.count(key))

@@ -1,6 +1,7 @@
 // libFuzzer target for the recording reader (analysis/recording.hpp): the input up to its first
 // NUL byte is campaign.json, the rest the trial CSV every trial of it may name ("trials/t.csv").
-// The CSV alone also goes through read_trial_csv with a two-zone map. Only InputError may escape.
+// The CSV alone also goes through read_trial_csv with a two-zone map; a campaign read is also
+// replayed as a physiological trial where it has the model's channels. Only InputError may escape.
 #include <unistd.h>
 
 #include <cstdint>
@@ -11,6 +12,7 @@
 #include <string_view>
 
 #include "analysis/input_error.hpp"
+#include "analysis/physio.hpp"
 #include "analysis/recording.hpp"
 #include "analysis/zone_map.hpp"
 
@@ -59,7 +61,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (nul != std::string_view::npos) {
         write_file(folder / "campaign.json", json);
         try {
-            (void)read_campaign(folder);
+            const Campaign campaign = read_campaign(folder);
+            // A physiological trial's model channels are replayed (analysis/physio.hpp): hostile
+            // values must end in InputError, never a crash or another exception.
+            physio::Options few;
+            few.draws = 20;
+            (void)physio::compute(campaign, few);
         } catch (const InputError&) {
         }
     }

@@ -199,6 +199,8 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         trial.info.wettedness = cond.value("wet", false) ? 1.0 : 0.0;
         trial.info.ensemble = cond.value("ensemble", "");
         trial.info.test = cond.value("test", "");
+        trial.info.control = cond.value("control", "");
+        if (trial.info.control == "physiological") trial.info.skin_setpoint_c.reset();  // the model's, zone by zone
         trial.info.chamber_setpoint_temp_c = cond.value("chamber_temp_c", 0.0);
         trial.info.chamber_setpoint_rh_pct = cond.value("chamber_rh_pct", 0.0);
         trial.info.started_utc = sp.row.started_utc_ns ? iso_utc(*sp.row.started_utc_ns) : "";

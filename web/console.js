@@ -153,6 +153,25 @@ function renderTrial(s) {
       : (st.eta_s === null ? "unknown (not yet closing in)" : `in about ${minutes(st.eta_s)}`);
   }
 
+  // A physiological trial: the model's state beside the zones (status trial.model).
+  const m = t && t.model;
+  $("model-panel").hidden = !m;
+  if (m) {
+    $("model-phase").textContent = m.phase;
+    $("model-phase").className = "badge " + (m.phase === "fallback" ? "not-steady" : "steady");
+    $("model-time").textContent = `${minutes(m.model_time_s)} of ${minutes(m.duration_s)} (${m.model})`;
+    $("model-core").textContent = `${fmt(m.core_temp_c, 2)} °C`;
+    $("model-skin").textContent = `${fmt(m.mean_skin_temp_c, 2)} °C`;
+    const body = $("model-segments").querySelector("tbody");
+    body.replaceChildren(...Object.entries(m.segments || {}).map(([name, seg]) => {
+      const tr = el("tr");
+      tr.append(el("td", {}, name), el("td", {}, fmt(seg.skin_temp_c, 2)), el("td", {}, fmt(seg.core_temp_c, 2)),
+                el("td", {}, fmt(seg.heat_loss_w, 1)));
+      return tr;
+    }));
+    $("model-fallback").textContent = m.fallback_reason ? `fell back to constant skin temperature: ${m.fallback_reason}` : "";
+  }
+
   const verdict = $("steady-verdict");
   if (t && t.limit_c !== undefined) {
     verdict.textContent = t.steady ? "STEADY" : "not steady";
