@@ -308,6 +308,56 @@ nlohmann::json to_json(const Result& r) {
     return j;
 }
 
+namespace {
+nlohmann::json point_json(const Point& p) {
+    return {{"t_s", p.t_s},
+            {"core_temp_c", p.core_temp_c},
+            {"core_temp_U95_c", p.core_u95_c},
+            {"mean_skin_temp_c", p.mean_skin_temp_c},
+            {"mean_skin_temp_U95_c", p.mean_skin_u95_c},
+            {"heat_loss_w", p.heat_loss_w},
+            {"heat_loss_U95_w", p.heat_loss_u95_w},
+            {"sweat_rate_g_h", p.sweat_rate_g_h}};
+}
+}  // namespace
+
+nlohmann::json results_json(const Result& r) {
+    nlohmann::json cases = nlohmann::json::array();
+    for (const auto& c : r.cases) {
+        nlohmann::json points = nlohmann::json::array();
+        double next_s = 0.0;
+        for (const auto& p : c.points)
+            if (p.t_s + 1e-9 >= next_s) {
+                points.push_back(point_json(p));
+                next_s = p.t_s + 60.0;
+            }
+        nlohmann::json one = {{"case", c.case_id}, {"replicates", c.replicates}, {"points", points}};
+        if (!c.points.empty()) one["final"] = point_json(c.points.back());
+        cases.push_back(one);
+    }
+    nlohmann::json fell_back = nlohmann::json::array();
+    for (const auto& t : r.trials)
+        if (t.fell_back) fell_back.push_back(t.trial);
+    return {{"cases", cases}, {"fell_back_trials", fell_back}};
+}
+
+std::string summary_text(const nlohmann::json& j) {
+    std::string out;
+    for (const auto& c : j.value("cases", nlohmann::json::array())) {
+        if (!c.contains("final")) continue;
+        const auto& f = c["final"];
+        out += fmt::format("  case {} (physiological, {} replicate{}): after {:.0f} min of the model, core {:.2f} ± {:.2f} °C, "
+                           "mean skin {:.2f} ± {:.2f} °C, measured loss {:.0f} ± {:.0f} W (trajectories: manikin physio)\n",
+                           c.value("case", 0), c.value("replicates", 0), c.value("replicates", 0) == 1 ? "" : "s",
+                           f.value("t_s", 0.0) / 60.0, f.value("core_temp_c", 0.0), f.value("core_temp_U95_c", 0.0),
+                           f.value("mean_skin_temp_c", 0.0), f.value("mean_skin_temp_U95_c", 0.0), f.value("heat_loss_w", 0.0),
+                           f.value("heat_loss_U95_w", 0.0));
+    }
+    const auto fb = j.value("fell_back_trials", nlohmann::json::array());
+    if (!fb.empty()) out += fmt::format("  {} physiological trial(s) fell back to constant skin temperature: {}\n", fb.size(), fb.dump());
+    return out;
+}
+
 std::string svg(const Result& r, const std::string& title) {
     namespace pl = plot;
     pl::Figure fig;

@@ -61,6 +61,11 @@ struct Result {
 // channels are present but incomplete (a channel missing or not a number where time_s is).
 Result compute(const Campaign& campaign, const Options& options = {});
 nlohmann::json to_json(const Result& result);
+// What the daemon stores with a campaign's results (key "physiological"): per case the replicates'
+// trajectory a point a minute and its last point as "final".
+nlohmann::json results_json(const Result& result);
+// One line per case of that JSON, as `manikin results` and manikind print them.
+std::string summary_text(const nlohmann::json& physiological);
 // Fig. 4 from measured data: temperatures with bands (top), heat rates and sweat (bottom).
 std::string svg(const Result& result, const std::string& title);
 

@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "analysis/analyze.hpp"
+#include "analysis/physio.hpp"
 #include "analysis/input_error.hpp"
 #include "daemon/campaign_plan.hpp"
 #include "daemon/config.hpp"
@@ -424,6 +425,8 @@ void add_daemon_commands(CLI::App& app) {
                 std::printf("  %4d  %d  %9.2f  %9.2f   [%.2f, %.2f]\n", cs.value("case", 0), cs.value("n_replicates", 0),
                             wb.value("q_w_m2", 0.0), wb.value("U", 0.0), wb.value("ci_low_w_m2", 0.0), wb.value("ci_high_w_m2", 0.0));
             }
+            if (r["results"].contains("physiological"))
+                std::printf("%s", analysis::physio::summary_text(r["results"]["physiological"]).c_str());
         });
     }
     {

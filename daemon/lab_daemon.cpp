@@ -10,6 +10,7 @@
 
 #include "base/guarded.hpp"
 #include "analysis/analyze.hpp"
+#include "analysis/physio.hpp"
 #include "analysis/zone_map.hpp"
 #include "store/database_export.hpp"
 #include "analysis/reconcile/results_parity.hpp"
@@ -748,6 +749,11 @@ void LabDaemon::finish_campaign(const std::string& state) {
             auto j = analysis::to_json(result);
             j["interim"] = false;
             j["twin_parity"] = twin_parity_json(result);
+            // Physiological trials: their trajectories (no steady state), a point a minute.
+            analysis::physio::Options few;
+            few.draws = 50;
+            if (const auto physio = analysis::physio::compute(campaign, few); !physio.trials.empty())
+                j["physiological"] = analysis::physio::results_json(physio);
             write([=, campaign = campaign_id_, text = j.dump(), utc_ns = clock_->utc_ns()](recorder::Database& db) {
                 db.store_result(campaign, text, utc_ns);
             });

@@ -32,6 +32,7 @@
 #include "daemon/lab_daemon.hpp"
 #include "daemon/logging.hpp"
 #include "base/user_error.hpp"
+#include "analysis/physio.hpp"
 #include "daemon/web_server.hpp"
 
 namespace {
@@ -48,6 +49,7 @@ void print_results_summary(manikind::LabDaemon& daemon, const std::string& campa
             std::printf("  %4d  %d  %9.2f   [%.2f, %.2f]\n", c.value("case", 0), c.value("n_replicates", 0), wb.value("q_w_m2", 0.0),
                         wb.value("ci_low_w_m2", 0.0), wb.value("ci_high_w_m2", 0.0));
         }
+        if (r.contains("physiological")) std::printf("%s", manikind::analysis::physio::summary_text(r["physiological"]).c_str());
         if (const auto ex = r.find("excluded_trials"); ex != r.end() && ex->is_array() && !ex->empty())
             std::printf("  %zu trial(s) excluded (see `manikin results --json`)\n", ex->size());
     } catch (const std::exception& e) {

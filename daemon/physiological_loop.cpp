@@ -300,8 +300,9 @@ nlohmann::json PhysiologicalLoop::status_json() const {
     for (std::size_t i = 0; i < tr::segment_count; ++i) {
         skin += nodes[4 * i + 3] * areas[i];
         area += areas[i];
-        segments[tr::segment_names()[i]] = {{"skin_temp_c", nodes[4 * i + 3]}, {"core_temp_c", nodes[4 * i]},
-                                            {"heat_loss_w", last_loss_w_[i]}};
+        segments[tr::segment_names()[i]] = {{"skin_temp_c", nodes[4 * i + 3]},
+                                            {"core_temp_c", nodes[4 * i]},
+                                            {"heat_loss_w", running_since_ns_ ? nlohmann::json(last_loss_w_[i]) : nlohmann::json()}};
     }
     j["mean_skin_temp_c"] = skin / area;
     j["segments"] = segments;

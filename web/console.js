@@ -156,6 +156,7 @@ function renderTrial(s) {
   // A physiological trial: the model's state beside the zones (status trial.model).
   const m = t && t.model;
   $("model-panel").hidden = !m;
+  $("steady-section").hidden = !!m;  // a physiological trial has no steady state
   if (m) {
     $("model-phase").textContent = m.phase;
     $("model-phase").className = "badge " + (m.phase === "fallback" ? "not-steady" : "steady");
@@ -166,7 +167,7 @@ function renderTrial(s) {
     body.replaceChildren(...Object.entries(m.segments || {}).map(([name, seg]) => {
       const tr = el("tr");
       tr.append(el("td", {}, name), el("td", {}, fmt(seg.skin_temp_c, 2)), el("td", {}, fmt(seg.core_temp_c, 2)),
-                el("td", {}, fmt(seg.heat_loss_w, 1)));
+                el("td", {}, seg.heat_loss_w === null ? "— (not yet)" : fmt(seg.heat_loss_w, 1)));
       return tr;
     }));
     $("model-fallback").textContent = m.fallback_reason ? `fell back to constant skin temperature: ${m.fallback_reason}` : "";
