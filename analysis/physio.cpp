@@ -48,6 +48,10 @@ std::optional<Recorded> recorded_steps(const Campaign& c, const Trial& t) {
         if (!index.count(n))
             throw InputError(t.info.file, 0, 0, "model." + n,
                              "a physiological trial's model channels are incomplete: model." + n + " is missing");
+    for (const auto& [name, i] : index)
+        if (i >= t.data.channel_values.size() || t.data.channel_values[i].size() != t.data.rows() ||
+            i >= t.data.channel_quality.size() || t.data.channel_quality[i].size() != t.data.rows())
+            throw InputError(t.info.file, 0, 0, "model." + name, "model." + name + " does not have a value or an empty cell in every row");
     auto value = [&](const std::string& name, std::size_t row) { return t.data.channel_values[index.at(name)][row]; };
     auto present = [&](const std::string& name, std::size_t row) {
         return t.data.channel_quality[index.at(name)][row] != kNoSample;
@@ -75,8 +79,13 @@ std::optional<Recorded> recorded_steps(const Campaign& c, const Trial& t) {
         s.metabolic_w = value("metabolic_w", row);
         s.respiration_w = value("respiration_loss_w", row);
         s.storage_w = value("storage_w", row);
+        if (!r.steps.empty() && value("metabolic_met", row) != r.met)
+            throw InputError(t.info.file, row + 2, 0, "model.metabolic_met",
+                             fmt::format("model.metabolic_met changes within the trial ({} then {})", r.met,
+                                         value("metabolic_met", row)));
         r.met = value("metabolic_met", row);
-        if (!(s.t_s > (r.steps.empty() ? 0.0 : r.steps.back().t_s)) || s.t_s > 7.0 * 86400.0)
+        // A plan's model runs at most 24 h; a day and a half leaves room and bounds the replay.
+        if (!(s.t_s > (r.steps.empty() ? 0.0 : r.steps.back().t_s)) || s.t_s > 1.5 * 86400.0)
             throw InputError(t.info.file, row + 2, 0, "model.time_s", fmt::format("model.time_s = {} s does not advance", s.t_s));
         r.steps.push_back(s);
     }
@@ -147,7 +156,9 @@ Result compute(const Campaign& campaign, const Options& options) {
         tt.trial = t.info.id;
         tt.case_id = t.info.case_id;
         tt.replicate = t.info.replicate;
-        tt.coupling_period_s = rec->steps.size() > 1 ? rec->steps[1].t_s - rec->steps[0].t_s : rec->steps[0].t_s;
+        tt.coupling_period_s = rec->steps.size() > 1    ? rec->steps[1].t_s - rec->steps[0].t_s
+                               : rec->steps.size() == 1 ? rec->steps[0].t_s
+                                                        : std::nan("");
         std::vector<tr::SegmentValues> losses;
         std::vector<tr::Environment> envs;
         for (const auto& s : rec->steps) losses.push_back(s.loss_w), envs.push_back(s.env);
@@ -240,8 +251,13 @@ Result compute(const Campaign& campaign, const Options& options) {
         CaseTrajectory ct;
         ct.case_id = case_id;
         ct.replicates = static_cast<int>(idx.size());
+        // The model times the replicates share (the same coupling period): a replicate coupled
+        // differently ends the shared part where its times part.
         std::size_t shared = SIZE_MAX;
         for (auto i : idx) shared = std::min(shared, result.trials[i].points.size());
+        for (std::size_t k = 0; k < shared; ++k)
+            for (auto i : idx)
+                if (std::abs(result.trials[i].points[k].t_s - result.trials[idx[0]].points[k].t_s) > 1e-6) shared = k;
         for (std::size_t k = 0; k < shared; ++k) {
             Point p = result.trials[idx[0]].points[k];
             auto combine = [&](auto value, auto u95, double& mean_out, double& u95_out) {
@@ -250,12 +266,24 @@ Result compute(const Campaign& campaign, const Options& options) {
                 for (auto i : idx) v.push_back(value(result.trials[i].points[k])), ub += u95(result.trials[i].points[k]) / 1.96;
                 ub /= static_cast<double>(idx.size());
                 mean_out = mean(v);
+                if (!std::isfinite(ub)) {  // too few Monte Carlo draws replayed: no band
+                    u95_out = std::nan("");
+                    return;
+                }
                 if (v.size() < 2) {
                     u95_out = 1.96 * ub;
                     return;
                 }
                 const double ua = type_a_of_mean(v);
+                if (!std::isfinite(ua) || !std::isfinite(mean_out)) {
+                    u95_out = std::nan("");
+                    return;
+                }
                 const double uc = std::sqrt(ua * ua + ub * ub);
+                if (uc == 0.0) {
+                    u95_out = 0.0;
+                    return;
+                }
                 const double nu = welch_satterthwaite({{ua, static_cast<double>(v.size() - 1)}, {ub, kInfiniteDof}});
                 u95_out = coverage_factor(nu) * uc;
             };

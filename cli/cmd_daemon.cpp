@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -534,7 +535,7 @@ void add_daemon_commands(CLI::App& app) {
     }
     {
         struct ExportOptions {
-            std::string db = "manikind.db", campaign, out, format = "csv", archive, lab;
+            std::string db = "manikind.db", campaign, out, format, archive, lab;
             bool json = false, force = false;
         };
         auto o = std::make_shared<ExportOptions>();
@@ -548,9 +549,9 @@ void add_daemon_commands(CLI::App& app) {
         cmd->add_option("--lab", o->lab, "With --archive: the lab id the campaign was pushed under")->needs(archive_option);
         archive_option->excludes(db_option);
         cmd->add_option("--format", o->format, "csv: manikin-recording/2, read by manikin analyze, pandas, MATLAB; "
-                                               "hdf5: manikin-hdf5/1 with the analysis beside the data")
-            ->check(CLI::IsMember({"csv", "hdf5"}))
-            ->capture_default_str();
+                                               "hdf5: manikin-hdf5/1 with the analysis beside the data. Default: hdf5 for an "
+                                               "output named *.h5, *.hdf5 or *.he5, else csv")
+            ->check(CLI::IsMember({"csv", "hdf5"}));
         cmd->add_flag("--json", o->json, "Print what was written as one JSON object");
         cmd->add_flag("--force", o->force, "Replace an existing output file, or a folder holding an earlier export (never a "
                                            "database, a device or a folder with other files)");
@@ -559,6 +560,19 @@ void add_daemon_commands(CLI::App& app) {
                     "  manikin export --db lab.db validation-2026 validation-2026.h5 --format hdf5\n"
                     "  manikin export --archive postgresql://archive.example/manikin --lab lab-3 validation-2026 out");
         cmd->callback([o] {
+            // The format follows the output's name unless told (a CSV folder named out.h5 surprised
+            // every user who tried it); told csv for an HDF5 name is a slip, refused.
+            {
+                std::string ext = std::filesystem::path(o->out).extension().string();
+                std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+                const bool hdf5_name = ext == ".h5" || ext == ".hdf5" || ext == ".he5";
+                if (o->format.empty()) o->format = hdf5_name ? "hdf5" : "csv";
+                else if (o->format == "csv" && hdf5_name)
+                    throw UserError(fmt::format("{}: --format csv writes a folder; this name says HDF5 (leave --format out, "
+                                                "or name a folder)",
+                                                o->out),
+                                    "bad_usage");
+            }
             // The output is checked before anything is read: an export never writes over its
             // input, a database, a device or (without --force) anything at all (issue 30).
             std::vector<std::filesystem::path> inputs;

@@ -159,6 +159,31 @@ TEST_CASE("export: the HDF5 file holds the analysis beside the data, as analyze 
     }
 }
 
+TEST_CASE("export: the format follows the output's name unless told: *.h5 is HDF5, a plain name a CSV folder, and csv "
+          "into a *.h5 name is refused", "[cli][export]") {
+    const fs::path db_path = recorded_database();
+    auto db = manikind::recorder::Database::open(db_path);
+    const std::string campaign = only_campaign(db);
+    const fs::path out = db_path.parent_path() / "export-by-name";
+    fs::remove_all(out);
+    fs::create_directories(out);
+    const auto h5 = run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "c.H5").string() + " --json");
+    REQUIRE(h5.exit_code == 0);
+    CHECK(nlohmann::json::parse(h5.out).at("format") == "manikin-hdf5/1");
+    REQUIRE(fs::is_regular_file(out / "c.H5"));
+    std::ifstream f(out / "c.H5", std::ios::binary);
+    char magic[8] = {};
+    f.read(magic, 8);
+    CHECK(std::string(magic, 8) == std::string("\x89HDF\r\n\x1a\n", 8));  // the HDF5 signature
+    const auto folder = run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "folder").string() + " --json");
+    REQUIRE(folder.exit_code == 0);
+    CHECK(fs::is_regular_file(out / "folder" / "campaign.json"));
+    const auto slip = run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "d.h5").string() + " --format csv --json");
+    CHECK(slip.exit_code == 2);
+    CHECK_THAT(slip.out, Catch::Contains("name a folder"));
+    CHECK_FALSE(fs::exists(out / "d.h5"));
+}
+
 TEST_CASE("export: bad input is refused with the reason and nothing half-written", "[cli][export]") {
     const fs::path db_path = recorded_database();
     const fs::path out = db_path.parent_path() / "export-bad";

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <map>
 
+#include "analysis/input_error.hpp"
 #include "analysis/physio.hpp"
 #include "daemon/campaign_plan.hpp"
 #include "daemon_fixture.hpp"
@@ -76,6 +77,29 @@ TEST_CASE("physiological trial on the simulated lab: 2 h at 41 C, 20 % RH reprod
     REQUIRE(r.trials.size() == 1);
     const auto& t = r.trials[0];
     CHECK(t.replay_max_abs_diff_c < 1e-9);  // the record holds everything the model was given
+    // A damaged record is refused by name, never replayed into nonsense or a crash.
+    auto damaged = [&](const std::string& channel, double value) {
+        auto c = campaign;
+        for (std::size_t i = 0; i < c.channels.size(); ++i)
+            if (c.channels[i].column() == channel) {
+                auto& v = c.trials[0].data.channel_values[i];
+                for (std::size_t row = 0; row < v.size(); ++row)
+                    if (c.trials[0].data.channel_quality[i][row] != manikind::analysis::kNoSample) {
+                        v[row] = value;
+                        break;
+                    }
+            }
+        try {
+            (void)ph::compute(c);
+        } catch (const manikind::analysis::InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    CHECK_THAT(damaged("model.air_rh_pct", 150.0), Catch::Contains("cannot be replayed") && Catch::Contains("humidity"));
+    CHECK_THAT(damaged("model.time_s", -5.0), Catch::Contains("model.time_s"));
+    CHECK_THAT(damaged("model.metabolic_met", 50.0), Catch::Contains("metabolic"));
+    CHECK_THAT(damaged("model.trunk.heat_loss_w", 1e9), Catch::Contains("cannot be replayed"));
     CHECK(t.coupling_period_s == Approx(f.daemon().config().physiological.coupling_period_s));
     REQUIRE(t.points.size() >= 300);
     CHECK(t.points.back().t_s == Approx(7200.0));
