@@ -105,6 +105,7 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
     analysis::Campaign c;
     c.name = name;
     c.zone_map = analysis::andi35_zone_map();
+    c.zone_map_inline = true;  // the export names every zone with its area and region, not only "andi35"
     c.instruments = analysis::default_instrument_specs();
     // Clothing campaigns: the ensembles of the campaign's definition (docs/clothing.md).
     for (const auto& row : db.campaigns())

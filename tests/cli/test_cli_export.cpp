@@ -178,6 +178,13 @@ TEST_CASE("export: the format follows the output's name unless told: *.h5 is HDF
     const auto folder = run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "folder").string() + " --json");
     REQUIRE(folder.exit_code == 0);
     CHECK(fs::is_regular_file(out / "folder" / "campaign.json"));
+    // The zone table travels inline: a reader needs no manikind to know zone 21 is the left hand.
+    std::ifstream cj(out / "folder" / "campaign.json");
+    const auto doc = nlohmann::json::parse(cj);
+    REQUIRE(doc.at("zone_map").is_array());
+    CHECK(doc.at("zone_map").size() == 35);
+    CHECK(doc.at("zone_map")[20].at("name") == "hand_l");
+    CHECK(doc.at("zone_map")[20].at("area_m2").get<double>() == Approx(0.0477));
     const auto slip = run_manikin("export --db " + db_path.string() + " " + campaign + " " + (out / "d.h5").string() + " --format csv --json");
     CHECK(slip.exit_code == 2);
     CHECK_THAT(slip.out, Catch::Contains("name a folder"));
