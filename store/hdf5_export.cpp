@@ -226,6 +226,9 @@ void write_file(const std::filesystem::path& path, const analysis::Campaign& c, 
         w.attribute(g.get(), "replicate", static_cast<std::int64_t>(t.info.replicate));
         if (t.info.skin_setpoint_c) w.attribute(g.get(), "skin_setpoint_c", *t.info.skin_setpoint_c);
         if (t.info.wettedness) w.attribute(g.get(), "wettedness", *t.info.wettedness);
+        // The chamber's setpoints beside the enclosure's readings (a trial group says what was asked).
+        if (t.info.chamber_setpoint_temp_c) w.attribute(g.get(), "chamber_setpoint_temp_c", *t.info.chamber_setpoint_temp_c);
+        if (t.info.chamber_setpoint_rh_pct) w.attribute(g.get(), "chamber_setpoint_rh_pct", *t.info.chamber_setpoint_rh_pct);
         if (!t.info.ensemble.empty()) w.attribute(g.get(), "ensemble", t.info.ensemble);
         if (!t.info.test.empty()) w.attribute(g.get(), "test", t.info.test);
         if (!t.info.control.empty()) w.attribute(g.get(), "control", t.info.control);

@@ -92,6 +92,13 @@ try:
                 if t0 is None:
                     fail(f"{trial_id}: no acquiring event for case {group.attrs['case']}")
                 t0_mono, db_trial = t0
+                # The trial group says what was asked: the chamber's setpoints, as the case stored them.
+                asked = con.execute(
+                    "SELECT json_extract(conditions_json, '$.chamber_temp_c'), json_extract(conditions_json, '$.chamber_rh_pct') "
+                    "FROM cases WHERE id = (SELECT case_id FROM trials WHERE id = ?)", (db_trial,)).fetchone()
+                for attr, want in zip(("chamber_setpoint_temp_c", "chamber_setpoint_rh_pct"), asked):
+                    if attr not in group.attrs or abs(float(group.attrs[attr]) - float(want)) > 1e-9:
+                        fail(f"{trial_id}: attribute {attr} {group.attrs.get(attr)!r}, the case asked {want!r}")
                 data = {name: dataset[:] for name, dataset in group.items()}  # one read per dataset
                 for name, values in data.items():
                     if name.endswith(".q") or name in ("utc_ns",):
