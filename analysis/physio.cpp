@@ -247,7 +247,10 @@ Result compute(const Campaign& campaign, const Options& options) {
     }
     // Per case: the replicates' mean at each model time they share; U95 from Type A (the
     // replicates) and Type B (the mean of their Monte Carlo half-widths, taken as 95 % at k = 1.96).
-    for (const auto& [case_id, idx] : trials_of_case) {
+    for (const auto& entry : trials_of_case) {
+        // Not a structured binding: clang 14 refuses to capture one in the lambdas below.
+        const int case_id = entry.first;
+        const std::vector<std::size_t>& idx = entry.second;
         CaseTrajectory ct;
         ct.case_id = case_id;
         ct.replicates = static_cast<int>(idx.size());

@@ -17,6 +17,8 @@ namespace {
 // temperature for this long (the model then starts from the state the manikin is in).
 constexpr double precondition_band_c = 0.2;
 constexpr double precondition_hold_s = 120.0;
+// The daemon ticks every second; a gap longer than this is time the trial stood still (a pause).
+constexpr std::int64_t max_tick_gap_ns = 5'000'000'000LL;
 
 int model_segment_index(const std::string& name) {
     const auto& names = tr::segment_names();
@@ -142,6 +144,18 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
     std::vector<double> initial_c(n);
     for (std::size_t z = 0; z < n; ++z) initial_c[z] = nodes0[static_cast<std::size_t>(4 * zone_segment_[z] + 3)];
 
+    // A gap between ticks (the campaign paused, the daemon stalled): the model's clock stood still
+    // with the stage clock, so every reference time moves by the gap; otherwise the model would
+    // catch up on the old losses and the setpoints step by the rate times the gap.
+    if (last_tick_ns_ && now - *last_tick_ns_ > max_tick_gap_ns) {
+        const std::int64_t gap = now - *last_tick_ns_;
+        for (auto* t : {&started_ns_, &last_command_ns_, &running_since_ns_})
+            if (*t) **t += gap;
+        for (auto& t : off_since_ns_)
+            if (t) *t += gap;
+        on_target_since_ns_.reset();
+    }
+    last_tick_ns_ = now;
     if (!started_ns_) {
         // The setpoints start where each zone is (never a jump) and move at the allowed rate.
         started_ns_ = now;

@@ -93,6 +93,7 @@ private:
     physics::thermoreg::Body body_;
     Phase phase_ = Phase::preconditioning;
     std::optional<std::int64_t> started_ns_;        // first tick
+    std::optional<std::int64_t> last_tick_ns_;      // a longer gap (a pause) stops the model's clock
     std::optional<std::int64_t> last_command_ns_;
     std::optional<std::int64_t> running_since_ns_;  // the model's t = 0
     std::optional<std::int64_t> on_target_since_ns_;

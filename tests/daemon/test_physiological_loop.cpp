@@ -218,3 +218,31 @@ TEST_CASE("physiological loop: a stale heat flux, a zone that cannot follow and 
         CHECK(loop.status_json().at("phase") == "fallback");
     }
 }
+
+TEST_CASE("physiological loop: a pause stops the model's clock: on resume the model does not catch up on old losses "
+          "and no setpoint steps by more than one period's rate", "[daemon][physiological]") {
+    const auto& map = manikind::analysis::andi35_zone_map();
+    manikind::config::PhysiologicalConfig cfg;
+    PhysiologicalLoop loop(model_of(120), cfg, map);
+    PerfectManikin m;
+    m.skin_c.assign(map.size(), 34.8);
+    int t = 0;
+    for (; t < 3600 && loop.model_time_s() < 600.0; ++t) {
+        m.now_ns = static_cast<std::int64_t>(t) * 1'000'000'000;
+        m.apply(loop.tick(m.inputs()));
+    }
+    REQUIRE(loop.phase() == PhysiologicalLoop::Phase::running);
+    const double model_before_s = loop.model_time_s();
+    const std::vector<double> before = m.skin_c;
+    m.now_ns = static_cast<std::int64_t>(t + 1800) * 1'000'000'000;  // 30 min paused
+    for (int i = 0; i < 2 * static_cast<int>(cfg.coupling_period_s); ++i) {
+        m.now_ns += 1'000'000'000;
+        const auto out = loop.tick(m.inputs());
+        for (const auto& c : out.commands)
+            CHECK(std::abs(c.skin_setpoint_c - before[static_cast<std::size_t>(c.zone - 1)]) <=
+                  2 * cfg.max_setpoint_rate_c_min * cfg.coupling_period_s / 60.0 + 1e-9);
+        m.apply(out);
+    }
+    CHECK(loop.model_time_s() <= model_before_s + 2 * cfg.coupling_period_s + 1.0);
+    CHECK(loop.phase() == PhysiologicalLoop::Phase::running);
+}
