@@ -84,9 +84,15 @@ std::optional<Recorded> recorded_steps(const Campaign& c, const Trial& t) {
                              fmt::format("model.metabolic_met changes within the trial ({} then {})", r.met,
                                          value("metabolic_met", row)));
         r.met = value("metabolic_met", row);
-        // A plan's model runs at most 24 h; a day and a half leaves room and bounds the replay.
-        if (!(s.t_s > (r.steps.empty() ? 0.0 : r.steps.back().t_s)) || s.t_s > 1.5 * 86400.0)
+        // A plan's model runs at most 24 h (a day and a half leaves room), and the loop steps at
+        // most every 600 s ([physiological] coupling_period_s): both bound the replay's cost.
+        const double previous_s = r.steps.empty() ? 0.0 : r.steps.back().t_s;
+        if (!(s.t_s > previous_s) || s.t_s > 1.5 * 86400.0)
             throw InputError(t.info.file, row + 2, 0, "model.time_s", fmt::format("model.time_s = {} s does not advance", s.t_s));
+        if (s.t_s - previous_s > 600.0 + 1e-6)
+            throw InputError(t.info.file, row + 2, 0, "model.time_s",
+                             fmt::format("model.time_s jumps {:.0f} s: the loop records a step at least every 600 s",
+                                         s.t_s - previous_s));
         r.steps.push_back(s);
     }
     if (r.steps.empty() && !r.fell_back) return std::nullopt;
