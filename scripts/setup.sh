@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what is missing on a Debian 12 machine (as root), then configures and builds.
-#   scripts/setup.sh                  release build in build/ (what the program needs)
-#   scripts/setup.sh --tests          the same, plus what the test suite drives (peers, tools)
+#   scripts/setup.sh                  release build in build/: the two programs, manikin and manikind
+#   scripts/setup.sh --tests          the same, plus what the test suite drives (peers, tools), and
+#                                     every target: tests and benchmarks
 #   scripts/setup.sh [--tests] asan   AddressSanitizer + UBSan build in build-asan/
 # (--tests also installs clang for the fuzz preset; scripts/fuzz.sh builds and runs that one.)
 # Safe to run again: it installs nothing that is already there and rebuilds incrementally.
@@ -60,5 +61,11 @@ if [ "${#missing[@]}" -gt 0 ]; then
 fi
 
 cmake --preset "$preset" >/dev/null
-# Two cores: parallel 2 keeps memory modest and the machine responsive.
-cmake --build --preset "$preset" -j 2
+# Two cores: parallel 2 keeps memory modest and the machine responsive. Without --tests only the
+# two programs are built (what the main job runs); --tests builds everything, tests and
+# benchmarks included (issue 36: a newcomer's first command builds what it runs).
+if [ "$with_tests" = yes ]; then
+  cmake --build --preset "$preset" -j 2
+else
+  cmake --build --preset "$preset" -j 2 --target manikin manikind
+fi
