@@ -33,22 +33,6 @@ struct Draw {
     double flux_offset = 0.0, flux_gain = 0.0, air = 0.0, skin = 0.0, rh = 0.0;
 };
 
-double standardised(Distribution d, std::mt19937_64& rng) {
-    std::uniform_real_distribution<double> u(-1.0, 1.0);
-    std::normal_distribution<double> n(0.0, 0.5);   // a k = 2 limit: u = a/2
-    switch (d) {
-        case Distribution::rectangular: return u(rng);
-        case Distribution::normal_k2: return n(rng);
-        case Distribution::triangular: return 0.5 * (u(rng) + u(rng));
-    }
-    return u(rng);
-}
-
-InstrumentSpec spec_of(const Campaign& c, const char* channel) {
-    const auto it = c.instruments.find(channel);
-    return it == c.instruments.end() ? InstrumentSpec{} : it->second;
-}
-
 // The trial's values under a draw of the instrument errors.
 struct Perturbed {
     double air_temp_c = 0.0, air_rh_pct = 0.0;
@@ -57,8 +41,8 @@ struct Perturbed {
 
 Perturbed perturb(const TestTrial& t, const Draw& d) {
     const Campaign& c = *t.campaign;
-    const auto flux = spec_of(c, "heat_flux_w_m2"), air = spec_of(c, "air_temp_c"), skin = spec_of(c, "skin_temp_c"),
-               rh = spec_of(c, "air_rh_pct");
+    const auto flux = c.instrument("heat_flux_w_m2"), air = c.instrument("air_temp_c"), skin = c.instrument("skin_temp_c"),
+               rh = c.instrument("air_rh_pct");
     Perturbed p;
     p.air_temp_c = t.r->air_temp_c + d.air * air.limit(t.r->air_temp_c);
     p.air_rh_pct = std::clamp(t.r->air_rh_pct + d.rh * rh.limit(t.r->air_rh_pct), 0.0, 100.0);
@@ -347,16 +331,16 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
     // Monte Carlo over the shared instrument errors (GUM Supplement 1): the Type B standard
     // uncertainty of every quantity is its standard deviation over the draws.
     std::mt19937_64 rng(options.seed);
-    const auto dist = [&](const char* ch) { return spec_of(campaign, ch).distribution; };
+    const auto dist = [&](const char* ch) { return campaign.instrument(ch).distribution; };
     std::map<std::string, std::map<std::string, std::pair<double, double>>> sums;  // sum, sum of squares
     const int draws = std::max(100, options.monte_carlo_draws);
     for (int i = 0; i < draws; ++i) {
         Draw d;
-        d.flux_offset = standardised(dist("heat_flux_w_m2"), rng);
-        d.flux_gain = standardised(dist("heat_flux_w_m2"), rng);
-        d.air = standardised(dist("air_temp_c"), rng);
-        d.skin = standardised(dist("skin_temp_c"), rng);
-        d.rh = standardised(dist("air_rh_pct"), rng);
+        d.flux_offset = standardised_error_draw(dist("heat_flux_w_m2"), rng);
+        d.flux_gain = standardised_error_draw(dist("heat_flux_w_m2"), rng);
+        d.air = standardised_error_draw(dist("air_temp_c"), rng);
+        d.skin = standardised_error_draw(dist("skin_temp_c"), rng);
+        d.rh = standardised_error_draw(dist("air_rh_pct"), rng);
         const Quantities q = evaluate(trials, map, regions, given_fcl, d);
         for (const auto& [ensemble, keys] : q.value)
             for (const auto& [key, v] : keys) {

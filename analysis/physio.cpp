@@ -121,17 +121,9 @@ Replayed replay(const Recorded& r, tr::ConvectionModel convection, bool measured
     return out;
 }
 
+// A drawn error of an instrument at a reading (Type B Monte Carlo).
 double draw_error(std::mt19937_64& rng, const InstrumentSpec& spec, double reading) {
-    const double a = spec.limit(reading);
-    switch (spec.distribution) {
-        case Distribution::rectangular: return std::uniform_real_distribution<double>(-a, a)(rng);
-        case Distribution::normal_k2: return std::normal_distribution<double>(0.0, a / 2.0)(rng);
-        case Distribution::triangular: {
-            std::uniform_real_distribution<double> u(-a / 2, a / 2);
-            return u(rng) + u(rng);
-        }
-    }
-    return 0.0;
+    return standardised_error_draw(spec.distribution, rng) * spec.limit(reading);
 }
 
 double quantile(std::vector<double> v, double p) {
@@ -145,14 +137,19 @@ double quantile(std::vector<double> v, double p) {
 
 Result compute(const Campaign& campaign, const Options& options) {
     Result result;
-    const auto spec = [&](const char* channel) {
-        const auto it = campaign.instruments.find(channel);
-        return it != campaign.instruments.end() ? it->second : InstrumentSpec{};
-    };
-    const InstrumentSpec flux = spec("heat_flux_w_m2"), air = spec("air_temp_c"), rh = spec("air_rh_pct"), wall = spec("wall_temp_c");
-    // The zones' areas per model segment (the loop's map: the zone map's segments, config default).
-    const std::map<std::string, int> segment_of = {{"head", 0}, {"chest", 1}, {"back", 1}, {"pelvis", 1}, {"upper_arm", 2},
-                                                   {"forearm", 2}, {"hand", 3}, {"thigh", 4}, {"calf", 4}, {"foot", 5}};
+    const InstrumentSpec flux = campaign.instrument("heat_flux_w_m2"), air = campaign.instrument("air_temp_c"),
+                         rh = campaign.instrument("air_rh_pct"), wall = campaign.instrument("wall_temp_c");
+    // Each zone's model segment by the default [physiological.segments] map (the record does not
+    // say which map a trial ran with), and the zones' area per model segment.
+    std::map<std::string, int> segment_of;
+    for (const auto& [model_segment, zone_segments] : default_model_segments())
+        for (std::size_t m = 0; m < tr::segment_names().size(); ++m)
+            if (model_segment == tr::segment_names()[m])
+                for (const auto& zs : zone_segments) segment_of[zs] = static_cast<int>(m);
+    tr::SegmentValues zone_area{};
+    for (const auto& z : campaign.zone_map.zones)
+        if (const auto it = segment_of.find(z.segment); it != segment_of.end())
+            zone_area[static_cast<std::size_t>(it->second)] += z.area_m2;
     const auto& model_areas = tr::Body::segment_areas_m2();
     std::map<int, std::vector<std::size_t>> trials_of_case;
     for (const auto& t : campaign.trials) {
@@ -184,10 +181,6 @@ Result compute(const Campaign& campaign, const Options& options) {
         // common to every zone; offsets are per zone; the probes' offsets per draw.
         std::mt19937_64 rng(options.seed ^ (static_cast<std::uint64_t>(t.info.case_id) << 20) ^ static_cast<std::uint64_t>(t.info.replicate));
         std::vector<std::vector<double>> core_draws(used), skin_draws(used), loss_draws(used);
-        tr::SegmentValues zone_area{};
-        for (const auto& z : campaign.zone_map.zones)
-            if (const auto it = segment_of.find(z.segment); it != segment_of.end())
-                zone_area[static_cast<std::size_t>(it->second)] += z.area_m2;
         const InstrumentSpec gain_spec{0.0, flux.accuracy_of_reading, flux.distribution};
         const InstrumentSpec offset_spec{flux.accuracy, 0.0, flux.distribution};
         for (int d = 0; d < options.draws; ++d) {
@@ -312,23 +305,31 @@ Result compute(const Campaign& campaign, const Options& options) {
     return result;
 }
 
+namespace {
+nlohmann::json point_json(const Point& p) {
+    return {{"t_s", p.t_s},
+            {"core_temp_c", p.core_temp_c},
+            {"core_temp_U95_c", p.core_u95_c},
+            {"mean_skin_temp_c", p.mean_skin_temp_c},
+            {"mean_skin_temp_U95_c", p.mean_skin_u95_c},
+            {"heat_loss_w", p.heat_loss_w},
+            {"heat_loss_U95_w", p.heat_loss_u95_w},
+            {"sweat_rate_g_h", p.sweat_rate_g_h}};
+}
+}  // namespace
+
 nlohmann::json to_json(const Result& r) {
     auto points = [](const std::vector<Point>& ps) {
         nlohmann::json a = nlohmann::json::array();
-        for (const auto& p : ps)
-            a.push_back({{"t_s", p.t_s},
-                         {"core_temp_c", p.core_temp_c},
-                         {"core_temp_U95_c", p.core_u95_c},
-                         {"mean_skin_temp_c", p.mean_skin_temp_c},
-                         {"mean_skin_temp_U95_c", p.mean_skin_u95_c},
-                         {"heat_loss_w", p.heat_loss_w},
-                         {"heat_loss_U95_w", p.heat_loss_u95_w},
-                         {"sweat_rate_g_h", p.sweat_rate_g_h},
-                         {"metabolic_w", p.metabolic_w},
-                         {"respiration_loss_w", p.respiration_loss_w},
-                         {"storage_w", p.storage_w},
-                         {"model_alone", {{"coupled", {{"core_temp_c", p.alone_coupled_core_c}, {"mean_skin_temp_c", p.alone_coupled_skin_c}}},
-                                          {"dt_only", {{"core_temp_c", p.alone_dt_only_core_c}, {"mean_skin_temp_c", p.alone_dt_only_skin_c}}}}}});
+        for (const auto& p : ps) {
+            nlohmann::json j = point_json(p);  // what results_json keeps, then the rest
+            j["metabolic_w"] = p.metabolic_w;
+            j["respiration_loss_w"] = p.respiration_loss_w;
+            j["storage_w"] = p.storage_w;
+            j["model_alone"] = {{"coupled", {{"core_temp_c", p.alone_coupled_core_c}, {"mean_skin_temp_c", p.alone_coupled_skin_c}}},
+                                {"dt_only", {{"core_temp_c", p.alone_dt_only_core_c}, {"mean_skin_temp_c", p.alone_dt_only_skin_c}}}};
+            a.push_back(std::move(j));
+        }
         return a;
     };
     nlohmann::json j = {{"trials", nlohmann::json::array()}, {"cases", nlohmann::json::array()}};
@@ -344,19 +345,6 @@ nlohmann::json to_json(const Result& r) {
         j["cases"].push_back({{"case", c.case_id}, {"replicates", c.replicates}, {"points", points(c.points)}});
     return j;
 }
-
-namespace {
-nlohmann::json point_json(const Point& p) {
-    return {{"t_s", p.t_s},
-            {"core_temp_c", p.core_temp_c},
-            {"core_temp_U95_c", p.core_u95_c},
-            {"mean_skin_temp_c", p.mean_skin_temp_c},
-            {"mean_skin_temp_U95_c", p.mean_skin_u95_c},
-            {"heat_loss_w", p.heat_loss_w},
-            {"heat_loss_U95_w", p.heat_loss_u95_w},
-            {"sweat_rate_g_h", p.sweat_rate_g_h}};
-}
-}  // namespace
 
 nlohmann::json results_json(const Result& r) {
     nlohmann::json cases = nlohmann::json::array();

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <map>
 #include <optional>
+#include <random>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -45,6 +46,9 @@ struct InstrumentSpec {
 };
 
 const char* to_string(Distribution d);
+// One draw of an instrument's error in units of its limit, from the spec's distribution (a k = 2
+// limit: sd 1/2): Monte Carlo Type B multiplies it by limit(reading) (clothing, physio).
+double standardised_error_draw(Distribution d, std::mt19937_64& rng);
 std::optional<Distribution> distribution_from_string(const std::string& s);
 
 // The channels that carry Type B specs, by the names used in campaign.json `instruments`.
@@ -126,6 +130,9 @@ struct Campaign {
     std::map<std::string, Ensemble> ensembles;            // clothing tests: what the trials wear, by id
     std::vector<Trial> trials;
     std::vector<std::string> warnings; // unknown keys and the like, with the file named
+
+    // The spec of a channel (air_temp_c, heat_flux_w_m2, ...); a zero spec when it has none.
+    InstrumentSpec instrument(const std::string& channel) const;
 };
 
 struct ReadOptions {

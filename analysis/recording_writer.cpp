@@ -18,6 +18,22 @@ double InstrumentSpec::limit(double reading) const {
     return accuracy + accuracy_of_reading * std::fabs(reading);
 }
 
+double standardised_error_draw(Distribution d, std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    std::normal_distribution<double> n(0.0, 0.5);  // a k = 2 limit: u = a/2
+    switch (d) {
+        case Distribution::rectangular: return u(rng);
+        case Distribution::normal_k2: return n(rng);
+        case Distribution::triangular: return 0.5 * (u(rng) + u(rng));
+    }
+    return u(rng);
+}
+
+InstrumentSpec Campaign::instrument(const std::string& channel) const {
+    const auto it = instruments.find(channel);
+    return it == instruments.end() ? InstrumentSpec{} : it->second;
+}
+
 double InstrumentSpec::standard_uncertainty(double reading) const {
     const double a = limit(reading);
     switch (distribution) {

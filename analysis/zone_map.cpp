@@ -44,6 +44,13 @@ std::vector<std::size_t> ZoneMap::zones_in(const std::string& region) const {
     return out;
 }
 
+const std::map<std::string, std::vector<std::string>>& default_model_segments() {
+    static const std::map<std::string, std::vector<std::string>> map = {
+        {"head", {"head"}},   {"trunk", {"chest", "back", "pelvis"}}, {"arms", {"upper_arm", "forearm"}},
+        {"hands", {"hand"}},  {"legs", {"thigh", "calf"}},            {"feet", {"foot"}}};
+    return map;
+}
+
 const ZoneMap& andi35_zone_map() {
     // Copied from config/andi35_zone_map.csv (ANDI, Thermetrics; Text S2); the test
     // "embedded andi35 map equals config/andi35_zone_map.csv" keeps the two identical.

@@ -3,6 +3,7 @@
 // and the region it belongs to. The ANDI 35-zone map is compiled in, so `manikin` runs from
 // any directory; config/andi35_zone_map.csv is the same table (a test holds them equal).
 #include <istream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,11 @@ struct ZoneMap {
 
 // The ANDI 35-zone map (config/andi35_zone_map.csv), compiled in.
 const ZoneMap& andi35_zone_map();
+
+// Which zone-map segments make each of the thermoregulation model's six segments (head, trunk,
+// arms, hands, legs, feet): the default of [physiological.segments] (docs/daemon.md), and what
+// `manikin physio` spreads a zone's sensor error over.
+const std::map<std::string, std::vector<std::string>>& default_model_segments();
 
 // Parses the CSV form (header zone,name,region,segment,side,area_m2,centroid_height_m).
 // Throws InputError naming `source_name`, line and column.

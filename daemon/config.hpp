@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "analysis/zone_map.hpp"
 #include "sim/campaign/replicate_scatter.hpp"
 
 namespace manikind::config {
@@ -124,9 +125,7 @@ struct PhysiologicalConfig {
     double min_core_temp_c = 35.0;            // the model's core outside these has diverged: fallback
     double max_core_temp_c = 40.5;
     // Which zone-map segments make each model segment (head, trunk, arms, hands, legs, feet).
-    std::map<std::string, std::vector<std::string>> segments = {
-        {"head", {"head"}},        {"trunk", {"chest", "back", "pelvis"}}, {"arms", {"upper_arm", "forearm"}},
-        {"hands", {"hand"}},       {"legs", {"thigh", "calf"}},            {"feet", {"foot"}}};
+    std::map<std::string, std::vector<std::string>> segments = analysis::default_model_segments();
 };
 
 struct Config {

@@ -308,12 +308,14 @@ bool LabDaemon::flush_all_locked() {
     return recorder_->flush() && overflow_.empty() && unnamed_.empty();
 }
 
-// The enclosure's air (°C) or RH (%): the mean of the EE181 probes' good live readings; NaN without one.
-double LabDaemon::enclosure_mean(const char* quantity_suffix) const {
+// The enclosure's air (°C) or RH (%), the mean of the EE181 probes' good live readings, or its
+// wall temperature, the thermocouples' (the channels under `prefix` ending in `quantity_suffix`);
+// NaN without one.
+double LabDaemon::enclosure_mean(const char* prefix, const char* quantity_suffix) const {
     double sum = 0;
     int n = 0;
     for (const auto& [key, s] : live_)
-        if (key.starts_with("datalogger/ee181_") && key.ends_with(quantity_suffix) && s.quality == drivers::Quality::good)
+        if (key.starts_with(prefix) && key.ends_with(quantity_suffix) && s.quality == drivers::Quality::good)
             sum += s.value, ++n;
     return n ? sum / n : std::nan("");
 }
@@ -1131,12 +1133,7 @@ void LabDaemon::physiological_tick_locked(std::int64_t now) {
     }
     in.air_temp_c = enclosure_air_c();
     in.rh_pct = enclosure_rh_pct();
-    double wall_sum = 0.0;
-    int walls = 0;
-    for (const auto& [key, smp] : live_)
-        if (key.starts_with("datalogger/wall_tc_") && key.ends_with(".wall_temp_c") && smp.quality == drivers::Quality::good)
-            wall_sum += smp.value, ++walls;
-    in.wall_temp_c = walls ? wall_sum / walls : std::nan("");
+    in.wall_temp_c = enclosure_wall_c();
     const auto speed = live_.find("windsonic/air_speed_m_s");
     in.air_speed_m_s = speed != live_.end() && speed->second.quality == drivers::Quality::good ? speed->second.value : 0.0;
     LoopOutput out;

@@ -160,10 +160,11 @@ private:
     void write(recorder::Recorder::Job job);
     double stage_elapsed_s() const;
     std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
-    double enclosure_mean(const char* quantity_suffix) const;
+    double enclosure_mean(const char* prefix, const char* quantity_suffix) const;
     void physiological_tick_locked(std::int64_t now_ns);  // acquiring, control = "physiological"
-    double enclosure_air_c() const { return enclosure_mean(".air_temp_c"); }
-    double enclosure_rh_pct() const { return enclosure_mean(".air_rh_pct"); }
+    double enclosure_air_c() const { return enclosure_mean("datalogger/ee181_", ".air_temp_c"); }
+    double enclosure_rh_pct() const { return enclosure_mean("datalogger/ee181_", ".air_rh_pct"); }
+    double enclosure_wall_c() const { return enclosure_mean("datalogger/wall_tc_", ".wall_temp_c"); }
     // Where settling stands: targets, distances, the window, an ETA (status trial.settling).
     nlohmann::json settling_json_locked(std::int64_t now_ns) const;
     // The steady-state rule's inputs now: evicts samples older than the window, then measures.

@@ -58,6 +58,10 @@ PhysiologicalLoop::PhysiologicalLoop(const PhysiologicalModel& model, const conf
         if (!(segment_zone_area_m2_[static_cast<std::size_t>(m)] > 0.0))
             throw UserError(fmt::format("physiological.segments.{}: no zone of the zone map is in it",
                                         tr::segment_names()[static_cast<std::size_t>(m)]));
+    // The model's initial skin temperature per zone (its set points): what preconditioning reaches.
+    const auto nodes = body_.node_temps_c();
+    for (std::size_t z = 0; z < map_.size(); ++z)
+        initial_skin_c_.push_back(nodes[static_cast<std::size_t>(4 * zone_segment_[z] + 3)]);
     setpoint_c_.assign(map_.size(), 0.0);
     sweat_g_m2_h_.assign(map_.size(), 0.0);
     off_since_ns_.assign(map_.size(), std::nullopt);
@@ -140,9 +144,7 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
     const std::size_t n = map_.size();
     if (in.zones.size() != n) throw std::invalid_argument("PhysiologicalLoop::tick: one reading per zone");
     const auto period_ns = static_cast<std::int64_t>(cfg_.coupling_period_s * 1e9);
-    const auto nodes0 = body_.node_temps_c();
-    std::vector<double> initial_c(n);
-    for (std::size_t z = 0; z < n; ++z) initial_c[z] = nodes0[static_cast<std::size_t>(4 * zone_segment_[z] + 3)];
+    const std::vector<double>& initial_c = initial_skin_c_;
 
     // A gap between ticks (the campaign paused, the daemon stalled): the model's clock stood still
     // with the stage clock, so every reference time moves by the gap; otherwise the model would

@@ -97,6 +97,7 @@ private:
     std::optional<std::int64_t> last_command_ns_;
     std::optional<std::int64_t> running_since_ns_;  // the model's t = 0
     std::optional<std::int64_t> on_target_since_ns_;
+    std::vector<double> initial_skin_c_;            // the model's skin at its start, per zone
     std::vector<double> setpoint_c_;                // last commanded, per zone
     std::vector<double> sweat_g_m2_h_;
     std::vector<std::optional<std::int64_t>> off_since_ns_;  // per zone: off its setpoint since

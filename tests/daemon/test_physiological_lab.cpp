@@ -28,6 +28,18 @@ manikind::CampaignPlan physiological_plan(int case_id) {
     return plan;
 }
 
+// Runs the plan's one trial on the virtual clock: it must end done, without a fallback.
+manikind::recorder::Database& run_without_fallback(manikind::test::DaemonFixture& f, const manikind::CampaignPlan& plan) {
+    REQUIRE(f.daemon().start_campaign(plan).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    const auto trials = db.trials(*db.find_campaign(plan.name));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) == 0);
+    return db;
+}
+
 // The mean of a recorded analysis column over the rows from t_from_s on.
 double mean_from(const std::vector<double>& t_s, const std::vector<double>& v, double t_from_s) {
     double sum = 0.0;
@@ -58,13 +70,7 @@ TEST_CASE("physiological trial on the simulated lab: 2 h at 41 C, 20 % RH reprod
           "[daemon][physiological]") {
     manikind::test::DaemonFixture f;
     const auto plan = physiological_plan(1);
-    REQUIRE(f.daemon().start_campaign(plan).empty());
-    f.daemon().run_virtual();
-    auto& db = f.daemon().db();
-    const auto trials = db.trials(*db.find_campaign(plan.name));
-    REQUIRE(trials.size() == 1);
-    CHECK(trials[0].state == "done");
-    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) == 0);
+    auto& db = run_without_fallback(f, plan);
 
     const auto campaign = manikind::campaign_from_database(db, plan.name);
     // Recorded like any device: the export's columns are model.<channel>.
@@ -152,13 +158,7 @@ TEST_CASE("physiological trial on the simulated lab: a step from 41 C to 25 C mi
           "recorded conditions", "[daemon][physiological]") {
     manikind::test::DaemonFixture f;
     const auto plan = physiological_plan(2);
-    REQUIRE(f.daemon().start_campaign(plan).empty());
-    f.daemon().run_virtual();
-    auto& db = f.daemon().db();
-    const auto trials = db.trials(*db.find_campaign(plan.name));
-    REQUIRE(trials.size() == 1);
-    CHECK(trials[0].state == "done");
-    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) == 0);
+    auto& db = run_without_fallback(f, plan);
     const auto campaign = manikind::campaign_from_database(db, plan.name);
     // The chamber followed the protocol: the enclosure ends near 25 °C.
     const auto& data = campaign.trials[0].data;
