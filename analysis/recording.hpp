@@ -83,6 +83,19 @@ struct Ensemble {
     std::optional<double> fcl;         // clothing area factor; absent: ISO 9920's estimate from the insulation
 };
 
+// A lab-notebook entry carried with the recording (docs/formats.md, "notes"): who wrote what, when,
+// about the campaign or one of its trials.
+struct Note {
+    std::int64_t utc_ns = 0;
+    std::string author;
+    std::string kind = "comment";      // comment, operator, ensemble, garment
+    std::string text;
+    std::string trial;                 // a trial's id in this campaign; empty: the campaign as a whole
+};
+// The kinds a note may have, and the longest text a note may carry (bytes).
+bool is_note_kind(std::string_view kind);
+constexpr std::size_t kMaxNoteBytes = 4000;
+
 // One instrument channel as recorded (format 2), e.g. device "datalogger", name
 // "ee181_1.air_temp_c". In the trial CSV its column is "<device>.<name>", followed by
 // "<device>.<name>.q" with the quality code of each value.
@@ -128,6 +141,7 @@ struct Campaign {
     std::vector<RecordedChannel> channels;                // format 2: every instrument channel in the CSVs
     std::map<std::string, std::string> provenance;        // program, database, twin_version, config_sha256, ...
     std::map<std::string, Ensemble> ensembles;            // clothing tests: what the trials wear, by id
+    std::vector<Note> notes;                              // the lab notebook, by time
     std::vector<Trial> trials;
     std::vector<std::string> warnings; // unknown keys and the like, with the file named
 
@@ -166,6 +180,9 @@ std::optional<std::int64_t> parse_iso_utc(std::string_view text);
 
 // campaign.json's `ensembles` object: {"<id>": {"description": ..., "fcl": ...}} (fcl when given).
 nlohmann::json ensembles_json(const std::map<std::string, Ensemble>& ensembles);
+
+// campaign.json's `notes` array: [{"utc", "author", "kind", "text", "trial"?}] in time order.
+nlohmann::json notes_json(const std::vector<Note>& notes);
 
 // Writes campaign.json and trials/<id>.csv into `folder` (created if needed). Numbers are
 // written with the shortest representation that reads back to the same double, so a

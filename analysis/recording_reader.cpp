@@ -806,7 +806,7 @@ Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOp
         }
     }
     static const std::set<std::string> known_top{"format", "name", "zone_map", "instruments", "trials",
-                                                 "channels", "provenance", "heat_flux_sign", "ensembles"};
+                                                 "channels", "provenance", "heat_flux_sign", "ensembles", "notes"};
     for (const auto& [key, value] : doc.items()) {
         (void)value;
         if (!known_top.count(key)) {
@@ -826,6 +826,36 @@ Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOp
             cj.fail(fmt::format("trials[{}].id", i), fmt::format("duplicated trial id '{}'", info.id),
                     locate(cj.text(), "\"" + info.id + "\"", 1));
         infos.push_back(std::move(info));
+    }
+    // The lab notebook: each note about the campaign or one of its trials, in a known kind.
+    if (doc.contains("notes")) {
+        const auto& notes = doc.at("notes");
+        const Located at = locate(cj.text(), "\"notes\"");
+        if (!notes.is_array()) cj.fail("notes", "expected an array of notes", at);
+        for (std::size_t i = 0; i < notes.size(); ++i) {
+            const auto& n = notes[i];
+            const std::string path = fmt::format("notes[{}].", i);
+            if (!n.is_object()) cj.fail(fmt::format("notes[{}]", i), "expected an object with utc, author, kind and text", at);
+            for (const char* key : {"utc", "author", "kind", "text"})
+                if (!n.contains(key)) cj.fail(path + key, "required key is missing", at);
+            Note note;
+            const std::string utc = cj.string(n, "utc", path, at);
+            const auto utc_ns = parse_iso_utc(utc);
+            if (!utc_ns) cj.fail(path + "utc", fmt::format("expected ISO 8601 UTC like 2026-11-24T01:35:07.250Z, found '{}'", utc), at);
+            note.utc_ns = *utc_ns;
+            note.author = cj.string(n, "author", path, at);
+            note.kind = cj.string(n, "kind", path, at);
+            if (!is_note_kind(note.kind))
+                cj.fail(path + "kind", fmt::format("expected comment, operator, ensemble or garment, found '{}'", note.kind), at);
+            note.text = cj.string(n, "text", path, at);
+            if (note.text.size() > kMaxNoteBytes)
+                cj.fail(path + "text", fmt::format("{} bytes, more than a note holds ({})", note.text.size(), kMaxNoteBytes), at);
+            if (n.contains("trial")) {
+                note.trial = cj.string(n, "trial", path, at);
+                if (!ids.count(note.trial)) cj.fail(path + "trial", fmt::format("no trial '{}' in this campaign", note.trial), at);
+            }
+            campaign.notes.push_back(std::move(note));
+        }
     }
     // A trial's ensemble is one the campaign lists (or the bare manikin).
     for (std::size_t i = 0; i < infos.size(); ++i)

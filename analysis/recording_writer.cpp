@@ -161,6 +161,20 @@ nlohmann::json ensembles_json(const std::map<std::string, Ensemble>& ensembles) 
     return out;
 }
 
+bool is_note_kind(std::string_view kind) {
+    return kind == "comment" || kind == "operator" || kind == "ensemble" || kind == "garment";
+}
+
+nlohmann::json notes_json(const std::vector<Note>& notes) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& n : notes) {
+        nlohmann::json e{{"utc", iso_utc_ms(n.utc_ns)}, {"author", n.author}, {"kind", n.kind}, {"text", n.text}};
+        if (!n.trial.empty()) e["trial"] = n.trial;
+        out.push_back(std::move(e));
+    }
+    return out;
+}
+
 void write_campaign(const std::filesystem::path& folder, const Campaign& campaign) {
     using nlohmann::json;
     std::filesystem::create_directories(folder / "trials");
@@ -192,6 +206,7 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
     }
     if (!campaign.provenance.empty()) doc["provenance"] = campaign.provenance;
     if (!campaign.ensembles.empty()) doc["ensembles"] = ensembles_json(campaign.ensembles);
+    if (!campaign.notes.empty()) doc["notes"] = notes_json(campaign.notes);
     json trials = json::array();
     for (const auto& t : campaign.trials) {
         const auto& i = t.info;

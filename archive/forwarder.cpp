@@ -160,6 +160,7 @@ public:
         take_lab_lock();
         in_transaction([&] { send_metadata(); });
         in_transaction([&] { send_events(); });
+        in_transaction([&] { send_notes(); });
         send_samples();
         send_idle_samples();
         return result_;
@@ -348,6 +349,23 @@ private:
                           {lab_});
         result_.events.sent += n;
         result_.events.added += r.affected();
+    }
+
+    // The lab notebook: few rows, all sent every push like events; the unique index keeps one of each.
+    void send_notes() {
+        if (!src_.has_table("notes")) return;  // a recording from before the notebook (schema < 9)
+        Source::Stmt notes(src_, "SELECT c.name, t.uuid, n.utc_ns, n.author, n.kind, n.text FROM notes n"
+                                 " JOIN campaigns c ON c.id = n.campaign_id LEFT JOIN trials t ON t.id = n.trial_id ORDER BY n.id");
+        while (notes.step()) {
+            const bool no_trial = notes.is_null(1);
+            auto r = pg_.exec_nullable("INSERT INTO notes (lab_id, campaign_name, trial_uuid, utc_ns, author, kind, text)"
+                                       " VALUES ($1, $2, $3, $4, $5, $6, $7) ON CONFLICT DO NOTHING",
+                                       {lab_, notes.text(0), no_trial ? std::string() : notes.text(1), std::to_string(notes.int64(2)),
+                                        notes.text(3), notes.text(4), notes.text(5)},
+                                       {false, false, no_trial, false, false, false, false});
+            ++result_.notes.sent;
+            result_.notes.added += r.affected();
+        }
     }
 
     SampleProgress load_progress(const std::string& uuid) {

@@ -43,6 +43,7 @@ struct PushResult {
     TableCounts campaigns, trials, channels, events, samples;
     TableCounts devices, results, twin_versions, idle_samples;
     TableCounts setups;  // lab, chamber, manikin, calibration, configuration (recorder schema v7)
+    TableCounts notes;   // the lab notebook (recorder schema v9)
     std::int64_t chunks = 0;       // of samples
     std::int64_t idle_chunks = 0;  // of idle_samples
     bool idle_resent = false;      // rows appeared behind the idle log's progress (clock stepped back): resent all

@@ -158,7 +158,23 @@ SELECT t.trial_uuid, t.lab_id, t.campaign_name, t.case_name, t.replicate, s.setu
 FROM trials t LEFT JOIN setups s ON s.lab_id = t.lab_id AND s.setup_sha256 = t.setup_sha256;
 )sql";
 
-constexpr std::array<const char*, 3> all_migrations{migration_1, migration_2, migration_3};
+// Version 4: the lab notebook (recorder schema v9): notes by campaign name and, when about a trial,
+// its UUID; their identity is their content (a note is never edited), so a push repeats none.
+constexpr const char* migration_4 = R"sql(
+CREATE TABLE notes (
+    lab_id text NOT NULL,
+    campaign_name text NOT NULL,
+    trial_uuid text REFERENCES trials (trial_uuid),
+    utc_ns bigint NOT NULL,
+    author text NOT NULL,
+    kind text NOT NULL,
+    text text NOT NULL,
+    FOREIGN KEY (lab_id, campaign_name) REFERENCES campaigns (lab_id, campaign_name)
+);
+CREATE UNIQUE INDEX notes_identity ON notes (lab_id, campaign_name, coalesce(trial_uuid, ''), utc_ns, author, kind, md5(text));
+)sql";
+
+constexpr std::array<const char*, 4> all_migrations{migration_1, migration_2, migration_3, migration_4};
 
 // Any fixed number: the key of the lock pushers take while migrating.
 constexpr const char* migration_lock_sql = "SELECT pg_advisory_xact_lock(7419001)";

@@ -302,6 +302,27 @@ PullResult pull_campaign(const std::string& conninfo, const std::string& lab_id,
         ++result.events;
     }
 
+    // The lab notebook (an archive from before it, schema < 4, has none).
+    if (pg.exec("SELECT to_regclass('notes') IS NOT NULL").text(0, 0) == "t") {
+        auto notes = pg.exec("SELECT trial_uuid, utc_ns, author, kind, text FROM notes WHERE lab_id = $1 AND campaign_name = $2"
+                             " ORDER BY utc_ns",
+                             {lab_id, campaign_name});
+        for (int i = 0; i < notes.rows(); ++i) {
+            recorder::NoteRow n;
+            n.campaign_id = campaign_id;
+            if (!notes.is_null(i, 0)) {
+                const auto it = trial_ids.find(notes.text(i, 0));
+                if (it != trial_ids.end()) n.trial_id = it->second;
+            }
+            n.utc_ns = notes.int64(i, 1);
+            n.author = notes.text(i, 2);
+            n.kind = notes.text(i, 3);
+            n.text = notes.text(i, 4);
+            into.add_note(n);
+            ++result.notes;
+        }
+    }
+
     // Samples: one COPY per trial, in batches into SQLite.
     std::vector<recorder::SampleRow> batch;
     batch.reserve(sample_batch_rows);

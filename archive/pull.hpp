@@ -14,6 +14,7 @@ struct PullResult {
     std::int64_t cases = 0;
     std::int64_t trials = 0;
     std::int64_t events = 0;
+    std::int64_t notes = 0;
     std::int64_t samples = 0;
 };
 

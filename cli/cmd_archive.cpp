@@ -56,6 +56,7 @@ void run_push(const PushArgs& a) {
                                     {"twin_versions", to_json(r.twin_versions)},
                                     {"idle_samples", to_json(r.idle_samples)},
                                     {"setups", to_json(r.setups)},
+                                    {"notes", to_json(r.notes)},
                                     {"chunks", r.chunks},
                                     {"idle_chunks", r.idle_chunks},
                                     {"idle_resent", r.idle_resent},
@@ -80,6 +81,7 @@ void run_push(const PushArgs& a) {
     row("twin_versions", r.twin_versions);
     row("idle_samples", r.idle_samples);
     row("setups", r.setups);
+    row("notes", r.notes);
     if (r.idle_resent) std::printf("idle log: rows appeared behind what was sent (clock stepped back?): resent all\n");
     std::printf("trials with every sample archived: %lld; still running, sent so far: %lld\n",
                 static_cast<long long>(r.trials_complete), static_cast<long long>(r.trials_partial));

@@ -363,6 +363,80 @@ void add_daemon_commands(CLI::App& app) {
         });
     }
     {
+        struct NoteArgs {
+            std::string campaign, kind = "comment", text, author;
+            std::int64_t trial = 0;
+        };
+        auto c = std::make_shared<Conn>();
+        auto a = std::make_shared<NoteArgs>();
+        auto* cmd = app.add_subcommand("note", "Write in the lab notebook: a note on a campaign or one of its trials, "
+                                               "stored by the daemon with the time and its author (append-only)");
+        cmd->add_option("text", a->text, "The note (quote it; newlines allowed, at most 4000 bytes)")->required();
+        cmd->add_option("--campaign", a->campaign, "The campaign the note is about")->required();
+        cmd->add_option("--trial", a->trial, "A trial of it, by its database id (the running trial's: `manikin status --json`, trial.id)")
+            ->check(CLI::Range(std::int64_t{1}, std::int64_t{9'000'000'000'000'000}));
+        cmd->add_option("--kind", a->kind, "comment, operator (who ran it), ensemble (what the manikin wore), garment")
+            ->capture_default_str()
+            ->check(CLI::IsMember({"comment", "operator", "ensemble", "garment"}));
+        cmd->add_option("--author", a->author, "Who writes it (default: the user running this command)");
+        add_conn_options(cmd, *c, true);
+        cmd->footer("Notes travel with the campaign: `manikin notes`, every export (campaign.json \"notes\", HDF5 /notes),\n"
+                    "the archive and the reports. A note is never edited: write a correcting note instead.\n"
+                    "Example: manikin note --campaign astm-0425 --kind ensemble \"coverall #3, washed twice\"");
+        cmd->callback([c, a] {
+            std::string author = a->author;
+            if (author.empty())
+                if (const char* user = std::getenv("USER")) author = user;
+            nlohmann::json req{{"cmd", "note"}, {"campaign", a->campaign}, {"kind", a->kind}, {"text", a->text}};
+            if (!author.empty()) req["author"] = author;
+            if (a->trial > 0) req["trial"] = a->trial;
+            call(*c, req, true);
+            if (c->json) std::printf("%s\n", nlohmann::json{{"ok", true}}.dump().c_str());
+            else std::printf("note stored on '%s'%s\n", a->campaign.c_str(), a->trial > 0 ? fmt::format(" trial {}", a->trial).c_str() : "");
+        });
+    }
+    {
+        auto c = std::make_shared<Conn>();
+        auto campaign = std::make_shared<std::string>();
+        auto* cmd = app.add_subcommand("notes", "The lab notebook of a campaign, from the running daemon: time, author, kind, trial, text");
+        cmd->add_option("--campaign", *campaign, "The campaign")->required();
+        add_conn_options(cmd, *c, false);
+        cmd->callback([c, campaign] {
+            const auto reply = call(*c, {{"cmd", "notes"}, {"campaign", *campaign}}, false);
+            if (c->json) {
+                std::printf("%s\n", dump_json(reply["notes"], 2).c_str());
+                return;
+            }
+            if (reply["notes"].empty()) std::printf("no notes on '%s' yet (manikin note --campaign %s \"...\")\n", campaign->c_str(), campaign->c_str());
+            for (const auto& n : reply["notes"]) {
+                const std::string trial = n["trial_id"].is_null() ? std::string("campaign") : fmt::format("trial {}", n["trial_id"].get<long long>());
+                std::printf("%s  %-10s %-8s %-10s %s\n", n.value("utc", "").c_str(), printable(n.value("author", ""), 40).c_str(),
+                            n.value("kind", "").c_str(), trial.c_str(), n.value("text", "").c_str());
+            }
+        });
+    }
+    {
+        auto c = std::make_shared<Conn>();
+        auto history = std::make_shared<bool>(false);
+        auto* cmd = app.add_subcommand("alarms", "The daemon's open alarms (active, returned but unacknowledged, shelved), or the closed ones");
+        cmd->add_flag("--history", *history, "The closed alarms instead (returned and acknowledged)");
+        add_conn_options(cmd, *c, false);
+        cmd->footer("States (ISA-18.2): UNACK, ACKED, RTN_UNACK (returned, not acknowledged), SHELVED, NORMAL (closed).\n"
+                    "Acknowledge in the console, or {\"cmd\":\"ack_alarm\",\"id\":N} on the socket (docs/daemon.md).");
+        cmd->callback([c, history] {
+            const auto reply = call(*c, {{"cmd", *history ? "alarm_history" : "alarms"}}, false);
+            if (c->json) {
+                std::printf("%s\n", dump_json(reply["alarms"], 2).c_str());
+                return;
+            }
+            if (reply["alarms"].empty()) std::printf("%s\n", *history ? "no closed alarms" : "no open alarms");
+            for (const auto& al : reply["alarms"])
+                std::printf("%6lld  %-9s %-5s %-16s %s%s\n", al.value("id", 0LL), al.value("state", "").c_str(),
+                            al.value("severity", "").c_str(), al.value("kind", "").c_str(), al.value("message", "").c_str(),
+                            al.value("count", 1) > 1 ? fmt::format(" (x{})", al.value("count", 1)).c_str() : "");
+        });
+    }
+    {
         auto c = std::make_shared<Conn>();
         auto once = std::make_shared<bool>(false);
         auto* trial = app.add_subcommand("trial", "Follow the running trial");

@@ -33,7 +33,9 @@ const std::map<std::string, bool>& commands() {  // name -> mutating
     static const std::map<std::string, bool> c = {{"status", false}, {"live", false},          {"results", false},
                                                   {"start_campaign", true}, {"abort", true}, {"pause", true},
                                                   {"resume", true},  {"set_chamber", true},  {"shutdown", true},
-                                                  {"alarms", false}, {"ack_alarm", true}, {"campaign_outcome", false}};
+                                                  {"alarms", false}, {"ack_alarm", true}, {"campaign_outcome", false},
+                                                  {"alarm_history", false}, {"shelve_alarm", true}, {"unshelve_alarm", true},
+                                                  {"note", true}, {"notes", false}};
     return c;
 }
 
@@ -125,12 +127,38 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
             return {{"ok", true}, {"outcome", daemon.campaign_outcome_json(*name)}};
         }
         if (cmd == "alarms") return {{"ok", true}, {"alarms", daemon.alarms_json()}};
-        if (cmd == "ack_alarm") {
+        if (cmd == "note") {
+            const auto name = text("campaign");
+            if (!name) return fail("\"campaign\": expected the campaign's name (a string)");
+            const auto body = text("text");
+            if (!body) return fail("\"text\": expected the note's text (a string)");
+            std::optional<std::int64_t> trial;
+            if (req.contains("trial") && !req["trial"].is_null()) {
+                const auto t = number("trial");
+                if (!t || *t != std::trunc(*t) || *t < 1 || *t > 9e15) return fail("\"trial\": expected a trial's id (a whole number)");
+                trial = static_cast<std::int64_t>(*t);
+            }
+            const std::string kind = text("kind").value_or("comment");
+            const std::string author = text("author").value_or(origin.who);
+            return done(daemon.add_note(*name, trial, kind, *body, author));
+        }
+        if (cmd == "notes") {
+            const auto name = text("campaign");
+            if (!name) return fail("\"campaign\": expected the campaign's name (a string)");
+            return {{"ok", true}, {"notes", daemon.notes_json(*name)}};
+        }
+        if (cmd == "alarm_history") return {{"ok", true}, {"alarms", daemon.alarm_history_json()}};
+        if (cmd == "ack_alarm" || cmd == "shelve_alarm" || cmd == "unshelve_alarm") {
             const auto id = number("id");
             // Bounded before the conversion: a double beyond int64 (1e300) makes it undefined.
             if (!id || *id != std::trunc(*id) || std::fabs(*id) > 9e15)
                 return fail("\"id\": expected the alarm's id (a whole number)");
-            return done(daemon.acknowledge_alarm(static_cast<std::int64_t>(*id)));
+            const auto alarm = static_cast<std::int64_t>(*id);
+            if (cmd == "ack_alarm") return done(daemon.acknowledge_alarm(alarm, origin.who));
+            if (cmd == "unshelve_alarm") return done(daemon.unshelve_alarm(alarm, origin.who));
+            const auto duration = number("duration_s");
+            if (!duration) return fail("\"duration_s\": expected the shelf's length in seconds (at most 8 h)");
+            return done(daemon.shelve_alarm(alarm, *duration, origin.who));
         }
         if (cmd == "pause") return done(daemon.pause());
         if (cmd == "resume") return done(daemon.resume());

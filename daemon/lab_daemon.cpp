@@ -6,15 +6,18 @@
 #include <algorithm>
 #include <set>
 #include <chrono>
+#include <cctype>
 #include <cmath>
 
 #include "base/guarded.hpp"
 #include "analysis/analyze.hpp"
 #include "analysis/physio.hpp"
+#include "analysis/recording.hpp"
 #include "analysis/zone_map.hpp"
 #include "store/database_export.hpp"
 #include "analysis/reconcile/results_parity.hpp"
 #include "daemon/setup_record.hpp"
+#include "base/text.hpp"
 #include "base/user_error.hpp"
 
 namespace manikind {
@@ -135,18 +138,34 @@ std::int64_t LabDaemon::recorded_channel(const std::string& device, const std::s
     return id;
 }
 
+std::int64_t LabDaemon::now_utc_ns() const { return clock_ ? clock_->utc_ns() : system_clock_.utc_ns(); }
+
 void LabDaemon::event(const std::string& severity, const std::string& kind, const std::string& message) {
+    log_event(severity, kind, message);
+    if (severity == "warn" || severity == "error") alarms_.raise(severity, kind, "", message, now_utc_ns());
+}
+
+void LabDaemon::log_event(const std::string& severity, const std::string& kind, const std::string& message) {
     const std::optional<std::int64_t> trial = trial_id_ ? std::optional<std::int64_t>(trial_id_) : std::nullopt;
     const std::int64_t mono_ns = clock_ ? clock_->mono_ns() : 0;
-    const std::int64_t utc_ns = clock_ ? clock_->utc_ns() : system_clock_.utc_ns();
+    const std::int64_t utc_ns = now_utc_ns();
     write([=](recorder::Database& db) { db.add_event(trial, mono_ns, utc_ns, severity, kind, message); });
     if (severity == "error") spdlog::error("{}: {}", kind, message);
     else if (severity == "warn") spdlog::warn("{}: {}", kind, message);
     else spdlog::debug("{}: {}", kind, message);
-    if (severity == "warn" || severity == "error") {
-        alarms_.push_back({next_alarm_id_++, clock_ ? clock_->utc_ns() : system_clock_.utc_ns(), severity, kind, message});
-        if (alarms_.size() > 200) alarms_.pop_front();
-    }
+}
+
+void LabDaemon::condition(const std::string& severity, const std::string& kind, const std::string& source,
+                          const std::string& message) {
+    // Stored and logged like any event; the alarm is one line while the condition lasts.
+    const std::string sev = severity == "error" ? "error" : "warn";
+    log_event(sev, kind, message);
+    alarms_.raise(sev, kind, source, message, now_utc_ns());
+}
+
+void LabDaemon::condition_cleared(const std::string& kind, const std::string& source, const std::string& message) {
+    event("info", kind, message);
+    alarms_.clear(kind, source, message, now_utc_ns());
 }
 
 void LabDaemon::external_event(const std::string& severity, const std::string& kind, const std::string& message) {
@@ -159,28 +178,85 @@ void LabDaemon::add_status_section(const std::string& name, std::function<nlohma
     status_sections_.emplace_back(name, std::move(section));
 }
 
-nlohmann::json LabDaemon::alarms_json() {
+std::string LabDaemon::add_note(const std::string& campaign, std::optional<std::int64_t> trial_id, const std::string& kind,
+                                const std::string& text, const std::string& author) {
+    // Checked here, whoever asks (console, socket): the notebook holds text a person can read.
+    if (!analysis::is_note_kind(kind)) return fmt::format("\"kind\": expected comment, operator, ensemble or garment, not '{}'", printable(kind, 40));
+    if (!is_utf8(text) || !is_utf8(author)) return "\"text\" and \"author\": expected UTF-8 text";
+    const bool has_words = std::any_of(text.begin(), text.end(), [](char c) { return !std::isspace(static_cast<unsigned char>(c)); });
+    if (!has_words) return "\"text\": empty (a note needs words)";
+    if (text.size() > analysis::kMaxNoteBytes)
+        return fmt::format("\"text\": {} bytes, more than a note holds ({})", text.size(), analysis::kMaxNoteBytes);
+    for (const char c : text)
+        if ((static_cast<unsigned char>(c) < 0x20 && c != '\n' && c != '\t') || c == 0x7F)
+            return "\"text\": control characters are not allowed (newlines and tabs are)";
+    if (author.empty() || author.size() > 100) return "\"author\": expected a name of 1 to 100 bytes";
     std::lock_guard lk(lock_);
-    nlohmann::json a = nlohmann::json::array();
-    for (const auto& al : alarms_)
-        a.push_back({{"id", al.id}, {"utc_ms", al.utc_ns / 1000000}, {"severity", al.severity == "error" ? "MAJOR" : "MINOR"},
-                     {"kind", al.kind}, {"message", al.message}, {"acknowledged", al.acknowledged}});
-    return a;
+    flush_all_locked();  // a campaign or trial created a moment ago is found
+    const auto id = db_.find_campaign(campaign);
+    if (!id) return fmt::format("\"campaign\": no campaign named '{}' in {}", printable(campaign, 100), db_path_.filename().string());
+    if (trial_id) {
+        const auto t = db_.trial(*trial_id);
+        if (!t || t->campaign_id != *id) return fmt::format("\"trial\": no trial {} in campaign '{}'", *trial_id, campaign);
+    }
+    recorder::NoteRow note{0, *id, trial_id, now_utc_ns(), author, kind, text};
+    bool stored = false;
+    // Through the one writer, waited for: "stored" means in the database.
+    const bool allowed = storage_allows_locked([&] { recorder_->call([&](recorder::Database& db) { db.add_note(note); }); stored = true; });
+    if (!allowed || !stored) return "the database cannot be written now (see alarms); the note was not stored, try again";
+    log_event("info", "note", fmt::format("note by {} on '{}'{}", printable(author, 100), campaign,
+                                          trial_id ? fmt::format(" trial {}", *trial_id) : std::string()));
+    return {};
 }
 
-std::string LabDaemon::acknowledge_alarm(std::int64_t id) {
+nlohmann::json LabDaemon::notes_json(const std::string& campaign) {
     std::lock_guard lk(lock_);
-    for (auto& al : alarms_)
-        if (al.id == id) {
-            if (!al.acknowledged) {
-                al.acknowledged = true;
-                const std::int64_t mono_ns = clock_->mono_ns(), utc_ns = clock_->utc_ns();
-                const std::string message = fmt::format("alarm {} acknowledged: {}", id, al.message);
-                write([=](recorder::Database& db) { db.add_event(std::nullopt, mono_ns, utc_ns, "info", "alarm_ack", message); });
-            }
-            return {};
-        }
-    return fmt::format("no alarm with id {} (the newest 200 are kept)", id);
+    flush_all_locked();
+    const auto id = db_.find_campaign(campaign);
+    if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), printable(campaign, 100)));
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& n : db_.notes(*id)) {
+        nlohmann::json e{{"id", n.id}, {"utc", analysis::iso_utc_ms(n.utc_ns)}, {"author", n.author}, {"kind", n.kind}, {"text", n.text}};
+        e["trial_id"] = n.trial_id ? nlohmann::json(*n.trial_id) : nlohmann::json(nullptr);
+        out.push_back(std::move(e));
+    }
+    return out;
+}
+
+nlohmann::json LabDaemon::alarms_json() {
+    std::lock_guard lk(lock_);
+    return alarms_.open_json();
+}
+
+nlohmann::json LabDaemon::alarm_history_json() {
+    std::lock_guard lk(lock_);
+    return alarms_.history_json();
+}
+
+// Each change of an alarm's state is an event in the database: the alarm's history survives the daemon.
+std::string LabDaemon::acknowledge_alarm(std::int64_t id, const std::string& who) {
+    std::lock_guard lk(lock_);
+    const AlarmEntry* a = alarms_.find(id);
+    const bool was_acked = a && a->acknowledged;
+    const std::string message = a ? a->message : std::string();
+    if (auto err = alarms_.acknowledge(id, who, now_utc_ns()); !err.empty()) return err;
+    if (!was_acked) log_event("info", "alarm_ack", fmt::format("alarm {} acknowledged by {}: {}", id, who, message));
+    return {};
+}
+
+std::string LabDaemon::shelve_alarm(std::int64_t id, double duration_s, const std::string& who) {
+    std::lock_guard lk(lock_);
+    if (auto err = alarms_.shelve(id, duration_s, who, now_utc_ns()); !err.empty()) return err;
+    log_event("info", "alarm_shelve", fmt::format("alarm {} shelved by {} for {:.0f} min: {}", id, who, duration_s / 60.0,
+                                                  alarms_.find(id)->message));
+    return {};
+}
+
+std::string LabDaemon::unshelve_alarm(std::int64_t id, const std::string& who) {
+    std::lock_guard lk(lock_);
+    if (auto err = alarms_.unshelve(id, who); !err.empty()) return err;
+    log_event("info", "alarm_shelve", fmt::format("alarm {} unshelved by {}", id, who));
+    return {};
 }
 
 void LabDaemon::set_sample_listener(std::function<void()> listener) {
@@ -592,8 +668,8 @@ void LabDaemon::storage_stop_locked(const std::string& why) {
     jobs_lost_when_full_ = rs.jobs_lost;
     if (acq_) acq_->manikin().set_run(false);  // no heating that cannot be recorded
     const std::string running = plan_ ? fmt::format(" '{}' interrupted (start it again to continue);", plan_->name) : "";
-    event("error", "disk_full",
-          fmt::format("disk full: heating stopped;{} recording resumes by itself when space is freed ({})", running, why));
+    condition("error", "disk_full", "database",
+              fmt::format("disk full: heating stopped;{} recording resumes by itself when space is freed ({})", running, why));
     if (trial_id_) {
         const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
         const std::string reason = "disk full";
@@ -622,8 +698,9 @@ void LabDaemon::storage_busy_locked(const std::string& why) {
     ++storage_busy_waits_;
     if (storage_busy_) return;
     storage_busy_ = true;
-    event("error", "database_locked", fmt::format("the database is locked ({}); the daemon's writes wait in order and "
-                                                  "are made when it is free: nothing is lost", why));
+    condition("error", "database_locked", "database",
+              fmt::format("the database is locked ({}); the daemon's writes wait in order and are made when it is free: "
+                          "nothing is lost", why));
 }
 
 // Runs a call to the writer; false (the alarm for that kind raised) when storage refused it.
@@ -644,8 +721,9 @@ bool LabDaemon::storage_allows_locked(const std::function<void()>& call) {
 void LabDaemon::storage_fault_locked(const std::string& why) {
     if (storage_fault_) return;
     storage_fault_ = true;
-    event("error", "storage_error", fmt::format("the file system fails the database's writes ({}); readings and writes "
-                                                "wait in memory, tried again each second: nothing is lost", why));
+    condition("error", "storage_error", "database",
+              fmt::format("the file system fails the database's writes ({}); readings and writes wait in memory, tried "
+                          "again each second: nothing is lost", why));
 }
 
 // Each tick: the recorder's state (it retries each second) raises and clears the alarms for a
@@ -657,12 +735,12 @@ void LabDaemon::watch_storage_locked() {
     const bool clear = !rs.locked && !rs.io_error && overflow_.empty() && unnamed_.empty() && rs.jobs_waiting == 0;
     if (storage_busy_ && clear) {
         storage_busy_ = false;
-        event("warn", "database_locked", fmt::format("the database is free again: every waiting write made ({} waits)",
-                                                     storage_busy_waits_));
+        condition_cleared("database_locked", "database",
+                          fmt::format("the database is free again: every waiting write made ({} waits)", storage_busy_waits_));
     }
     if (storage_fault_ && clear) {
         storage_fault_ = false;
-        event("warn", "storage_error", "the file system writes again: every waiting write made");
+        condition_cleared("storage_error", "database", "the file system writes again: every waiting write made");
     }
 }
 
@@ -671,7 +749,7 @@ void LabDaemon::retry_storage_locked() {
     const auto rs = recorder_->stats();
     if (rs.storage_full || rs.jobs_waiting > 0) return;  // the recorder retries each second (and at each flush)
     storage_full_ = false;
-    event("warn", "disk_full",
+    condition_cleared("disk_full", "database",
           fmt::format("space is back: recording resumed; {} readings were dropped while the disk was full{}",
                       rs.dropped - dropped_when_full_,
                       rs.jobs_lost > jobs_lost_when_full_ ? fmt::format(", {} events not kept", rs.jobs_lost - jobs_lost_when_full_)
@@ -836,6 +914,8 @@ void LabDaemon::setpoint_refused(const std::string& what, const std::string& det
 }
 
 void LabDaemon::tick_locked() {
+    // A shelf ends by itself: the alarm is shown again, and the log says so.
+    for (const std::int64_t id : alarms_.expire_shelves(now_utc_ns())) log_event("info", "alarm_shelve", fmt::format("alarm {}: its shelf ended", id));
     try {
         if (!storage_full_) {
             if (const auto rs = recorder_->stats(); rs.storage_full) storage_stop_locked(rs.storage_error);
@@ -881,11 +961,13 @@ void LabDaemon::advance_locked() {
         const auto it = gap_since_ns_.find(st.name);
         if (down && it == gap_since_ns_.end()) {
             gap_since_ns_[st.name] = now;
-            event("warn", "gap", fmt::format("{} lost ({}){}", st.name, st.connected ? "stale" : "disconnected",
-                                             st.last_error.empty() ? "" : ": " + st.last_error));
+            condition("warn", "gap", st.name,
+                      fmt::format("{} lost ({}){}", st.name, st.connected ? "stale" : "disconnected",
+                                  st.last_error.empty() ? "" : ": " + st.last_error));
             if (trial_id_) write([=, trial = trial_id_](recorder::Database& db) { db.add_trial_flag(trial, flag_device_gap); });
         } else if (!down && it != gap_since_ns_.end()) {
-            event("info", "gap", fmt::format("{} back after {:.0f} s", st.name, static_cast<double>(now - it->second) * 1e-9));
+            condition_cleared("gap", st.name,
+                              fmt::format("{} back after {:.0f} s", st.name, static_cast<double>(now - it->second) * 1e-9));
             gap_since_ns_.erase(it);
         }
     }
@@ -1268,6 +1350,7 @@ nlohmann::json LabDaemon::status_json() {
     j["database"] = db_path_.string();
     j["time_s"] = static_cast<double>(clock_->mono_ns()) * 1e-9;
     j["campaign"] = plan_ ? nlohmann::json(plan_->name) : nlohmann::json(nullptr);
+    j["last_campaign"] = last_campaign_ ? nlohmann::json(*last_campaign_) : nlohmann::json(nullptr);
     j["queued_campaigns"] = nlohmann::json::array();
     for (const auto& p : waiting_) j["queued_campaigns"].push_back(p.name);
     j["stage"] = stage_name(stage_);

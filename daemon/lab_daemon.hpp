@@ -22,6 +22,7 @@
 
 #include "analysis/sliding_range.hpp"
 #include "daemon/acquisition.hpp"
+#include "daemon/alarm_book.hpp"
 #include "daemon/campaign_plan.hpp"
 #include "daemon/physiological_loop.hpp"
 #include "daemon/config.hpp"
@@ -80,10 +81,20 @@ public:
     // The latest stored results, or nothing while none are stored; throws for an unknown campaign.
     std::optional<nlohmann::json> latest_results_json(const std::string& campaign);
 
-    // Alarms: every warn or error event since the daemon started (the newest 200), each with an
-    // id, for the console; acknowledging one records who saw it, it does not clear the cause.
+    // Alarms with a life cycle (daemon/alarm_book.hpp): the open ones (active, or returned and not
+    // yet acknowledged, or shelved), oldest first; and the closed ones. Acknowledging records who
+    // saw it (it does not clear the cause); a shelf hides one for at most 8 h. `who` as in abort().
+    // The lab notebook (docs/daemon.md, "Notes"): appended to the database for a campaign (and
+    // optionally one of its trials, by database id); author is who wrote it. Returns an error
+    // message naming the field, empty when stored. notes_json: a campaign's notes, by time.
+    std::string add_note(const std::string& campaign, std::optional<std::int64_t> trial_id, const std::string& kind,
+                         const std::string& text, const std::string& author);
+    nlohmann::json notes_json(const std::string& campaign);
     nlohmann::json alarms_json();
-    std::string acknowledge_alarm(std::int64_t id);
+    nlohmann::json alarm_history_json();
+    std::string acknowledge_alarm(std::int64_t id, const std::string& who = "the operator");
+    std::string shelve_alarm(std::int64_t id, double duration_s, const std::string& who = "the operator");
+    std::string unshelve_alarm(std::int64_t id, const std::string& who = "the operator");
     // Called (under the daemon's lock: keep it to a flag and a post) after each new sample.
     void set_sample_listener(std::function<void()> listener);
     // Results so far after each trial, on their own thread. Default: in real time only.
@@ -137,7 +148,14 @@ private:
     void tick_locked();     // advance_locked(), surviving a full disk
     void advance_locked();  // gaps, watchdog, then one step of the trial state machine
     void enter(Stage s, const std::string& why = {});
+    // Logged and stored; warn and error are one-shot alarms (acknowledged, never "cleared").
     void event(const std::string& severity, const std::string& kind, const std::string& message);
+    // A condition that lasts (a device lost, the database locked): one alarm while it lasts, keyed
+    // by (kind, source); condition_cleared() logs the return (info) and clears it.
+    void condition(const std::string& severity, const std::string& kind, const std::string& source, const std::string& message);
+    void condition_cleared(const std::string& kind, const std::string& source, const std::string& message);
+    std::int64_t now_utc_ns() const;
+    void log_event(const std::string& severity, const std::string& kind, const std::string& message);  // no alarm
     void finish_trial(const std::string& state, const std::string& reason);
     void finish_campaign(const std::string& state);
     void standby_locked(const std::string& why);  // heating off, the chamber at [standby]
@@ -242,14 +260,7 @@ private:
     double chamber_setpoint_temp_c_ = std::numeric_limits<double>::quiet_NaN();
     double chamber_setpoint_rh_pct_ = std::numeric_limits<double>::quiet_NaN();
 
-    struct Alarm {
-        std::int64_t id;
-        std::int64_t utc_ns;
-        std::string severity, kind, message;
-        bool acknowledged = false;
-    };
-    std::deque<Alarm> alarms_;
-    std::int64_t next_alarm_id_ = 1;
+    AlarmBook alarms_;
     std::function<void()> sample_listener_;
     std::vector<std::pair<std::string, std::function<nlohmann::json()>>> status_sections_;
 

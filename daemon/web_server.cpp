@@ -1,6 +1,7 @@
 #include "daemon/web_server.hpp"
 #include "base/guarded.hpp"
 
+#include <cctype>
 #include <sys/socket.h>
 
 #include <boost/asio/ip/tcp.hpp>
@@ -35,6 +36,23 @@ using tcp = asio::ip::tcp;
 using steady = std::chrono::steady_clock;
 
 namespace {
+
+// A query value with its %XX escapes and '+' decoded (a malformed escape is kept as typed).
+std::string percent_decoded(std::string_view v) {
+    std::string out;
+    for (std::size_t i = 0; i < v.size(); ++i) {
+        if (v[i] == '+') {
+            out += ' ';
+        } else if (v[i] == '%' && i + 2 < v.size() && std::isxdigit(static_cast<unsigned char>(v[i + 1])) &&
+                   std::isxdigit(static_cast<unsigned char>(v[i + 2]))) {
+            out += static_cast<char>(std::stoi(std::string(v.substr(i + 1, 2)), nullptr, 16));
+            i += 2;
+        } else {
+            out += v[i];
+        }
+    }
+    return out;
+}
 
 std::chrono::nanoseconds seconds(double s) {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(s));
@@ -226,6 +244,11 @@ struct WebServer::Impl {
             if (path == "/api/zones") return json_reply(req, http::status::ok, zones_json());
             if (path == "/api/history") return json_reply(req, http::status::ok, history.to_json());
             if (path == "/api/alarms") return json_reply(req, http::status::ok, daemon.alarms_json());
+            if (path == "/api/notes") {
+                if (query.rfind("campaign=", 0) != 0) return error(req, http::status::bad_request, "expected ?campaign=NAME");
+                return json_reply(req, http::status::ok, daemon.notes_json(percent_decoded(query.substr(9))));
+            }
+            if (path == "/api/alarm-history") return json_reply(req, http::status::ok, daemon.alarm_history_json());
             if (path == "/api/results") {
                 std::optional<std::string> name;
                 if (query.rfind("campaign=", 0) == 0) name = query.substr(9);

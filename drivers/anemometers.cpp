@@ -11,8 +11,14 @@ void WindSonicDriver::on_bytes(const std::uint8_t* data, std::size_t n) {
         if (ev == Event::none) continue;
         if (ev == Event::checksum_error || ev == Event::malformed) {
             std::lock_guard lk(lock_);
-            if (ev == Event::checksum_error) ++status_.checksum_errors;
-            else ++status_.malformed;
+            // "last error" says what the counters count (issue 35: errors 1 beside an empty one).
+            if (ev == Event::checksum_error) {
+                ++status_.checksum_errors;
+                status_.last_error = "a line whose checksum does not match (garbled in transit)";
+            } else {
+                ++status_.malformed;
+                status_.last_error = "a malformed line (not the WindSonic's output format)";
+            }
             continue;
         }
         const auto& r = parser_.reading();
@@ -43,8 +49,13 @@ void Csat3bDriver::on_bytes(const std::uint8_t* data, std::size_t n) {
         if (ev == Event::none) continue;
         if (ev == Event::signature_error || ev == Event::malformed) {
             std::lock_guard lk(lock_);
-            if (ev == Event::signature_error) ++status_.checksum_errors;
-            else ++status_.malformed;
+            if (ev == Event::signature_error) {
+                ++status_.checksum_errors;
+                status_.last_error = "a record whose signature does not match (garbled in transit)";
+            } else {
+                ++status_.malformed;
+                status_.last_error = "a malformed record (not the CSAT3B's output format)";
+            }
             continue;
         }
         const auto& r = parser_.record();

@@ -101,6 +101,7 @@ void ManikinCanDriver::take(const can_frame& frame, std::size_t bytes) {
     } else {
         std::lock_guard lk(lock_);
         ++status_.malformed;
+        status_.last_error = fmt::format("a read of {} bytes, not one CAN frame", bytes);
     }
 }
 
@@ -184,7 +185,10 @@ void ManikinCanDriver::ingest(const can_frame& frame) {
         emit(prefix + "sweat_rate_g_m2_h", z->sweat_rate_g_m2_h, Quality::good, mono, utc);
     } else if (const auto* hb = std::get_if<mc::Heartbeat>(&msg)) {
         std::lock_guard lk(lock_);
-        if (heartbeat_ && static_cast<std::uint8_t>(heartbeat_->sequence + 1) != hb->sequence) ++status_.malformed;
+        if (heartbeat_ && static_cast<std::uint8_t>(heartbeat_->sequence + 1) != hb->sequence) {
+            ++status_.malformed;
+            status_.last_error = fmt::format("heartbeat sequence jumped from {} to {} (frames lost)", heartbeat_->sequence, hb->sequence);
+        }
         if (hb->error_bits != 0 && (!heartbeat_ || heartbeat_->error_bits == 0)) {
             ++status_.device_faults;
             status_.last_error = fmt::format("manikin error bits 0x{:04x}", hb->error_bits);
@@ -235,7 +239,10 @@ void ManikinCanDriver::check(std::int64_t now_mono_ns) {
     std::lock_guard lk(lock_);
     const auto limit_ns = static_cast<std::int64_t>(options_.stale_after_s * 1e9);
     if (status_.last_good_mono_ns >= 0 && now_mono_ns - status_.last_good_mono_ns > limit_ns) {
-        if (!status_.stale) ++status_.timeouts;
+        if (!status_.stale) {
+            ++status_.timeouts;
+            status_.last_error = fmt::format("no good frame for more than {} s", options_.stale_after_s);
+        }
         status_.stale = true;
     }
 }

@@ -1,6 +1,7 @@
 #include "drivers/serial_line_driver.hpp"
 
 #include <boost/asio/write.hpp>
+#include <fmt/core.h>
 
 namespace manikind::drivers {
 
@@ -100,7 +101,10 @@ void SerialLineDriver::check(std::int64_t now_mono_ns) {
         std::lock_guard lk(lock_);
         const auto limit_ns = static_cast<std::int64_t>(options_.stale_after_s * 1e9);
         if (status_.last_good_mono_ns >= 0 && now_mono_ns - status_.last_good_mono_ns > limit_ns) {
-            if (!status_.stale) ++status_.timeouts;
+            if (!status_.stale) {
+                ++status_.timeouts;
+                status_.last_error = fmt::format("no good line for more than {} s", options_.stale_after_s);
+            }
             status_.stale = true;
             went_stale = true;
         }

@@ -280,9 +280,27 @@ FROM trials t JOIN samples s ON s.id >= (t.id << 36) AND s.id < ((t.id + 1) << 3
      JOIN channels ch ON ch.id = s.channel_id JOIN devices d ON d.id = ch.device_id;
 )sql";
 
+// Version 9: the lab notebook (issue 35; docs/recorder.md, "Notes"): notes per campaign and,
+// optionally, per trial, each with its author, kind and time. Append-only: the triggers refuse an
+// edit or a deletion, so what was written on the day stays as written (a correction is a new note).
+constexpr const char* migration_9 = R"sql(
+CREATE TABLE notes (
+    id INTEGER PRIMARY KEY,
+    campaign_id INTEGER NOT NULL REFERENCES campaigns(id),
+    trial_id INTEGER REFERENCES trials(id),
+    utc_ns INTEGER NOT NULL,
+    author TEXT NOT NULL,
+    kind TEXT NOT NULL CHECK (kind IN ('comment', 'operator', 'ensemble', 'garment')),
+    text TEXT NOT NULL
+);
+CREATE INDEX notes_by_campaign ON notes (campaign_id, utc_ns);
+CREATE TRIGGER notes_no_update BEFORE UPDATE ON notes BEGIN SELECT RAISE(ABORT, 'notes are append-only'); END;
+CREATE TRIGGER notes_no_delete BEFORE DELETE ON notes BEGIN SELECT RAISE(ABORT, 'notes are append-only'); END;
+)sql";
+
 // Append only: a released migration is never edited, a change is a new entry.
-constexpr std::array<const char*, 8> all_migrations{migration_1, migration_2, migration_3, migration_4, migration_5,
-                                                    migration_6, migration_7, migration_8};
+constexpr std::array<const char*, 9> all_migrations{migration_1, migration_2, migration_3, migration_4, migration_5,
+                                                    migration_6, migration_7, migration_8, migration_9};
 
 // SQL text of trial_table for the channels stored now: one row per trial and 5-s step of the
 // exports' grid ((t - 5 s, t] after the manikin's start), a column "<device>.<channel>" per
@@ -981,6 +999,21 @@ std::int64_t Database::add_event(std::optional<std::int64_t> trial_id, std::int6
         .bind(trial_id, mono_ns, utc_ns, severity, kind, message)
         .run();
     return sqlite3_last_insert_rowid(impl_->db);
+}
+
+std::int64_t Database::add_note(const NoteRow& note) {
+    Query(*impl_, "INSERT INTO notes (campaign_id, trial_id, utc_ns, author, kind, text) VALUES (?, ?, ?, ?, ?, ?)")
+        .bind(note.campaign_id, note.trial_id, note.utc_ns, note.author, note.kind, note.text)
+        .run();
+    return sqlite3_last_insert_rowid(impl_->db);
+}
+
+std::vector<NoteRow> Database::notes(std::int64_t campaign_id) {
+    Query q(*impl_, "SELECT id, campaign_id, trial_id, utc_ns, author, kind, text FROM notes WHERE campaign_id = ? ORDER BY utc_ns, id");
+    q.bind(campaign_id);
+    std::vector<NoteRow> out;
+    while (q.step()) out.push_back({q.integer(0), q.integer(1), q.optional_integer(2), q.integer(3), q.text(4), q.text(5), q.text(6)});
+    return out;
 }
 
 std::int64_t Database::store_result(std::int64_t campaign_id, const std::string& json, std::int64_t utc_ns) {

@@ -124,6 +124,17 @@ struct ChannelRow {
     std::string unit;
 };
 
+// A lab-notebook entry (docs/recorder.md, "Notes"): append-only.
+struct NoteRow {
+    std::int64_t id = 0;
+    std::int64_t campaign_id = 0;
+    std::optional<std::int64_t> trial_id;  // empty: about the campaign as a whole
+    std::int64_t utc_ns = 0;
+    std::string author;
+    std::string kind;                      // comment, operator, ensemble, garment
+    std::string text;
+};
+
 struct EventRow {
     std::int64_t id = 0;
     std::optional<std::int64_t> trial_id;  // empty: a daemon-wide event
@@ -248,6 +259,9 @@ public:
 
     std::int64_t add_event(std::optional<std::int64_t> trial_id, std::int64_t mono_ns, std::int64_t utc_ns,
                            const std::string& severity, const std::string& kind, const std::string& message);
+    // The lab notebook: appended, never edited (the table's triggers refuse it).
+    std::int64_t add_note(const NoteRow& note);
+    std::vector<NoteRow> notes(std::int64_t campaign_id);  // by time
     std::int64_t store_result(std::int64_t campaign_id, const std::string& json, std::int64_t utc_ns);
     // Idempotent for the same text; a different text under an existing (name, version) is a UserError.
     std::int64_t store_twin_version(const std::string& name, std::int64_t version, const std::string& toml);

@@ -236,6 +236,19 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         c.trials.push_back(std::move(trial));
     }
 
+    // The lab notebook: every note of the campaign; one about a trial names it by its exported id
+    // (a trial not exported, one that did not finish, keeps its note on the campaign, saying so).
+    std::map<std::int64_t, std::string> exported_id;
+    for (std::size_t s = 0; s < spans.size(); ++s) exported_id[spans[s].row.id] = c.trials[s].info.id;
+    for (const auto& n : db.notes(campaign_id.value())) {
+        analysis::Note note{n.utc_ns, n.author, n.kind, n.text, {}};
+        if (n.trial_id) {
+            if (const auto it = exported_id.find(*n.trial_id); it != exported_id.end()) note.trial = it->second;
+            else note.text = fmt::format("(about trial {}, not exported) {}", *n.trial_id, n.text);
+        }
+        c.notes.push_back(std::move(note));
+    }
+
     // Provenance: what made these numbers.
     c.provenance["program"] = std::string("manikind ") + MANIKIND_VERSION;
     c.provenance["database"] = db.path().filename().string();

@@ -101,6 +101,7 @@ public:
         Handle set(H5Dcreate2(parent, name.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
                    H5Dclose);
         check(set.ok(), "creating dataset " + name);
+        if (texts.empty()) return;  // an empty column: created, nothing to write
         check(H5Dwrite(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, packed.data()) >= 0, "writing " + name);
     }
 
@@ -213,6 +214,25 @@ void write_file(const std::filesystem::path& path, const analysis::Campaign& c, 
         w.dataset(zones.get(), "area_m2", area, H5T_NATIVE_DOUBLE, "m²");
         w.strings_dataset(zones.get(), "name", names);
         w.strings_dataset(zones.get(), "region", regions);
+    }
+
+    // The lab notebook: one row per note, in time order, as parallel string columns (trial empty:
+    // about the campaign); written even when empty, so a script need not test for the group.
+    {
+        Handle notes = w.group(w.root(), "notes");
+        std::vector<std::string> utc, author, kind, text, trial;
+        for (const auto& n : c.notes) {
+            utc.push_back(analysis::iso_utc_ms(n.utc_ns));
+            author.push_back(n.author);
+            kind.push_back(n.kind);
+            text.push_back(n.text);
+            trial.push_back(n.trial);
+        }
+        w.strings_dataset(notes.get(), "utc", utc);
+        w.strings_dataset(notes.get(), "author", author);
+        w.strings_dataset(notes.get(), "kind", kind);
+        w.strings_dataset(notes.get(), "text", text);
+        w.strings_dataset(notes.get(), "trial", trial);
     }
 
     Handle trials = w.group(w.root(), "trials");

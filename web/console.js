@@ -263,24 +263,53 @@ function renderDevices(s) {
   }
 }
 
+// ISA-18.2 states (daemon/alarm_book.hpp): what each means to the operator.
+const ALARM_STATE_TEXT = {
+  UNACK: "active, not acknowledged",
+  ACKED: "active, acknowledged",
+  RTN_UNACK: "returned to normal, not acknowledged",
+  SHELVED: "shelved",
+};
+
 function renderAlarms(alarms) {
   const table = $("alarms");
-  table.innerHTML = "<tr><th>time</th><th>severity</th><th>what</th><th></th></tr>";
-  for (const a of alarms.slice(-20).reverse()) {
-    const tr = el("tr", { "data-alarm": a.id });
+  table.innerHTML = "<tr><th>raised</th><th>severity</th><th>state</th><th>what</th><th></th></tr>";
+  // Active ones first (unacknowledged before acknowledged), then returned, then shelved; newest first within.
+  const rank = { UNACK: 0, ACKED: 1, RTN_UNACK: 2, SHELVED: 3 };
+  const shown = alarms.slice().sort((a, b) => (rank[a.state] ?? 4) - (rank[b.state] ?? 4) || b.id - a.id).slice(0, 20);
+  const active = alarms.filter((a) => a.state === "UNACK" || a.state === "ACKED").length;
+  $("alarm-count").textContent = alarms.length
+    ? `${active} active · ${alarms.length - active} returned or shelved (${alarms.length} open)` : "none open";
+  for (const a of shown) {
+    const tr = el("tr", { "data-alarm": a.id, "data-state": a.state || "", class: "alarm-" + (a.state || "").toLowerCase() });
     tr.appendChild(el("td", {}, new Date(a.utc_ms).toLocaleTimeString()));
     const sev = el("td");
     sev.appendChild(el("span", { class: "badge " + a.severity }, a.severity));
     tr.appendChild(sev);
-    tr.appendChild(el("td", {}, `${a.kind}: ${a.message}`));
-    const ack = el("td");
-    if (a.acknowledged) ack.textContent = "acknowledged";
-    else {
+    let state = ALARM_STATE_TEXT[a.state] || a.state || "";
+    if (a.state === "SHELVED" && a.shelved_until_utc_ms) state += ` until ${new Date(a.shelved_until_utc_ms).toLocaleTimeString()}`;
+    if (a.acknowledged && a.acknowledged_by) state += ` (by ${a.acknowledged_by})`;
+    tr.appendChild(el("td", {}, state));
+    let what = `${a.kind}: ${a.message}`;
+    if (a.count > 1) what += ` (×${a.count})`;
+    if (a.cleared_message) what += ` → ${a.cleared_message}`;
+    tr.appendChild(el("td", {}, what));
+    const actions = el("td");
+    if (!a.acknowledged) {
       const b = el("button", {}, "Acknowledge");
       b.addEventListener("click", () => command({ cmd: "ack_alarm", id: a.id }));
-      ack.appendChild(b);
+      actions.appendChild(b);
     }
-    tr.appendChild(ack);
+    if (a.state === "SHELVED") {
+      const b = el("button", {}, "Unshelve");
+      b.addEventListener("click", () => command({ cmd: "unshelve_alarm", id: a.id }));
+      actions.appendChild(b);
+    } else {
+      const b = el("button", { title: "hide it for one hour; it comes back by itself" }, "Shelve 1 h");
+      b.addEventListener("click", () => command({ cmd: "shelve_alarm", id: a.id, duration_s: 3600 }));
+      actions.appendChild(b);
+    }
+    tr.appendChild(actions);
     table.appendChild(tr);
   }
 }
@@ -342,18 +371,39 @@ function drawParity(points) {
   svg.appendChild(el("svg:text", { x: 250, y: 158 }, "baseline twin, W/m² →"));
 }
 
+// True when the daemon did it.
 async function command(body) {
   body.token = $("token").value;
   const out = $("command-result");
   try {
     const r = await fetch("/api/command", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
     const j = await r.json();
-    out.textContent = j.ok ? `${body.cmd}: done` : `${body.cmd} refused: ${j.error}`;
+    let text = j.ok ? `${body.cmd}: done` : `${body.cmd} refused: ${j.error}`;
+    if (!j.ok && /token/.test(j.error || "")) text += " (the token: see the note under the token field)";
+    out.textContent = text;
     out.className = j.ok ? "ok" : "error";
+    return !!j.ok;
   } catch (e) {
     out.textContent = `${body.cmd}: no answer (${e})`;
     out.className = "error";
+    return false;
   }
+}
+
+// The campaign's notebook, newest first (text shown as text, never as markup).
+async function renderNotes(campaign) {
+  const list = $("notes-list");
+  if (!campaign) { list.textContent = ""; return; }
+  try {
+    const r = await fetch(`/api/notes?campaign=${encodeURIComponent(campaign)}`);
+    if (!r.ok) return;
+    const notes = await r.json();
+    list.textContent = "";
+    for (const n of notes.slice().reverse().slice(0, 10)) {
+      const about = n.trial_id === null ? "campaign" : `trial ${n.trial_id}`;
+      list.appendChild(el("li", {}, `${n.utc} · ${n.author} · ${n.kind} · ${about}: ${n.text}`));
+    }
+  } catch (e) { /* the connection badge says when the daemon is gone */ }
 }
 
 function onUpdate(msg) {
@@ -400,10 +450,25 @@ async function main() {
     command({ cmd: "abort", confirm: $("abort-typed").value, reason: $("abort-reason").value || "aborted from the console" });
     $("abort-confirm").hidden = true;
   });
+  $("note-form").addEventListener("submit", async (e) => {
+    e.preventDefault();
+    const s = latest && latest.status ? latest.status : {};
+    const campaign = $("note-campaign").value.trim() || s.campaign || s.last_campaign || "";
+    const body = { cmd: "note", campaign, kind: $("note-kind").value, text: $("note-text").value };
+    if ($("note-author").value.trim()) body.author = $("note-author").value.trim();
+    if ($("note-trial").checked) {
+      if (!s.trial || !s.trial.id) { $("command-result").textContent = "note: no trial is running"; $("command-result").className = "error"; return; }
+      body.trial = s.trial.id;
+    }
+    if (await command(body)) { $("note-text").value = ""; renderNotes(campaign); }
+  });
   connect();
   renderHistory();
   setInterval(renderHistory, 5000);
   setInterval(() => { if (latest) renderResults(latest.status); }, 5000);
+  // The notebook of the campaign named in the form, else the running (or last) one.
+  const notesCampaign = () => $("note-campaign").value.trim() || (latest && latest.status && (latest.status.campaign || latest.status.last_campaign)) || "";
+  setInterval(() => renderNotes(notesCampaign()), 5000);
 }
 
 document.addEventListener("DOMContentLoaded", main);

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <string>
 #include <sys/stat.h>
@@ -564,4 +565,43 @@ TEST_CASE("a last number without a final newline reads completely") {
     const auto c = an::read_campaign(copy.path);
     REQUIRE(c.trials[2].data.rows() == 7);
     CHECK(c.trials[2].data.heat_flux_w_m2[1].back() == 25.0);
+}
+
+TEST_CASE("the lab notebook travels in campaign.json: written, read back, and a bad note named by its field") {
+    TempDir dir;
+    auto c = an::read_campaign(recordings("good-2zone"));
+    REQUIRE_FALSE(c.trials.empty());
+    c.notes.push_back({1780000000250000000, "ana", "operator", "Ana ran it", ""});
+    c.notes.push_back({1780000100000000000, "bo", "garment", "sleeve torn,\n\"zone 12\" reads low", c.trials[0].info.id});
+    an::write_campaign(dir.path, c);
+    const auto back = an::read_campaign(dir.path);
+    REQUIRE(back.notes.size() == 2);
+    CHECK(back.notes[0].utc_ns == 1780000000250000000);
+    CHECK(back.notes[0].trial.empty());
+    CHECK(back.notes[1].text == "sleeve torn,\n\"zone 12\" reads low");
+    CHECK(back.notes[1].trial == c.trials[0].info.id);
+    CHECK(back.warnings.empty());
+
+    // Each bad note is refused with the file and the field.
+    std::ifstream in(dir.path / "campaign.json");
+    const auto doc = nlohmann::json::parse(in);
+    auto refused = [&](const std::function<void(nlohmann::json&)>& spoil) {
+        auto bad = doc;
+        spoil(bad);
+        std::ofstream(dir.path / "campaign.json") << bad.dump(2);
+        try {
+            (void)an::read_campaign(dir.path);
+        } catch (const an::InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    CHECK(refused([](nlohmann::json& j) { j["notes"] = "x"; }).find("(field 'notes'): expected an array") != std::string::npos);
+    CHECK(refused([](nlohmann::json& j) { j["notes"][0]["kind"] = "gossip"; }).find("(field 'notes[0].kind')") != std::string::npos);
+    CHECK(refused([](nlohmann::json& j) { j["notes"][1]["trial"] = "c99-r9"; }).find("(field 'notes[1].trial'): no trial 'c99-r9'") != std::string::npos);
+    CHECK(refused([](nlohmann::json& j) { j["notes"][0]["utc"] = "yesterday"; }).find("(field 'notes[0].utc')") != std::string::npos);
+    CHECK(refused([](nlohmann::json& j) { j["notes"][0].erase("author"); }).find("(field 'notes[0].author'): required key is missing") != std::string::npos);
+    CHECK(refused([](nlohmann::json& j) { j["notes"][0]["text"] = std::string(4001, 'a'); }).find("4001 bytes") != std::string::npos);
+    CHECK(refused([](nlohmann::json& j) { j["notes"][0]["text"] = 7; }).find("(field 'notes[0].text'): expected a string") != std::string::npos);
+    CHECK(refused([](nlohmann::json&) {}) == "no error");
 }

@@ -358,8 +358,15 @@ TEST_CASE("archive pull gives analyze the same campaign as the lab database", "[
             add_samples(db, lab.running_trial, lab.channels, 1200, 300);
             db.add_event(lab.running_trial, 6'499 * second_ns, 1'790'004'499 * second_ns, "info", "stage", "stopping");
             db.set_trial_state(lab.running_trial, "done", "steady", 1'790'005'000 * second_ns);
+            // The lab notebook: one note on the campaign, one on a trial (newline and quote inside).
+            const auto campaign = db.find_campaign("archive-test").value();
+            db.add_note({0, campaign, std::nullopt, 1'790'000'010 * second_ns, "ana", "operator", "Ana ran it"});
+            db.add_note({0, campaign, lab.done_trial, 1'790'000'020 * second_ns, "bo", "garment", "sleeve \"torn\",\n\tzone 12"});
         }
-        push(db_path, server.conninfo(), "lab-3");
+        const auto pushed = push(db_path, server.conninfo(), "lab-3");
+        CHECK(pushed.notes.sent == 2);
+        CHECK(pushed.notes.added == 2);
+        CHECK(push(db_path, server.conninfo(), "lab-3").notes.added == 0);  // never twice
 
         auto original = Database::open(db_path);
         const auto want = manikind::campaign_from_database(original, "archive-test");
@@ -370,6 +377,18 @@ TEST_CASE("archive pull gives analyze the same campaign as the lab database", "[
         const auto got = manikind::campaign_from_database(pulled_db, "archive-test");
         REQUIRE(want.trials.size() == 2);
         check_same_campaign(want, got);
+        CHECK(pulled.notes == 2);
+        REQUIRE(got.notes.size() == 2);
+        REQUIRE(want.notes.size() == 2);
+        for (std::size_t i = 0; i < 2; ++i) {
+            CHECK(got.notes[i].utc_ns == want.notes[i].utc_ns);
+            CHECK(got.notes[i].author == want.notes[i].author);
+            CHECK(got.notes[i].kind == want.notes[i].kind);
+            CHECK(got.notes[i].text == want.notes[i].text);
+            CHECK(got.notes[i].trial == want.notes[i].trial);
+        }
+        CHECK(got.notes[1].text == "sleeve \"torn\",\n\tzone 12");
+        CHECK_FALSE(got.notes[1].trial.empty());
         // The UUIDs, states and times travel as they were.
         const auto want_trials = original.trials(original.find_campaign("archive-test").value());
         const auto got_trials = pulled_db.trials(pulled_db.find_campaign("archive-test").value());

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "daemon/control_api.hpp"
+#include "store/database_export.hpp"
 #include "daemon_fixture.hpp"
 
 using manikind::ControlOptions;
@@ -92,6 +93,53 @@ TEST_CASE("control server: Unix socket is 0660 and answers newline-delimited JSO
     CHECK(server.shutdown_requested());
 }
 
+TEST_CASE("control API: a device that drops out twice and returns is one alarm, returned to normal until acknowledged, then in the history",
+          "[daemon][api][alarms]") {
+    DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"windsonic:silent@5-20", "windsonic:silent@40-55"}; });
+    auto windsonic_alarms = [&](const char* cmd) {
+        nlohmann::json out = nlohmann::json::array();
+        const nlohmann::json reply = ask(f, fmt::format(R"({{"cmd":"{}"}})", cmd));  // kept: the loop reads into it
+        for (const auto& a : reply["alarms"])
+            if (a["kind"] == "gap" && a["source"] == "windsonic") out.push_back(a);
+        return out;
+    };
+    for (int i = 0; i < 15; ++i) f.daemon().step_virtual(1.0);
+    auto open = windsonic_alarms("alarms");
+    REQUIRE(open.size() == 1);
+    CHECK(open[0]["state"] == "UNACK");
+    for (int i = 0; i < 25; ++i) f.daemon().step_virtual(1.0);  // back at 20 s
+    open = windsonic_alarms("alarms");
+    REQUIRE(open.size() == 1);
+    CHECK(open[0]["state"] == "RTN_UNACK");
+    CHECK(open[0]["cleared_message"].get<std::string>().find("windsonic back after") != std::string::npos);
+    for (int i = 0; i < 40; ++i) f.daemon().step_virtual(1.0);  // lost again at 40 s, back at 55 s
+    open = windsonic_alarms("alarms");
+    REQUIRE(open.size() == 1);  // the same line, counted, not a second one
+    CHECK(open[0]["count"] == 2);
+    CHECK(open[0]["state"] == "RTN_UNACK");
+    const auto id = open[0]["id"].get<long>();
+    // Shelving needs the token and a bounded length.
+    CHECK(ask(f, fmt::format(R"({{"cmd":"shelve_alarm","id":{},"duration_s":60}})", id))["error"] == "wrong or missing token");
+    CHECK(ask(f, fmt::format(R"({{"cmd":"shelve_alarm","token":"s3cret","id":{},"duration_s":1e9}})", id))["ok"] == false);
+    CHECK(ask(f, fmt::format(R"({{"cmd":"ack_alarm","token":"s3cret","id":{}}})", id))["ok"] == true);
+    CHECK(windsonic_alarms("alarms").empty());
+    const auto history = windsonic_alarms("alarm_history");
+    REQUIRE(history.size() == 1);
+    CHECK(history[0]["state"] == "NORMAL");
+    CHECK(history[0]["count"] == 2);
+    CHECK_FALSE(history[0]["acknowledged_by"].get<std::string>().empty());
+    // Each change is in the database's event log: the alarm's history outlives the daemon.
+    int raised = 0, returned = 0, acked = 0;
+    for (const auto& e : f.daemon().db().events(std::nullopt)) {
+        if (e.kind == "gap" && e.severity == "warn" && e.message.find("windsonic") != std::string::npos) ++raised;
+        if (e.kind == "gap" && e.severity == "info" && e.message.find("windsonic back") != std::string::npos) ++returned;
+        if (e.kind == "alarm_ack") ++acked;
+    }
+    CHECK(raised == 2);
+    CHECK(returned == 2);
+    CHECK(acked == 1);
+}
+
 TEST_CASE("control API: alarms list every warning, and acknowledging one needs the token and is recorded",
           "[daemon][api]") {
     DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"windsonic:silent@5"}; });
@@ -112,4 +160,48 @@ TEST_CASE("control API: alarms list every warning, and acknowledging one needs t
     for (const auto& e : f.daemon().db().events(std::nullopt))
         if (e.kind == "alarm_ack") recorded = true;
     CHECK(recorded);
+}
+
+TEST_CASE("control API: the lab notebook takes notes on a campaign and its trials, append-only, checked, carried by the export",
+          "[daemon][api][notes]") {
+    DaemonFixture f;
+    auto& d = f.daemon();
+    REQUIRE(d.start_campaign(manikind::test::quick_plan("notebook", 35.0)).empty());
+    for (int i = 0; i < 600 && !d.status_json()["trial"].contains("id"); ++i) d.step_virtual(1.0);
+    const auto trial = d.status_json()["trial"]["id"].get<long long>();
+    auto note = [&](const std::string& fields) { return ask(f, R"({"cmd":"note","token":"s3cret",)" + fields + "}"); };
+    CHECK(note(R"("campaign":"notebook","kind":"operator","text":"Ana ran it","author":"ana")")["ok"] == true);
+    CHECK(note(fmt::format(R"("campaign":"notebook","trial":{},"kind":"ensemble","text":"coverall #3,\nwashed twice")", trial))["ok"] == true);
+    // Refused, with the field named; nothing stored.
+    CHECK(ask(f, R"({"cmd":"note","campaign":"notebook","text":"x"})")["error"] == "wrong or missing token");
+    CHECK(note(R"("campaign":"nope","text":"x")")["error"].get<std::string>().find("\"campaign\": no campaign named 'nope'") == 0);
+    CHECK(note(R"("campaign":"notebook","kind":"gossip","text":"x")")["error"].get<std::string>().find("\"kind\"") == 0);
+    CHECK(note(R"("campaign":"notebook","text":"   ")")["error"].get<std::string>().find("\"text\": empty") == 0);
+    CHECK(note(R"("campaign":"notebook","text":"bell\u0007")")["error"].get<std::string>().find("control characters") != std::string::npos);
+    CHECK(note(fmt::format(R"("campaign":"notebook","text":"{}")", std::string(4001, 'a')))["error"].get<std::string>().find("4001 bytes") !=
+          std::string::npos);
+    CHECK(note(R"("campaign":"notebook","trial":999999,"text":"x")")["error"].get<std::string>().find("\"trial\": no trial 999999") == 0);
+    CHECK(note(R"("campaign":"notebook","trial":1e300,"text":"x")")["error"].get<std::string>().find("\"trial\"") == 0);
+    const auto listed = ask(f, R"({"cmd":"notes","campaign":"notebook"})");
+    REQUIRE(listed["notes"].size() == 2);
+    CHECK(listed["notes"][0]["author"] == "ana");
+    CHECK(listed["notes"][0]["trial_id"].is_null());
+    CHECK(listed["notes"][1]["trial_id"] == trial);
+    CHECK(listed["notes"][1]["text"] == "coverall #3,\nwashed twice");
+    CHECK(listed["notes"][1]["author"] == "a control-socket client");  // no author given: who asked
+    auto& db = d.db();
+    const auto id = db.find_campaign("notebook");
+    REQUIRE(id);
+    CHECK(db.notes(*id).size() == 2);
+
+    // The campaign runs to its end; the export carries both notes, the trial's by its exported id.
+    for (int i = 0; i < 4 * 3600 && d.status_json()["campaign"].is_string(); ++i) d.step_virtual(1.0);
+    d.flush_recorder();
+    const auto c = manikind::campaign_from_database(db, "notebook");
+    REQUIRE(c.trials.size() == 1);
+    REQUIRE(c.notes.size() == 2);
+    CHECK(c.notes[0].trial.empty());
+    CHECK(c.notes[0].kind == "operator");
+    CHECK(c.notes[1].trial == c.trials[0].info.id);
+    CHECK(c.notes[1].text == "coverall #3,\nwashed twice");
 }

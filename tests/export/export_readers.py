@@ -12,6 +12,7 @@ octave: docs/examples/octave_read_hdf5.m runs in GNU Octave on the HDF5 export; 
 Exit 77 (skipped) only when the tool itself is not installed.
 """
 import csv
+import json
 import math
 import os
 import re
@@ -60,6 +61,17 @@ try:
     subprocess.run([manikin, "demo", "--cases", "2", "--replicates", "1", "--out", work], check=True,
                    stdout=subprocess.DEVNULL)
     db = os.path.join(work, "manikind.db")
+    # Two lab-notebook entries, as the daemon stores them (`manikin note`): one on the campaign,
+    # one on its first trial; every export must carry both.
+    rw = sqlite3.connect(db)
+    (campaign_id,) = rw.execute("SELECT id FROM campaigns").fetchone()
+    (first_trial,) = rw.execute("SELECT min(id) FROM trials WHERE state = 'done'").fetchone()
+    rw.execute("INSERT INTO notes (campaign_id, trial_id, utc_ns, author, kind, text) VALUES (?, NULL, 1, 'ana', 'operator', 'Ana ran it')",
+               (campaign_id,))
+    rw.execute("INSERT INTO notes (campaign_id, trial_id, utc_ns, author, kind, text) VALUES (?, ?, 2, 'bo', 'garment', 'sleeve torn, zone 12')",
+               (campaign_id, first_trial))
+    rw.commit()
+    rw.close()
     con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
     (campaign,) = con.execute("SELECT name FROM campaigns").fetchone()
     subprocess.run([manikin, "export", "--db", db, campaign, os.path.join(work, "csv")], check=True,
@@ -73,11 +85,22 @@ try:
             rows = list(csv.reader(f))
         return {name: [r[i] for r in rows[1:]] for i, name in enumerate(rows[0])}
 
+    with open(os.path.join(work, "csv", "campaign.json")) as f:
+        notes = json.load(f).get("notes", [])
+    if [(n["author"], n["kind"], n["text"], "trial" in n) for n in notes] != [
+            ("ana", "operator", "Ana ran it", False), ("bo", "garment", "sleeve torn, zone 12", True)]:
+        fail(f"campaign.json notes: {notes!r}")
+
     if mode == "h5py":
         checked = 0
         with h5py.File(h5_path, "r") as f:
             if f.attrs["format"] != "manikin-hdf5/1":
                 fail(f"format attribute {f.attrs['format']!r}")
+            got = [tuple(x.decode() for x in row) for row in zip(f["notes/author"][:], f["notes/kind"][:], f["notes/text"][:])]
+            if got != [("ana", "operator", "Ana ran it"), ("bo", "garment", "sleeve torn, zone 12")]:
+                fail(f"HDF5 /notes: {got!r}")
+            if f["notes/trial"][1].decode() != notes[1]["trial"] or f["notes/trial"][0] != b"":
+                fail(f"HDF5 /notes/trial: {f['notes/trial'][:]!r}")
             if len(f.attrs["config_sha256"]) != 64 or not f.attrs["program"].startswith("manikind "):
                 fail("provenance attributes missing")
             units = dict(con.execute(

@@ -72,9 +72,14 @@ private:
     std::string error_;
 };
 
-bool has_alarm(manikind::LabDaemon& d, const std::string& kind, const std::string& text) {
+// The open alarm of that kind whose message (or, once returned, its clearing message) holds `text`;
+// `state`: the alarm's life-cycle state it must be in (empty: any).
+bool has_alarm(manikind::LabDaemon& d, const std::string& kind, const std::string& text, const std::string& state = {}) {
     for (const auto& a : d.alarms_json())
-        if (a.value("kind", "") == kind && a.value("message", "").find(text) != std::string::npos) return true;
+        if (a.value("kind", "") == kind &&
+            (a.value("message", "").find(text) != std::string::npos || a.value("cleared_message", "").find(text) != std::string::npos) &&
+            (state.empty() || a.value("state", "") == state))
+            return true;
     return false;
 }
 
@@ -111,7 +116,7 @@ TEST_CASE("a full disk mid-trial: heating stops, trial and campaign interrupted,
     CHECK_FALSE(d.acquisition().manikin().running_command());  // heating stopped
     CHECK(full["campaign"].is_null());
     CHECK(full["stage"] == "idle");
-    CHECK(has_alarm(d, "disk_full", "heating stopped"));
+    CHECK(has_alarm(d, "disk_full", "heating stopped", "UNACK"));
     CHECK(has_alarm(d, "disk_full", "'full-disk' interrupted"));
     // Nothing new starts on a full disk, and the daemon keeps running (readings, ticks, API).
     CHECK(d.start_campaign(quick_plan("another")).find("is full") != std::string::npos);
@@ -124,7 +129,8 @@ TEST_CASE("a full disk mid-trial: heating stops, trial and campaign interrupted,
     for (int s = 0; s < 10 && d.status_json()["storage"]["full"].get<bool>(); ++s) d.step_virtual(1.0);
     CHECK_FALSE(d.status_json()["storage"]["full"].get<bool>());
     CHECK(d.status_json()["storage"]["deferred_writes"] == 0);
-    CHECK(has_alarm(d, "disk_full", "space is back"));
+    // One alarm for the episode: returned to normal, waiting for someone to acknowledge it.
+    CHECK(has_alarm(d, "disk_full", "space is back", "RTN_UNACK"));
     const auto idle_before = d.db().idle_sample_count();
     for (int s = 0; s < 120; ++s) d.step_virtual(1.0);
     d.flush_recorder();

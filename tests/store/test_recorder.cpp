@@ -159,6 +159,38 @@ TEST_CASE("database: a fresh file is at the latest schema, in WAL mode and sound
     CHECK(again.schema_version() == Database::latest_schema_version());
 }
 
+TEST_CASE("database: the lab notebook is append-only: notes are stored by time, and the file refuses an edit or a deletion",
+          "[recorder][notes]") {
+    TempDir dir("notes");
+    auto db = Database::open(dir.path / "trials.db");
+    const auto f = make_fixture(db);
+    db.add_note({0, f.campaign, std::nullopt, 2000, "ana", "operator", "Ana ran it"});
+    db.add_note({0, f.campaign, f.trial, 1000, "bo", "garment", "sleeve torn at zone 12"});
+    const auto notes = db.notes(f.campaign);
+    REQUIRE(notes.size() == 2);
+    CHECK(notes[0].utc_ns == 1000);  // by time, not by insertion
+    CHECK(notes[0].trial_id == f.trial);
+    CHECK(notes[1].author == "ana");
+    CHECK_FALSE(notes[1].trial_id.has_value());
+    // A kind outside the four and a note on no campaign are refused by the schema itself.
+    CHECK_THROWS(db.add_note({0, f.campaign, std::nullopt, 3000, "ana", "gossip", "x"}));
+    CHECK_THROWS(db.add_note({0, 424242, std::nullopt, 3000, "ana", "comment", "x"}));
+    // Another program (sqlite3 on the file) cannot edit or delete one.
+    sqlite3* raw = nullptr;
+    REQUIRE(sqlite3_open((dir.path / "trials.db").c_str(), &raw) == SQLITE_OK);
+    char* err = nullptr;
+    CHECK(sqlite3_exec(raw, "UPDATE notes SET text = 'nothing happened'", nullptr, nullptr, &err) != SQLITE_OK);
+    REQUIRE(err != nullptr);
+    CHECK(std::string(err).find("append-only") != std::string::npos);
+    sqlite3_free(err);
+    err = nullptr;
+    CHECK(sqlite3_exec(raw, "DELETE FROM notes", nullptr, nullptr, &err) != SQLITE_OK);
+    sqlite3_free(err);
+    sqlite3_close(raw);
+    CHECK(db.notes(f.campaign).size() == 2);
+    CHECK(db.notes(f.campaign)[0].text == "sleeve torn at zone 12");
+}
+
 TEST_CASE("database: [recorder] durability picks SQLite's sync level, from the configuration to the daemon's connections",
           "[recorder][durability]") {
     TempDir dir("durability");
