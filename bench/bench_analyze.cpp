@@ -73,12 +73,13 @@ std::size_t floor_parse_files(const std::vector<fs::path>& files, std::size_t k,
 
 std::size_t floor_parse(const fs::path& folder, double& checksum) { return floor_parse_files(trial_files(folder), 0, 1, checksum); }
 
-// The floor on `threads` threads, the files dealt out between them: best of 3, in ms. The
-// command parses on two threads (analyze_campaign_streaming), so the two-thread floor is the
-// one that truly bounds it; the one-thread floor is issue 18's yardstick.
+// The floor on `threads` threads, the files dealt out between them: the median of 3, in ms, the
+// statistic the command's figure uses (issue 36: a best-of-3 floor against a median overstated
+// the ratio). The command parses on two threads (analyze_campaign_streaming), so the two-thread
+// floor is the one that truly bounds it; the one-thread floor is issue 18's yardstick.
 double floor_ms(const fs::path& folder, int threads) {
     const auto files = trial_files(folder);
-    double best_s = 1e9;
+    std::vector<double> runs_s;
     for (int run = 0; run < 3; ++run) {
         std::vector<double> sums(static_cast<std::size_t>(threads), 0.0);
         const auto t0 = Clock::now();
@@ -88,9 +89,10 @@ double floor_ms(const fs::path& folder, int threads) {
                 floor_parse_files(files, static_cast<std::size_t>(k), static_cast<std::size_t>(threads), sums[static_cast<std::size_t>(k)]);
             });
         for (auto& t : pool) t.join();
-        best_s = std::min(best_s, seconds_since(t0));
+        runs_s.push_back(seconds_since(t0));
     }
-    return best_s * 1e3;
+    std::sort(runs_s.begin(), runs_s.end());
+    return runs_s[1] * 1e3;
 }
 
 // Writes a synthetic campaign from a child process. Linux counts the memory a forked child

@@ -7,8 +7,11 @@
 //    - push():   COPY into a staging table, then INSERT ... ON CONFLICT DO NOTHING, 50 000 rows a
 //                transaction (what `manikin archive push` and the daemon do);
 //    - inserts:  one prepared INSERT ... ON CONFLICT DO NOTHING per row, same transactions;
-//    - floor:    COPY of the same rows straight into a table with no key, index or foreign key
-//                (what the server cannot beat for this data).
+//    - floor:    the same rows read from the same SQLite file, written as COPY text and copied
+//                straight into a table with no key, index or foreign key (what the server cannot
+//                beat for this data). Inside its timer, as push has inside its own: the
+//                connection, the table's creation, the SQLite reading and the text (issue 36:
+//                the text had been built before the floor's timer started).
 // 2. The lag behind acquisition in real time: a Recorder fed at the simulated lab's rate times
 //    ten (390 rows/s), committing every second as the daemon does, and the daemon's forwarding
 //    thread (BackgroundForwarder) at its default 5-s interval and at 1 s; every 250 ms, now minus
@@ -25,6 +28,7 @@
 #include <vector>
 
 #include <fmt/core.h>
+#include <sqlite3.h>
 
 #include "archive/background.hpp"
 #include "archive/forwarder.hpp"
@@ -92,17 +96,6 @@ std::string fresh_database(const std::string& admin_conninfo, const std::string&
     return admin_conninfo.substr(0, admin_conninfo.rfind("dbname=")) + "dbname=" + name;
 }
 
-// The same rows push() sends, as the COPY text it builds (device, channel, mono, utc, value, quality).
-std::string copy_text() {
-    std::string data;
-    for (std::int64_t i = 0; i < total_rows; ++i) {
-        const std::int64_t tick = i / channels;
-        data += fmt::format("manikin\tzone{:02}.heat_flux_w_m2\t{}\t{}\t{}\t0\n", i % channels + 1, tick * period_ns,
-                            1'790'000'000'000'000'000 + tick * period_ns, 40.0 + static_cast<double>(i % 997) * 0.013);
-    }
-    return data;
-}
-
 double run_push(const std::string& conninfo, const fs::path& db) {
     ar::PushOptions o;
     o.chunk_rows = chunk_rows;
@@ -148,19 +141,38 @@ double run_inserts(const std::string& conninfo, const fs::path& db) {
     return static_cast<double>(total_rows) / seconds_since(t0);
 }
 
-double run_floor(const std::string& conninfo, const std::string& data) {
+double run_floor(const std::string& conninfo, const fs::path& db) {
+    const auto t0 = Clock::now();
     auto pg = ar::PgConnection::connect(conninfo);
     pg.exec("CREATE TABLE plain (device text, channel text, mono_ns bigint, utc_ns bigint, value double precision,"
             " quality smallint)");
-    const auto t0 = Clock::now();
-    for (std::size_t at = 0; at < data.size();) {
-        std::size_t end = at;
-        for (std::size_t n = 0; n < chunk_rows && end < data.size(); ++n) end = data.find('\n', end) + 1;
+    sqlite3* src = nullptr;
+    if (sqlite3_open_v2(db.c_str(), &src, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) throw std::runtime_error("floor: cannot open the source");
+    sqlite3_stmt* q = nullptr;
+    sqlite3_prepare_v2(src,
+                       "SELECT d.name, c.name, s.mono_ns, s.utc_ns, s.value, s.quality FROM samples s"
+                       " JOIN channels c ON c.id = s.channel_id JOIN devices d ON d.id = c.device_id ORDER BY s.id",
+                       -1, &q, nullptr);
+    std::string data;
+    std::int64_t rows = 0;
+    auto flush = [&] {
         pg.exec("BEGIN");
-        pg.copy_in("COPY plain FROM STDIN", std::string_view(data).substr(at, end - at));
+        pg.copy_in("COPY plain FROM STDIN", data);
         pg.exec("COMMIT");
-        at = end;
+        data.clear();
+    };
+    while (sqlite3_step(q) == SQLITE_ROW) {
+        data += reinterpret_cast<const char*>(sqlite3_column_text(q, 0));
+        data += '\t';
+        data += reinterpret_cast<const char*>(sqlite3_column_text(q, 1));
+        data += fmt::format("\t{}\t{}\t{}\t{}\n", sqlite3_column_int64(q, 2), sqlite3_column_int64(q, 3), sqlite3_column_double(q, 4),
+                            sqlite3_column_int64(q, 5));
+        if (++rows % static_cast<std::int64_t>(chunk_rows) == 0) flush();
     }
+    if (!data.empty()) flush();
+    sqlite3_finalize(q);
+    sqlite3_close(src);
+    if (rows != total_rows) throw std::runtime_error("floor read " + std::to_string(rows) + " rows");
     return static_cast<double>(total_rows) / seconds_since(t0);
 }
 
@@ -225,13 +237,12 @@ int main() {
     fs::create_directories(dir);
     const fs::path source = dir / "source.db";
     make_source(source, true);
-    const std::string data = copy_text();
 
     std::vector<double> push_rps, insert_rps, floor_rps;
     for (int run = 0; run < 3; ++run) {
         push_rps.push_back(run_push(fresh_database(server.conninfo(), fmt::format("push{}", run)), source));
         insert_rps.push_back(run_inserts(fresh_database(server.conninfo(), fmt::format("ins{}", run)), source));
-        floor_rps.push_back(run_floor(fresh_database(server.conninfo(), fmt::format("floor{}", run)), data));
+        floor_rps.push_back(run_floor(fresh_database(server.conninfo(), fmt::format("floor{}", run)), source));
         std::printf("run %d: push (COPY) %.0f rows/s, per-row INSERT %.0f rows/s, COPY floor %.0f rows/s\n", run + 1,
                     push_rps.back(), insert_rps.back(), floor_rps.back());
         std::fflush(stdout);

@@ -276,6 +276,18 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*a, "archive", "lab_name", c.archive.lab_name);
         r.number(*a, "archive", "interval_s", c.archive.interval_s, 0.5, 3600.0, "s");
     }
+    if (const auto* n = r.table(root, "", "notifications")) {
+        auto& x = c.notifications;
+        r.strings(*n, "notifications", "events", x.events);
+        r.text(*n, "notifications", "webhook_url", x.webhook_url);
+        r.text(*n, "notifications", "webhook_format", x.webhook_format, {"json", "slack", "matrix"});
+        r.text(*n, "notifications", "smtp_url", x.smtp_url);
+        r.text(*n, "notifications", "mail_from", x.mail_from);
+        r.strings(*n, "notifications", "mail_to", x.mail_to);
+        r.number(*n, "notifications", "min_interval_s", x.min_interval_s, 0.0, 86400.0, "s");
+        r.number(*n, "notifications", "retries", x.retries, 0.0, 10.0, "tries");
+        r.number(*n, "notifications", "timeout_s", x.timeout_s, 0.5, 120.0, "s");
+    }
     if (const auto* ph = r.table(root, "", "physiological")) {
         auto& p = c.physiological;
         r.number(*ph, "physiological", "coupling_period_s", p.coupling_period_s, 1.0, 600.0, "s");

@@ -111,6 +111,20 @@ struct ArchiveConfig {
     double interval_s = 5.0;  // between forwarding passes while the server answers
 };
 
+// [notifications]: what is sent away from the screen, and where (docs/daemon.md, "Notifications").
+// Off unless a webhook URL or an SMTP URL with recipients is set.
+struct NotificationsConfig {
+    std::vector<std::string> events{"safety", "alarm_error", "campaign_end"};  // notice_kinds()
+    std::string webhook_url;            // http:// or https://
+    std::string webhook_format = "json";// json (ntfy and generic), slack, matrix
+    std::string smtp_url;               // smtp:// or smtps://host:port
+    std::string mail_from;
+    std::vector<std::string> mail_to;
+    double min_interval_s = 60.0;       // per destination: what comes within is sent together
+    double retries = 4;                 // after the first try
+    double timeout_s = 10.0;            // per try
+};
+
 // [physiological]: the manikin under a thermoregulation model's control (docs/thermoregulation.md,
 // "The manikin in the loop"). The limits are the daemon's, enforced whatever the model asks.
 struct PhysiologicalConfig {
@@ -162,6 +176,7 @@ struct Config {
     ApiConfig api;
     HttpConfig http;
     ArchiveConfig archive;
+    NotificationsConfig notifications;
     PhysiologicalConfig physiological;
     std::filesystem::path source_dir;      // relative paths in the file resolve from here
     std::vector<std::string> warnings;     // unknown keys and similar, with file:line

@@ -13,6 +13,7 @@
 #include <libpq-fe.h>
 
 #include "daemon/config.hpp"
+#include "daemon/notifier.hpp"
 #include "daemon/web_server.hpp"
 #include "drivers/register_map.hpp"
 #include "base/user_error.hpp"
@@ -170,6 +171,45 @@ void check_token(const Config& c, std::vector<std::string>& problems) {
                                        c.source_name, c.file_mode & 07777, c.source_name));
 }
 
+// [notifications]: known event kinds, URLs of the schemes libcurl is allowed here, an e-mail with
+// a sender and plain addresses (no header can be smuggled in through one).
+void check_notifications(const Config& c, std::vector<std::string>& problems) {
+    const auto& n = c.notifications;
+    for (std::size_t i = 0; i < n.events.size(); ++i)
+        if (!notice_kinds().count(n.events[i])) {
+            std::string list;
+            for (const auto& k : notice_kinds()) list += (list.empty() ? "" : ", ") + k;
+            problems.push_back(fmt::format("{}: notifications.events: '{}' is not one of {}",
+                                           where_of(c, fmt::format("notifications.events[{}]", i)), n.events[i], list));
+        }
+    auto scheme_ok = [](const std::string& url, std::initializer_list<const char*> schemes) {
+        for (const char* s : schemes)
+            if (url.rfind(s, 0) == 0 && url.size() > std::string(s).size()) return true;
+        return false;
+    };
+    if (!n.webhook_url.empty() && !scheme_ok(n.webhook_url, {"http://", "https://"}))
+        problems.push_back(fmt::format("{}: notifications.webhook_url: expected http://... or https://..., found '{}'",
+                                       where_of(c, "notifications.webhook_url"), n.webhook_url));
+    if (!n.smtp_url.empty() && !scheme_ok(n.smtp_url, {"smtp://", "smtps://"}))
+        problems.push_back(fmt::format("{}: notifications.smtp_url: expected smtp://host:port or smtps://host:port, found '{}'",
+                                       where_of(c, "notifications.smtp_url"), n.smtp_url));
+    if (!n.smtp_url.empty() && (n.mail_from.empty() || n.mail_to.empty()))
+        problems.push_back(fmt::format("{}: notifications: an smtp_url needs mail_from and at least one mail_to",
+                                       where_of(c, "notifications.smtp_url")));
+    auto plain_address = [](const std::string& a) {
+        const auto at = a.find('@');
+        return at != std::string::npos && at > 0 && at + 1 < a.size() && a.size() <= 254 &&
+               std::all_of(a.begin(), a.end(), [](char ch) { return ch > ' ' && ch < 127 && ch != '<' && ch != '>' && ch != ','; });
+    };
+    if (!n.mail_from.empty() && !plain_address(n.mail_from))
+        problems.push_back(fmt::format("{}: notifications.mail_from: expected a plain address like manikind@lab.example, found '{}'",
+                                       where_of(c, "notifications.mail_from"), n.mail_from));
+    for (std::size_t i = 0; i < n.mail_to.size(); ++i)
+        if (!plain_address(n.mail_to[i]))
+            problems.push_back(fmt::format("{}: notifications.mail_to: expected a plain address like ana@lab.example, found '{}'",
+                                           where_of(c, fmt::format("notifications.mail_to[{}]", i)), n.mail_to[i]));
+}
+
 // [archive]: a conninfo libpq parses, a lab id the archive accepts, no password in a file every
 // user can read (docs/archive.md).
 void check_archive(const Config& c, std::vector<std::string>& problems) {
@@ -247,6 +287,7 @@ std::vector<std::string> validate(const Config& c) {
     if (c.mode == "real") check_real_mode(c, problems);
     check_token(c, problems);
     check_archive(c, problems);
+    check_notifications(c, problems);
     check_limits_fit_devices(c, problems);
     return problems;
 }

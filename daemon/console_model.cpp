@@ -72,28 +72,96 @@ void DeviceSeverity::annotate(nlohmann::json& devices, double now_s) {
     }
 }
 
-void ChamberHistory::add(double now_s, const nlohmann::json& live) {
+void ChamberHistory::add(double now_s, std::int64_t utc_ms, const nlohmann::json& live, const nlohmann::json& status) {
+    // The spans' starts follow the daemon's trial and campaign, whatever the step.
+    if (status.is_object()) {
+        const auto& trial = status.contains("trial") ? status["trial"] : nlohmann::json();
+        const std::int64_t id = trial.is_object() && trial.contains("id") && trial["id"].is_number_integer() ? trial["id"].get<std::int64_t>() : 0;
+        if (id != 0 && id != trial_id_) {
+            trial_id_ = id;
+            trial_start_utc_ms_ = utc_ms;
+        }
+        const auto& c = status.contains("campaign") ? status["campaign"] : nlohmann::json();
+        if (c.is_string() && c.get<std::string>() != campaign_) {
+            campaign_ = c.get<std::string>();
+            campaign_start_utc_ms_ = utc_ms;
+        }
+    }
     if (now_s - last_s_ < step_s_) return;
     last_s_ = now_s;
-    auto value = [&](const char* key) -> nlohmann::json {
-        if (!live.contains(key) || !live[key].contains("value")) return nullptr;
-        return live[key]["value"];
+    constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+    auto value = [&](const char* key) {
+        if (!live.contains(key) || !live[key].contains("value") || !live[key]["value"].is_number()) return nan;
+        return live[key]["value"].get<double>();
     };
-    points_.push_back({{"t_s", now_s},
-                       {"air_temp_c", value("datalogger/ee181_1.air_temp_c")},
-                       {"air_temp_pv_c", value("chamber/air_temp_pv_c")},
-                       {"air_temp_setpoint_c", value("chamber/air_temp_remote_setpoint_c")},
-                       {"air_rh_pct", value("datalogger/ee181_1.air_rh_pct")},
-                       {"air_rh_pv_pct", value("chamber/air_rh_pv_pct")},
-                       {"air_rh_setpoint_pct", value("chamber/air_rh_remote_setpoint_pct")},
-                       {"air_speed_m_s", value("windsonic/air_speed_m_s")}});
-    while (!points_.empty() && now_s - points_.front()["t_s"].get<double>() > keep_s_) points_.pop_front();
+    // The setpoint the daemon last sent (status.measured), where the register is not read back.
+    auto sent = [&](const char* key) {
+        if (!status.is_object() || !status.contains("measured") || !status["measured"].contains(key)) return nan;
+        const auto& m = status["measured"][key];
+        return m.contains("setpoint") && m["setpoint"].is_number() ? m["setpoint"].get<double>() : nan;
+    };
+    auto either = [](double a, double b) { return std::isnan(a) ? b : a; };
+    points_.push_back({now_s, utc_ms, value("datalogger/ee181_1.air_temp_c"), value("chamber/air_temp_pv_c"),
+                       either(value("chamber/air_temp_remote_setpoint_c"), sent("chamber_air_temp_c")),
+                       value("datalogger/ee181_1.air_rh_pct"), value("chamber/air_rh_pv_pct"),
+                       either(value("chamber/air_rh_remote_setpoint_pct"), sent("chamber_air_rh_pct")),
+                       value("windsonic/air_speed_m_s"),
+                       status.is_object() && status.contains("stage") && status["stage"].is_string() ? status["stage"].get<std::string>() : ""});
+    while (!points_.empty() && now_s - points_.front().t_s > keep_s_) points_.pop_front();
 }
 
-nlohmann::json ChamberHistory::to_json() const {
+std::size_t ChamberHistory::first_of(const std::string& span) const {
+    std::int64_t since_ms = 0;
+    if (span == "trial" && trial_start_utc_ms_ > 0) since_ms = trial_start_utc_ms_;
+    else if (span == "campaign" && campaign_start_utc_ms_ > 0) since_ms = campaign_start_utc_ms_;
+    else if (!points_.empty()) {
+        const double since_s = points_.back().t_s - 3600.0;
+        std::size_t i = 0;
+        while (i < points_.size() && points_[i].t_s < since_s) ++i;
+        return i;
+    }
+    std::size_t i = 0;
+    while (i < points_.size() && points_[i].utc_ms < since_ms) ++i;
+    return i;
+}
+
+nlohmann::json ChamberHistory::points_json(const std::string& span, std::size_t max_points) const {
     nlohmann::json a = nlohmann::json::array();
-    for (const auto& p : points_) a.push_back(p);
+    const std::size_t first = first_of(span);
+    const std::size_t n = points_.size() - first;
+    if (n == 0 || max_points == 0) return a;
+    const std::size_t stride = (n + max_points - 1) / max_points;
+    auto number = [](double v) { return std::isnan(v) ? nlohmann::json(nullptr) : nlohmann::json(v); };
+    for (std::size_t k = 0; k < n; k += stride) {
+        // The newest point always: the chart ends at now.
+        const std::size_t i = first + (k + stride >= n ? n - 1 : k);
+        const auto& p = points_[i];
+        a.push_back({{"t_s", p.t_s},
+                     {"utc_ms", p.utc_ms},
+                     {"air_temp_c", number(p.air_temp_c)},
+                     {"air_temp_pv_c", number(p.air_temp_pv_c)},
+                     {"air_temp_setpoint_c", number(p.air_temp_setpoint_c)},
+                     {"air_rh_pct", number(p.air_rh_pct)},
+                     {"air_rh_pv_pct", number(p.air_rh_pv_pct)},
+                     {"air_rh_setpoint_pct", number(p.air_rh_setpoint_pct)},
+                     {"air_speed_m_s", number(p.air_speed_m_s)},
+                     {"stage", p.stage}});
+        if (i == first + n - 1) break;
+    }
     return a;
+}
+
+nlohmann::json ChamberHistory::to_json(const std::string& span, std::size_t max_points) const {
+    const std::string s = span == "trial" || span == "campaign" ? span : "1h";
+    const std::size_t first = first_of(s);
+    return {{"span", s},
+            {"step_s", step_s_},
+            {"keep_s", keep_s_},
+            {"covers_from_utc_ms", first < points_.size() ? nlohmann::json(points_[first].utc_ms) : nlohmann::json(nullptr)},
+            {"trial_start_utc_ms", trial_start_utc_ms_ > 0 ? nlohmann::json(trial_start_utc_ms_) : nlohmann::json(nullptr)},
+            {"campaign", campaign_.empty() ? nlohmann::json(nullptr) : nlohmann::json(campaign_)},
+            {"campaign_start_utc_ms", campaign_start_utc_ms_ > 0 ? nlohmann::json(campaign_start_utc_ms_) : nlohmann::json(nullptr)},
+            {"points", points_json(s, max_points)}};
 }
 
 nlohmann::json twin_zone_fluxes(const nlohmann::json& live, bool wet) {

@@ -1,7 +1,9 @@
 #pragma once
 // What the operator console and /metrics show, computed from the daemon's status and live JSON
 // (no I/O, no clock: time is passed in, so every rule here is unit-tested).
+#include <cstdint>
 #include <deque>
+#include <limits>
 #include <map>
 #include <string>
 
@@ -28,18 +30,38 @@ private:
     std::map<std::string, double> last_rise_s_;
 };
 
-// The chamber's last hour for the page's charts: air temperature and RH (EE181 probe 1 and the
-// controller's PV) against their setpoints, and air speed, one point per `step_s`.
+// The chamber's history for the page's time-axis charts: air temperature and RH (EE181 probe 1,
+// the enclosure's reading, and the controller's own PV) against their setpoints, and air speed,
+// one point per `step_s`, kept for `keep_s` (24 h: 17,280 points of 80 bytes). The setpoint is
+// the controller's remote-setpoint register where it is read, else the one the daemon last sent.
+// Spans (issue 35): the last hour, the running (or last) trial, the running (or last) campaign,
+// each since the daemon started at the earliest (said in `covers_from_utc_ms`).
 class ChamberHistory {
 public:
-    explicit ChamberHistory(double keep_s = 3600.0, double step_s = 5.0) : keep_s_(keep_s), step_s_(step_s) {}
-    void add(double now_s, const nlohmann::json& live);
-    nlohmann::json to_json() const;
+    explicit ChamberHistory(double keep_s = 24 * 3600.0, double step_s = 5.0) : keep_s_(keep_s), step_s_(step_s) {}
+    // now_s: a steady clock; utc_ms: the wall clock; status: the daemon's (trial id, campaign,
+    // stage, measured setpoints); live: its channels.
+    void add(double now_s, std::int64_t utc_ms, const nlohmann::json& live, const nlohmann::json& status = nullptr);
+    // span: "1h", "trial", "campaign" (else UserError-free: unknown spans read as "1h"). At most
+    // `max_points` points, thinned evenly (the newest always kept).
+    nlohmann::json to_json(const std::string& span = "1h", std::size_t max_points = 720) const;
+    // The points alone (the span's), as the page's older /api/history gave them.
+    nlohmann::json points_json(const std::string& span = "1h", std::size_t max_points = 720) const;
 
 private:
+    struct Point {
+        double t_s;
+        std::int64_t utc_ms;
+        double air_temp_c, air_temp_pv_c, air_temp_setpoint_c, air_rh_pct, air_rh_pv_pct, air_rh_setpoint_pct, air_speed_m_s;
+        std::string stage;
+    };
+    std::size_t first_of(const std::string& span) const;
     double keep_s_, step_s_;
     double last_s_ = -1e300;
-    std::deque<nlohmann::json> points_;
+    std::deque<Point> points_;
+    // Where the spans begin: the wall time the running (or last) trial and campaign were first seen.
+    std::int64_t trial_id_ = 0, trial_start_utc_ms_ = 0, campaign_start_utc_ms_ = 0;
+    std::string campaign_;
 };
 
 // The baseline twin's heat flux for every zone at the live conditions (EE181 air temperature and

@@ -142,7 +142,25 @@ std::int64_t LabDaemon::now_utc_ns() const { return clock_ ? clock_->utc_ns() : 
 
 void LabDaemon::event(const std::string& severity, const std::string& kind, const std::string& message) {
     log_event(severity, kind, message);
-    if (severity == "warn" || severity == "error") alarms_.raise(severity, kind, "", message, now_utc_ns());
+    if (severity == "warn" || severity == "error") {
+        alarms_.raise(severity, kind, "", message, now_utc_ns());
+        if (kind == "safety") notify_locked("safety", "error", "SAFETY STOP: heating stopped", message);
+        else notify_locked(severity == "error" ? "alarm_error" : "alarm_warn", severity, fmt::format("alarm: {}", kind), message);
+    }
+}
+
+void LabDaemon::set_notice_listener(NoticeListener listener) {
+    std::lock_guard lk(lock_);
+    notice_listener_ = std::move(listener);
+}
+
+void LabDaemon::notify_locked(const std::string& kind, const std::string& severity, const std::string& title, const std::string& body) {
+    if (!notice_listener_) return;
+    try {
+        notice_listener_(kind, severity, title, body, now_utc_ns());
+    } catch (const std::exception& e) {
+        spdlog::warn("a notification could not be queued: {}", e.what());  // never the tick's problem
+    }
 }
 
 void LabDaemon::log_event(const std::string& severity, const std::string& kind, const std::string& message) {
@@ -160,7 +178,10 @@ void LabDaemon::condition(const std::string& severity, const std::string& kind, 
     // Stored and logged like any event; the alarm is one line while the condition lasts.
     const std::string sev = severity == "error" ? "error" : "warn";
     log_event(sev, kind, message);
-    alarms_.raise(sev, kind, source, message, now_utc_ns());
+    bool fresh = false;
+    alarms_.raise(sev, kind, source, message, now_utc_ns(), &fresh);
+    // Once per episode: a device dropping out every minute is one message, not sixty.
+    if (fresh) notify_locked(sev == "error" ? "alarm_error" : "alarm_warn", sev, fmt::format("alarm: {} ({})", kind, source), message);
 }
 
 void LabDaemon::condition_cleared(const std::string& kind, const std::string& source, const std::string& message) {
@@ -770,6 +791,10 @@ void LabDaemon::finish_trial(const std::string& state, const std::string& reason
     }
     trial_summaries_.push_back(fmt::format("case {} replicate {}: {}{}", current_->c.id, current_->replicate, state,
                                            reason.empty() ? "" : " (" + reason + ")"));
+    notify_locked("trial_end", state == "done" ? "info" : "warn",
+                  fmt::format("trial {} (case {} replicate {}) {}", trial_id_, current_->c.id, current_->replicate, state),
+                  fmt::format("'{}': {}{}; {} of {} trials ended", plan_ ? plan_->name : std::string("?"), state,
+                              reason.empty() ? "" : " (" + reason + ")", trials_done_ + 1, trials_total_));
     trial_id_ = 0;
     current_.reset();
     loop_.reset();
@@ -844,6 +869,13 @@ void LabDaemon::finish_campaign(const std::string& state) {
     }
     write([=, campaign = campaign_id_](recorder::Database& db) { db.set_campaign_state(campaign, state); });
     event("info", "campaign", fmt::format("'{}' {}", plan_->name, state));
+    {
+        std::string body;
+        // This campaign's trials: the last trials_total_ summaries (a daemon may have run others before).
+        const std::size_t n = std::min<std::size_t>(trial_summaries_.size(), static_cast<std::size_t>(std::max(0, trials_total_)));
+        for (std::size_t i = trial_summaries_.size() - n; i < trial_summaries_.size(); ++i) body += trial_summaries_[i] + "\n";
+        notify_locked("campaign_end", state == "done" ? "info" : "warn", fmt::format("campaign '{}' {}", plan_->name, state), body);
+    }
     standby_locked(fmt::format("campaign '{}' {}", plan_->name, state));
     plan_.reset();
     paused_ = false;
@@ -1166,6 +1198,8 @@ void LabDaemon::advance_locked() {
                 steady_seen_at_ns_ = now;
                 write([=, trial = trial_id_, since = *steady_since_ns_](recorder::Database& db) { db.set_trial_steady(trial, since); });
                 event("info", "steady", fmt::format("every zone within {:.3f} °C over the last {:.0f} min", worst, window_s / 60));
+                notify_locked("steady", "info", fmt::format("trial {} (case {} replicate {}) steady", trial_id_, current_->c.id, current_->replicate),
+                              fmt::format("every zone within {:.3f} °C over the last {:.0f} min", worst, window_s / 60));
             } else if (!steady && steady_since_ns_) {
                 steady_since_ns_.reset();
             }
@@ -1346,7 +1380,9 @@ nlohmann::json LabDaemon::status_json() {
     std::lock_guard lk(lock_);
     nlohmann::json j;
     j["mode"] = o_.config.mode;
-    j["clock"] = o_.virtual_clock ? "virtual" : "real";
+    // "real" only for a real lab or a simulated one at 1x; a simulated lab sped up says so.
+    j["clock"] = o_.virtual_clock ? "virtual" : (o_.config.mode == "simulated" && o_.speed != 1.0 ? "paced" : "real");
+    j["speed"] = o_.virtual_clock ? nlohmann::json(nullptr) : nlohmann::json(o_.speed);
     j["database"] = db_path_.string();
     j["time_s"] = static_cast<double>(clock_->mono_ns()) * 1e-9;
     j["campaign"] = plan_ ? nlohmann::json(plan_->name) : nlohmann::json(nullptr);
@@ -1362,6 +1398,14 @@ nlohmann::json LabDaemon::status_json() {
                       {"wet", current_->c.wet}, {"stage_elapsed_s", stage_elapsed_s()}};
         if (stage_ == Stage::chamber_settling) j["trial"]["settling"] = settling_json_locked(clock_->mono_ns());
         if (loop_) j["trial"]["model"] = loop_->status_json();  // a physiological trial: the model beside the zones
+        // Each zone's skin setpoint, for the console's deviation view: the case's, or the model's last.
+        nlohmann::json zone_sp = nlohmann::json::array();
+        if (loop_) {
+            for (const double v : loop_->zone_setpoints_c()) zone_sp.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr));
+        } else if (!current_->c.model) {
+            j["trial"]["skin_setpoint_c"] = current_->c.skin_setpoint_c;
+        }
+        j["trial"]["zone_setpoints_c"] = std::move(zone_sp);
         if (stage_ == Stage::acquiring) {
             const SteadyCheck c = check_steady_window_locked(paused_ ? paused_at_ns_ : clock_->mono_ns());
             const double limit_c = o_.config.steady_state.max_skin_fluctuation_c;

@@ -97,6 +97,12 @@ public:
     std::string unshelve_alarm(std::int64_t id, const std::string& who = "the operator");
     // Called (under the daemon's lock: keep it to a flag and a post) after each new sample.
     void set_sample_listener(std::function<void()> listener);
+    // Called under the daemon's lock (keep it to a post: daemon/notifier.hpp) with what people away
+    // from the screen may want: kind (safety, alarm_error, alarm_warn, trial_end, campaign_end,
+    // steady), severity, a title and details.
+    using NoticeListener = std::function<void(const std::string& kind, const std::string& severity, const std::string& title,
+                                              const std::string& body, std::int64_t utc_ns)>;
+    void set_notice_listener(NoticeListener listener);
     // Results so far after each trial, on their own thread. Default: in real time only.
     void set_interim_results(bool on) { interim_results_ = on; }
 
@@ -262,6 +268,8 @@ private:
 
     AlarmBook alarms_;
     std::function<void()> sample_listener_;
+    NoticeListener notice_listener_;
+    void notify_locked(const std::string& kind, const std::string& severity, const std::string& title, const std::string& body);
     std::vector<std::pair<std::string, std::function<nlohmann::json()>>> status_sections_;
 
     std::thread tick_thread_;

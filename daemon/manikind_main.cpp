@@ -30,6 +30,7 @@
 #include "daemon/config.hpp"
 #include "daemon/control_api.hpp"
 #include "daemon/lab_daemon.hpp"
+#include "daemon/notifier.hpp"
 #include "daemon/logging.hpp"
 #include "base/user_error.hpp"
 #include "analysis/physio.hpp"
@@ -116,7 +117,32 @@ int main(int argc, char** argv) {
         // no token file of the first.
         InstanceLock socket_lock = InstanceLock::acquire(api.socket_path, "control socket");
         api.token = load_or_create_token(cfg.api.token, api.socket_path);
+        // [notifications]: made before the daemon so that it outlives every notice the daemon posts
+        // (the last ones at its exit are tried once more as it stops).
+        std::unique_ptr<Notifier> notifier;
+        const auto& nc = cfg.notifications;
+        if (!nc.webhook_url.empty() || (!nc.smtp_url.empty() && !nc.mail_to.empty())) {
+            NotifierOptions no;
+            no.lab_name = cfg.lab_name;
+            no.events = std::set<std::string>(nc.events.begin(), nc.events.end());
+            no.webhook_url = nc.webhook_url;
+            no.webhook_format = nc.webhook_format;
+            no.smtp_url = nc.smtp_url;
+            no.mail_from = nc.mail_from;
+            no.mail_to = nc.mail_to;
+            no.min_interval_s = nc.min_interval_s;
+            no.retries = static_cast<int>(nc.retries);
+            no.timeout_s = nc.timeout_s;
+            notifier = std::make_unique<Notifier>(no);
+        }
         LabDaemon daemon({cfg, virtual_clock, speed});
+        if (notifier) {
+            daemon.set_notice_listener([n = notifier.get()](const std::string& kind, const std::string& severity, const std::string& title,
+                                                            const std::string& body, std::int64_t utc_ns) {
+                n->post({kind, severity, title, body, utc_ns});
+            });
+            daemon.add_status_section("notifications", [n = notifier.get()] { return n->status_json(); });
+        }
         // [archive]: forwarded from the recorder's file on a thread of its own (docs/archive.md).
         std::unique_ptr<archive::BackgroundForwarder> forwarder;
         if (!cfg.archive.postgresql.empty()) {

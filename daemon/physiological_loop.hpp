@@ -77,6 +77,7 @@ public:
     nlohmann::json status_json() const;
     // The model segment of each zone (index = zone - 1), for tests and docs.
     const std::vector<int>& zone_segments() const { return zone_segment_; }
+    const std::vector<double>& zone_setpoints_c() const { return setpoint_c_; }  // last commanded, zone 1 first
 
 private:
     void command_towards(const std::vector<double>& target_c, const std::vector<double>& sweat_g_m2_h, double dt_s,

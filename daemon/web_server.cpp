@@ -136,10 +136,17 @@ struct WebServer::Impl {
         return s;
     }
 
+    static std::int64_t wall_ms() {
+        return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+    }
+    void record_history(const nlohmann::json& live, const nlohmann::json& s) {
+        history.add(std::chrono::duration<double>(steady::now().time_since_epoch()).count(), wall_ms(), live, s);
+    }
+
     nlohmann::json update_message() {
         auto live = daemon.live_json();
-        history.add(std::chrono::duration<double>(steady::now().time_since_epoch()).count(), live);
         auto s = status();
+        record_history(live, s);
         const bool wet = s.contains("trial") && s["trial"].value("wet", false);
         auto twin = console::twin_zone_fluxes(live, wet);
         return {{"type", "update"},
@@ -242,7 +249,12 @@ struct WebServer::Impl {
             if (path == "/api/status") return json_reply(req, http::status::ok, status());
             if (path == "/api/live") return json_reply(req, http::status::ok, daemon.live_json());
             if (path == "/api/zones") return json_reply(req, http::status::ok, zones_json());
-            if (path == "/api/history") return json_reply(req, http::status::ok, history.to_json());
+            if (path == "/api/history") {
+                // ?span=1h|trial|campaign (default 1h); at most 720 points, thinned evenly.
+                std::string span = "1h";
+                if (query.rfind("span=", 0) == 0) span = query.substr(5);
+                return json_reply(req, http::status::ok, history.to_json(span));
+            }
             if (path == "/api/alarms") return json_reply(req, http::status::ok, daemon.alarms_json());
             if (path == "/api/notes") {
                 if (query.rfind("campaign=", 0) != 0) return error(req, http::status::bad_request, "expected ?campaign=NAME");
@@ -497,7 +509,7 @@ struct WebServer::Impl {
     }
     void tick() {
         if (steady::now() - last_push >= std::chrono::milliseconds(900)) broadcast();
-        else history.add(std::chrono::duration<double>(steady::now().time_since_epoch()).count(), daemon.live_json());
+        else record_history(daemon.live_json(), daemon.status_json());
         tick_timer->expires_after(std::chrono::seconds(1));
         tick_timer->async_wait([this](beast::error_code ec) {
             if (!ec) tick();

@@ -30,7 +30,7 @@ struct WebOptions {
     std::size_t max_clients = 32;
     double idle_timeout_s = 120.0;       // HTTP keep-alive and request read; WebSocket pings
     std::size_t max_unsent_bytes = 4 * 1024 * 1024;  // a WebSocket client this far behind is dropped
-    double history_s = 3600.0;           // chamber history kept for the page's charts
+    double history_s = 24 * 3600.0;      // chamber history kept for the page's charts (spans: 1 h, trial, campaign)
 };
 
 // "127.0.0.1:8470" -> host, port. Throws UserError when the host is not a loopback address.

@@ -28,6 +28,8 @@ packages=(
   libpq-dev
   # SHA-256 of configurations and set-ups: OpenSSL's libcrypto.
   libssl-dev
+  # Notifications by webhook and e-mail (docs/daemon.md, "Notifications").
+  libcurl4-openssl-dev
 )
 if [ "$with_tests" = yes ]; then
   packages+=(
@@ -40,6 +42,8 @@ if [ "$with_tests" = yes ]; then
     # The tools labs read exports with (tests/export/): h5py, pandas and GNU Octave; rsvg-convert
     # renders every SVG the tool writes so a malformed one fails (tests/plot/).
     python3-h5py python3-pandas octave librsvg2-bin
+    # A real SMTP server to receive the daemon's e-mail (tests/daemon/notify_peers.py).
+    python3-aiosmtpd
     # scripts/fuzz.sh: clang with libFuzzer and the sanitizer runtimes (libclang-rt-14-dev is
     # only recommended by clang, and recommends are not installed); llvm-symbolizer for traces.
     clang libclang-rt-14-dev llvm

@@ -70,6 +70,30 @@ function drawBody() {
   }
 }
 
+// Fixed colour scales (docs/daemon.md, "Console"), so a colour means the same value in every
+// trial: 0.07 °C of spread no longer fills blue to red. Values beyond clip to the end colour.
+const ZONE_SCALES = {
+  skin_temp_c: { lo: 30, hi: 40, unit: "°C" },
+  deviation: { lo: -0.5, hi: 0.5, unit: "°C from the setpoint" },
+  heat_flux_w_m2: { lo: -100, hi: 300, unit: "W/m² (positive: heat lost)" },
+  heater_power_w_m2: { lo: 0, hi: 400, unit: "W/m²" },
+  residual: { lo: -20, hi: 20, unit: "W/m² measured − twin" },
+};
+// A zone is off its setpoint beyond this (the steady-state rule's order of magnitude, x4).
+const OFF_SETPOINT_C = 0.2;
+
+function zoneSetpoint(z) {
+  const t = latest && latest.status ? latest.status.trial : null;
+  if (!t) return null;
+  if (t.zone_setpoints_c && t.zone_setpoints_c.length >= z.zone && t.zone_setpoints_c[z.zone - 1] !== null) return t.zone_setpoints_c[z.zone - 1];
+  return t.skin_setpoint_c === undefined ? null : t.skin_setpoint_c;
+}
+
+function zoneReading(z, quantity) {
+  if (!latest) return null;
+  return latest.live[`manikin/z${String(z.zone).padStart(2, "0")}.${quantity}`] || null;
+}
+
 function zoneValue(z, quantity) {
   if (!latest) return null;
   if (quantity === "residual") {  // measured minus the baseline twin at the live conditions
@@ -77,44 +101,71 @@ function zoneValue(z, quantity) {
     const twin = latest.twin_q_w_m2 ? latest.twin_q_w_m2[String(z.zone)] : undefined;
     return measured === null || twin === undefined || twin === null ? null : measured - twin;
   }
-  const key = `manikin/z${String(z.zone).padStart(2, "0")}.${quantity}`;
-  const v = latest.live[key];
+  if (quantity === "deviation") {
+    const skin = zoneValue(z, "skin_temp_c"), sp = zoneSetpoint(z);
+    return skin === null || sp === null ? null : skin - sp;
+  }
+  const v = zoneReading(z, quantity);
   return v ? v.value : null;
+}
+
+// Why a zone is marked: its sensor flagged by the manikin, its reading stale, or off its setpoint.
+function zoneMark(z) {
+  const r = zoneReading(z, "skin_temp_c");
+  if (r && r.quality && r.quality !== "good") return `faulted (${r.quality})`;
+  if (r && r.age_s > 10) return `stale (${fmt(r.age_s, 0)} s old)`;
+  const d = zoneValue(z, "deviation");
+  if (d !== null && Math.abs(d) > OFF_SETPOINT_C && latest.status.stage === "acquiring") return `off setpoint by ${fmt(d, 2)} °C`;
+  return "";
 }
 
 function showZone(z) {
   const q = $("zone-quantity").value;
-  const unit = q === "skin_temp_c" ? "°C" : "W/m²";
-  $("zone-hover").textContent = `zone ${z.zone} ${z.name.replaceAll("_", " ")}: ${fmt(zoneValue(z, q))} ${unit}`;
+  const mark = zoneMark(z);
+  $("zone-hover").textContent = `zone ${z.zone} ${z.name.replaceAll("_", " ")}: ${fmt(zoneValue(z, q))} ${ZONE_SCALES[q].unit}` +
+    (mark ? ` · ${mark}` : "");
 }
 
 function paintZones() {
   const q = $("zone-quantity").value;
-  const values = zones.map((z) => zoneValue(z, q)).filter((v) => v !== null);
-  let lo = values.length ? Math.min(...values) : 0, hi = values.length ? Math.max(...values) : 1;
-  if (q === "residual") {  // symmetric about zero: blue below the twin, red above
-    const m = Math.max(Math.abs(lo), Math.abs(hi), 1e-6);
-    lo = -m;
-    hi = m;
-  }
-  const span = hi - lo > 1e-9 ? hi - lo : 1;
+  const { lo, hi, unit } = ZONE_SCALES[q];
   for (const z of zones) {
     const r = $("zone-" + z.zone);
     if (!r) continue;
     const v = zoneValue(z, q);
+    const mark = zoneMark(z);
     r.setAttribute("data-value", v === null ? "" : v.toFixed(3));
+    r.setAttribute("data-mark", mark);
     r.classList.toggle("nodata", v === null);
-    r.style.fill = v === null ? "" : colour((v - lo) / span);
-    r.firstChild.textContent = `${z.zone} ${z.name}: ${fmt(v)}`;
+    r.classList.toggle("marked", mark !== "");
+    r.style.fill = v === null ? "" : colour((v - lo) / (hi - lo));
+    r.firstChild.textContent = `${z.zone} ${z.name}: ${fmt(v)} ${unit}${mark ? " · " + mark : ""}`;
   }
   const legend = $("zone-legend");
   legend.innerHTML = "";
   // Positioned through the CSSOM: the page's Content-Security-Policy refuses style attributes.
-  const low = el("span", {}, fmt(lo)), high = el("span", {}, fmt(hi));
+  const low = el("span", {}, `${fmt(lo, lo % 1 ? 1 : 0)}`), mid = el("span", {}, unit), high = el("span", {}, `${fmt(hi, hi % 1 ? 1 : 0)}`);
   low.style.left = "0";
+  mid.style.left = "35%";
   high.style.right = "0";
-  legend.appendChild(low);
-  legend.appendChild(high);
+  legend.append(low, mid, high);
+  renderZoneTable();
+}
+
+// Every zone in one table: skin, setpoint, deviation, heat flux, heater power, quality and age,
+// the marked ones first.
+function renderZoneTable() {
+  const body = $("zone-table").querySelector("tbody");
+  const rows = zones.map((z) => ({ z, mark: zoneMark(z) })).sort((a, b) => (b.mark !== "") - (a.mark !== "") || a.z.zone - b.z.zone);
+  body.replaceChildren(...rows.map(({ z, mark }) => {
+    const skin = zoneReading(z, "skin_temp_c");
+    const tr = el("tr", { "data-zone": z.zone, class: mark ? "marked" : "" });
+    tr.append(el("td", {}, `${z.zone} ${z.name.replaceAll("_", " ")}`), el("td", {}, fmt(zoneValue(z, "skin_temp_c"), 2)),
+      el("td", {}, fmt(zoneSetpoint(z), 2)), el("td", {}, fmt(zoneValue(z, "deviation"), 2)),
+      el("td", {}, fmt(zoneValue(z, "heat_flux_w_m2"), 1)), el("td", {}, fmt(zoneValue(z, "heater_power_w_m2"), 1)),
+      el("td", {}, skin ? `${skin.quality}, ${fmt(skin.age_s, 0)} s` : "—"), el("td", {}, mark));
+    return tr;
+  }));
 }
 
 function renderTrial(s) {
@@ -191,11 +242,18 @@ function renderTrial(s) {
       ? `in ≥ ${minutes(wait)} (a zone still varies beyond the limit)` : `in ${minutes(wait)}`);
     $("steady-bar").style.width = `${Math.floor(100 * (t.steady_progress || 0))}%`;
   } else {
+    // Not acquiring: the rule's numbers are the running trial's, so say what is awaited instead
+    // of a rule with blanks in it.
     verdict.textContent = "—";
     verdict.className = "badge";
     verdict.setAttribute("data-steady", "none");
     $("steady-bar").style.width = "0%";
+    for (const id of ["steady-range", "steady-window-filled", "steady-elapsed", "steady-eta"]) $(id).textContent = "—";
   }
+  $("steady-rule").hidden = !(t && t.limit_c !== undefined);
+  $("steady-idle").hidden = !!(t && t.limit_c !== undefined);
+  $("steady-idle").textContent = t ? `judged once the trial is acquiring (now: ${s.stage.replaceAll("_", " ")})`
+    : "judged while a trial acquires; no trial is running";
 }
 
 function renderMeasured(s) {
@@ -208,7 +266,9 @@ function renderMeasured(s) {
   table.appendChild(el("tr", {}, "")).innerHTML = "<th></th><th>value</th><th>setpoint</th><th>age</th>";
   for (const [label, v] of rows) {
     if (!v) continue;
-    const tr = el("tr");
+    // A reading older than 10 s, or not good, is greyed: it is not the chamber now.
+    const stale = (v.age_s !== null && v.age_s > 10) || (v.quality && v.quality !== "good");
+    const tr = el("tr", { class: stale ? "stale" : "", title: stale ? `stale: ${v.quality || ""}, ${fmt(v.age_s, 0)} s old` : "" });
     tr.appendChild(el("th", {}, label));
     tr.appendChild(el("td", {}, `${fmt(v.value)} ${v.unit}`));
     tr.appendChild(el("td", {}, v.setpoint === undefined ? "" : `${fmt(v.setpoint, 1)} ${v.unit}`));
@@ -217,33 +277,63 @@ function renderMeasured(s) {
   }
 }
 
-function chart(id, points, measuredKey, setpointKey, unit) {
+// A time-axis chart: the enclosure's reading (solid), the controller's PV (thin), the setpoint
+// (dashed), with the unit, clock times under the axis and the span it covers. `minSpan` keeps a
+// flat signal from filling the height with noise (air speed near zero reads "0.00 to 0.50").
+function chart(id, points, series, unit, minSpan) {
   const svg = $(id);
   svg.innerHTML = "";
-  const pts = points.filter((p) => p[measuredKey] !== null && p[measuredKey] !== undefined);
-  if (pts.length < 2) {
+  const X0 = 44, X1 = 395, Y0 = 100, Y1 = 14;
+  const have = (k) => points.filter((p) => p[k] !== null && p[k] !== undefined);
+  const main = have(series[0].key);
+  if (main.length < 2) {
     svg.appendChild(el("svg:text", { x: 8, y: 60 }, `${unit}: waiting for data`));
     return;
   }
-  const values = pts.map((p) => p[measuredKey]).concat(setpointKey ? pts.map((p) => p[setpointKey]).filter((v) => v !== null) : []);
-  const lo = Math.min(...values), hi = Math.max(...values), span = hi - lo > 1e-6 ? hi - lo : 1;
-  const t0 = pts[0].t_s, t1 = pts[pts.length - 1].t_s, tspan = t1 - t0 > 0 ? t1 - t0 : 1;
-  const xy = (p, k) => `${(40 + 355 * (p.t_s - t0) / tspan).toFixed(1)},${(110 - 100 * (p[k] - lo) / span).toFixed(1)}`;
-  svg.appendChild(el("svg:polyline", { class: "measured", points: pts.map((p) => xy(p, measuredKey)).join(" ") }));
-  if (setpointKey) {
-    const sp = pts.filter((p) => p[setpointKey] !== null && p[setpointKey] !== undefined);
-    if (sp.length > 1) svg.appendChild(el("svg:polyline", { class: "setpoint", points: sp.map((p) => xy(p, setpointKey)).join(" ") }));
+  const values = [];
+  for (const s of series) for (const p of have(s.key)) values.push(p[s.key]);
+  let lo = Math.min(...values), hi = Math.max(...values);
+  if (hi - lo < minSpan) { const mid = (hi + lo) / 2; lo = Math.max(unit.includes("m/s") ? 0 : -Infinity, mid - minSpan / 2); hi = lo + minSpan; }
+  const t0 = points[0].utc_ms, t1 = points[points.length - 1].utc_ms, tspan = Math.max(t1 - t0, 1);
+  const x = (p) => (X0 + (X1 - X0) * (p.utc_ms - t0) / tspan).toFixed(1);
+  const y = (v) => (Y0 - (Y0 - Y1) * (v - lo) / (hi - lo)).toFixed(1);
+  // Axes: value ticks at the ends and the middle, clock times at the ends and the middle.
+  svg.appendChild(el("svg:line", { x1: X0, y1: Y0, x2: X1, y2: Y0, class: "axis" }));
+  svg.appendChild(el("svg:line", { x1: X0, y1: Y1, x2: X0, y2: Y0, class: "axis" }));
+  for (const f of [0, 0.5, 1]) {
+    const v = lo + f * (hi - lo);
+    svg.appendChild(el("svg:text", { x: X0 - 3, y: Number(y(v)) + 3, "text-anchor": "end" }, fmt(v, hi - lo < 2 ? 2 : 1)));
+    const t = new Date(t0 + f * tspan);
+    svg.appendChild(el("svg:text", { x: X0 + f * (X1 - X0), y: 114, "text-anchor": f === 0 ? "start" : f === 1 ? "end" : "middle" },
+      t.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" })));
   }
-  svg.appendChild(el("svg:text", { x: 2, y: 12 }, `${fmt(hi, 1)}`));
-  svg.appendChild(el("svg:text", { x: 2, y: 112 }, `${fmt(lo, 1)}`));
-  svg.appendChild(el("svg:text", { x: 300, y: 12 }, `${unit}, last ${fmt(tspan / 60, 0)} min`));
+  for (const s of series) {
+    const pts = have(s.key);
+    if (pts.length > 1) svg.appendChild(el("svg:polyline", { class: s.cls, points: pts.map((p) => `${x(p)},${y(p[s.key])}`).join(" ") }));
+  }
+  const last = main[main.length - 1][series[0].key];
+  svg.appendChild(el("svg:text", { x: X0 + 2, y: 10 }, `${unit} · now ${fmt(last, 2)} · ${fmt(tspan / 60000, 0)} min`));
+  let lx = 250;
+  for (const s of series) {
+    if (!have(s.key).length) continue;
+    svg.appendChild(el("svg:line", { x1: lx, y1: 7, x2: lx + 12, y2: 7, class: s.cls }));
+    svg.appendChild(el("svg:text", { x: lx + 14, y: 10 }, s.label));
+    lx += 20 + 5.5 * s.label.length;
+  }
 }
 
+let historySpan = "1h";
 async function renderHistory() {
-  const points = await (await fetch("/api/history")).json();
-  chart("chart-temp", points, "air_temp_c", "air_temp_setpoint_c", "air °C");
-  chart("chart-rh", points, "air_rh_pct", "air_rh_setpoint_pct", "RH %");
-  chart("chart-speed", points, "air_speed_m_s", null, "air speed m/s");
+  const h = await (await fetch(`/api/history?span=${historySpan}`)).json();
+  const points = h.points || [];
+  chart("chart-temp", points, [{ key: "air_temp_c", cls: "measured", label: "probe" },
+    { key: "air_temp_pv_c", cls: "pv", label: "PV" }, { key: "air_temp_setpoint_c", cls: "setpoint", label: "setpoint" }], "air °C", 0.5);
+  chart("chart-rh", points, [{ key: "air_rh_pct", cls: "measured", label: "probe" },
+    { key: "air_rh_pv_pct", cls: "pv", label: "PV" }, { key: "air_rh_setpoint_pct", cls: "setpoint", label: "setpoint" }], "RH %", 2);
+  chart("chart-speed", points, [{ key: "air_speed_m_s", cls: "measured", label: "WindSonic" }], "air speed m/s", 0.5);
+  const from = h.covers_from_utc_ms ? new Date(h.covers_from_utc_ms).toLocaleString() : "—";
+  $("history-note").textContent = `span: ${h.span === "1h" ? "last hour" : h.span}, from ${from}` +
+    (h.span !== "1h" && !(h.span === "trial" ? h.trial_start_utc_ms : h.campaign_start_utc_ms) ? " (none seen since the console's daemon started)" : "");
 }
 
 function renderDevices(s) {
@@ -409,7 +499,14 @@ async function renderNotes(campaign) {
 function onUpdate(msg) {
   latest = msg;
   const s = msg.status;
-  $("lab").textContent = `${s.mode} lab · ${s.clock} clock · t = ${fmt(s.time_s, 0)} s`;
+  $("last-update").textContent = new Date(msg.server_utc_ms || Date.now()).toLocaleTimeString();
+  $("hdr-stage").textContent = (s.stage || "—").replaceAll("_", " ") + (s.paused ? " (PAUSED)" : "");
+  const active = (msg.alarms || []).filter((a) => a.state === "UNACK" || a.state === "ACKED").length;
+  const unacked = (msg.alarms || []).filter((a) => !a.acknowledged).length;
+  $("hdr-alarms").textContent = `alarms: ${active} active, ${unacked} to acknowledge`;
+  $("hdr-alarms").className = "badge " + (active ? "MAJOR" : unacked ? "MINOR" : "NO_ALARM");
+  const clock = s.clock === "paced" ? `simulated time at ${s.speed}× the wall clock` : `${s.clock} clock`;
+  $("lab").textContent = `${s.mode} lab · ${clock} · t = ${fmt(s.time_s, 0)} s`;
   renderTrial(s);
   renderMeasured(s);
   renderDevices(s);
@@ -421,11 +518,19 @@ function onUpdate(msg) {
 
 function connect() {
   const ws = new WebSocket(`ws://${location.host}/ws`);
-  ws.onopen = () => { $("connection").textContent = "live"; $("connection").className = "badge NO_ALARM"; };
+  ws.onopen = () => {
+    $("connection").textContent = "live";
+    $("connection").className = "badge NO_ALARM";
+    document.body.classList.remove("disconnected");
+    $("disconnected-banner").hidden = true;
+  };
   ws.onmessage = (e) => onUpdate(JSON.parse(e.data));
   ws.onclose = () => {
-    $("connection").textContent = "disconnected: retrying";
-    $("connection").className = "badge INVALID";
+    // Impossible to miss: the page greys out under a banner saying how old its values are.
+    $("connection").textContent = "DISCONNECTED";
+    $("connection").className = "badge MAJOR";
+    document.body.classList.add("disconnected");
+    $("disconnected-banner").hidden = false;
     setTimeout(connect, 2000);
   };
 }
@@ -436,6 +541,10 @@ async function main() {
   $("zone-quantity").addEventListener("change", paintZones);
   $("pause").addEventListener("click", () => command({ cmd: "pause" }));
   $("resume").addEventListener("click", () => command({ cmd: "resume" }));
+  // The header's copies: the same commands; Abort opens the confirmation below (name and reason).
+  $("hdr-pause").addEventListener("click", () => command({ cmd: "pause" }));
+  $("hdr-resume").addEventListener("click", () => command({ cmd: "resume" }));
+  $("hdr-abort").addEventListener("click", () => { $("abort").click(); $("control-panel").scrollIntoView(); });
   // Abort asks first: the campaign's name typed, and a reason (both recorded by the daemon).
   $("abort").addEventListener("click", () => {
     const running = latest && latest.status ? latest.status.campaign : null;
@@ -462,6 +571,13 @@ async function main() {
     }
     if (await command(body)) { $("note-text").value = ""; renderNotes(campaign); }
   });
+  for (const b of document.querySelectorAll("#history-span button")) {
+    b.addEventListener("click", () => {
+      historySpan = b.dataset.span;
+      for (const o of document.querySelectorAll("#history-span button")) o.classList.toggle("chosen", o === b);
+      renderHistory();
+    });
+  }
   connect();
   renderHistory();
   setInterval(renderHistory, 5000);

@@ -245,3 +245,30 @@ TEST_CASE("manikind refuses to start on a file config check refuses, with the sa
     CHECK_THAT(out, Catch::Contains(file.string() + ":2:") && Catch::Contains("simulation.faults[0]: 'toaster:on_fire'"));
     CHECK_FALSE(fs::exists(dir.path() / "d.sock"));
 }
+
+TEST_CASE("[notifications]: unknown events, URLs of other schemes, e-mail without sender or with a smuggled header are refused with the line",
+          "[daemon][config][notify]") {
+    const auto c = config::parse_config(R"([notifications]
+events = ["safety", "gossip"]
+webhook_url = "file:///etc/passwd"
+smtp_url = "smtp://127.0.0.1:25"
+mail_to = ["ana@lab.example", "bo@lab.example\r\nBcc: all@x"]
+)", "lab.toml");
+    const std::string all = joined(config::validate(c));
+    CHECK_THAT(all, Catch::Contains("lab.toml:2") && Catch::Contains("notifications.events: 'gossip' is not one of"));
+    CHECK_THAT(all, Catch::Contains("lab.toml:3") && Catch::Contains("notifications.webhook_url: expected http://... or https://..."));
+    CHECK_THAT(all, Catch::Contains("notifications: an smtp_url needs mail_from"));
+    CHECK_THAT(all, Catch::Contains("notifications.mail_to: expected a plain address"));
+    // A good one passes.
+    const auto good = config::parse_config(R"([notifications]
+events = ["safety", "alarm_error", "campaign_end", "steady"]
+webhook_url = "https://ntfy.sh/lab"
+webhook_format = "slack"
+smtp_url = "smtps://mail.lab.example:465"
+mail_from = "manikind@lab.example"
+mail_to = ["ana@lab.example"]
+)", "lab.toml");
+    CHECK(joined(config::validate(good)).find("notifications") == std::string::npos);
+    CHECK_THROWS_WITH(config::parse_config("[notifications]\nwebhook_format = \"xml\"\n", "lab.toml"),
+                      Catch::Contains("notifications.webhook_format: 'xml' is not one of json, matrix, slack"));
+}

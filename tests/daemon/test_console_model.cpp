@@ -60,13 +60,50 @@ TEST_CASE("Prometheus text: one TYPE per family, label values escaped, NaN spelt
 TEST_CASE("chamber history keeps one point per step over the last hour", "[daemon][console]") {
     ChamberHistory h(3600.0, 5.0);
     for (int t = 0; t <= 7200; ++t)
-        h.add(t, {{"datalogger/ee181_1.air_temp_c", {{"value", 20.0 + t * 1e-3}}}});
-    const auto points = h.to_json();
+        h.add(t, 1'780'000'000'000 + t * 1000LL, {{"datalogger/ee181_1.air_temp_c", {{"value", 20.0 + t * 1e-3}}}});
+    const auto points = h.points_json("1h", 1000);
     REQUIRE(points.size() == 721);  // 3600 s / 5 s + the newest
     CHECK(points.front()["t_s"] == 3600.0);
     CHECK(points.back()["t_s"] == 7200.0);
+    CHECK(points.back()["utc_ms"] == 1'780'000'000'000 + 7'200'000LL);
     CHECK(points.back()["air_temp_c"] == Approx(27.2));
     CHECK(points.back()["air_rh_pct"].is_null());  // a channel not seen is null, not zero
+    // Thinned to the page's 720 points at most, evenly, the newest kept.
+    const auto thin = h.points_json("1h", 100);
+    CHECK(thin.size() <= 100);
+    CHECK(thin.size() >= 90);
+    CHECK(thin.back()["t_s"] == 7200.0);
+}
+
+TEST_CASE("chamber history: spans of the trial and the campaign, the setpoint the daemon sent where the register is not read",
+          "[daemon][console]") {
+    ChamberHistory h(24 * 3600.0, 5.0);
+    const std::int64_t t0_ms = 1'780'000'000'000;
+    auto status = [](nlohmann::json trial_id, nlohmann::json campaign, double setpoint) {
+        return nlohmann::json{{"campaign", campaign},
+                              {"stage", trial_id.is_null() ? "idle" : "acquiring"},
+                              {"trial", trial_id.is_null() ? nlohmann::json(nullptr) : nlohmann::json{{"id", trial_id}}},
+                              {"measured", {{"chamber_air_temp_c", {{"value", 30.0}, {"setpoint", setpoint}}}}}};
+    };
+    const nlohmann::json live = {{"datalogger/ee181_1.air_temp_c", {{"value", 30.0}}}};
+    for (int t = 0; t < 600; t += 5) h.add(t, t0_ms + t * 1000LL, live, status(nullptr, nullptr, 25.0));           // idle
+    for (int t = 600; t < 3000; t += 5) h.add(t, t0_ms + t * 1000LL, live, status(7, "c", 35.0));                 // trial 7
+    for (int t = 3000; t <= 4000; t += 5) h.add(t, t0_ms + t * 1000LL, live, status(8, "c", 40.0));               // trial 8
+    const auto trial = h.to_json("trial");
+    CHECK(trial["span"] == "trial");
+    CHECK(trial["trial_start_utc_ms"] == t0_ms + 3'000'000);
+    CHECK(trial["points"].front()["t_s"] == 3000.0);
+    CHECK(trial["points"].front()["air_temp_setpoint_c"] == 40.0);  // the daemon's, no register in live
+    const auto campaign = h.to_json("campaign");
+    CHECK(campaign["campaign"] == "c");
+    CHECK(campaign["points"].front()["t_s"] == 600.0);
+    CHECK(campaign["points"].front()["stage"] == "acquiring");
+    CHECK(h.to_json("nonsense")["span"] == "1h");
+    // A register read back wins over what the daemon sent.
+    nlohmann::json with_register = live;
+    with_register["chamber/air_temp_remote_setpoint_c"] = {{"value", 39.5}};
+    h.add(4010, t0_ms + 4'010'000, with_register, status(8, "c", 40.0));
+    CHECK(h.points_json("trial").back()["air_temp_setpoint_c"] == 39.5);
 }
 
 TEST_CASE("the twin's zone fluxes at live conditions: every zone once inputs are there, null while one is missing",

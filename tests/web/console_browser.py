@@ -132,11 +132,34 @@ def main():
         if got:
             check(True, f"the faulted device shows {got}")
 
+        # The zone map's scale is fixed and says its unit (30-40 degC for skin), not the zones' spread.
+        legend = driver.execute_script("return document.getElementById('zone-legend').textContent;")
+        check("30" in legend and "40" in legend and "°C" in legend, f"the zone legend is the fixed 30-40 °C scale with its unit ({legend!r})")
+        # The chart has a time axis, a setpoint line and says its span.
+        wait_for("the chamber chart is drawn", lambda: driver.execute_script(
+            "return document.querySelectorAll('#chart-temp polyline.setpoint').length > 0;"), 60)
+        check(driver.execute_script("return document.querySelectorAll('#chart-temp polyline.setpoint').length;") > 0,
+              "the air-temperature chart draws the setpoint")
+        driver.find_element(By.CSS_SELECTOR, "#history-span button[data-span='trial']").click()
+        check(bool(wait_for("the trial span is shown", lambda: "span: trial" in driver.execute_script(
+            "return document.getElementById('history-note').textContent;"), 15)), "the chart's span switches to the trial")
         if screenshot:  # for docs/: a running trial with its chamber history drawn
-            wait_for("the chamber chart is drawn", lambda: driver.execute_script(
-                "return document.querySelectorAll('#chart-temp polyline').length > 0;"), 30)
             driver.save_screenshot(screenshot)
             print(f"screenshot: {screenshot}")
+
+        # At 800x600 the stage, the alarms and Pause/Abort stay on screen, wherever the page is scrolled.
+        driver.set_window_size(800, 600)
+        driver.execute_script("window.scrollTo(0, 1200);")
+        in_view = driver.execute_script("""
+            const h = window.innerHeight, w = window.innerWidth;
+            return ['hdr-stage', 'hdr-alarms', 'hdr-pause', 'hdr-abort'].every((id) => {
+              const r = document.getElementById(id).getBoundingClientRect();
+              return r.top >= 0 && r.bottom <= h && r.left >= 0 && r.right <= w && r.height > 0; });""")
+        check(in_view, "at 800x600, scrolled down, the stage, the alarm count, Pause and Abort are on screen")
+        if screenshot:
+            driver.save_screenshot(screenshot.replace(".png", "-800x600.png"))
+        driver.set_window_size(1500, 1300)
+        driver.execute_script("window.scrollTo(0, 0);")
 
         token_box = driver.find_element(By.ID, "token")
         result = lambda: driver.execute_script("return document.getElementById('command-result').textContent;")
@@ -160,6 +183,20 @@ def main():
               f"the campaign still runs after the wrong token (stage {before.get('stage')}, campaign {before.get('campaign')})")
         token_box.clear()
         token_box.send_keys(token)
+        # The lab notebook from the console: stored with the author, about the running trial.
+        driver.find_element(By.ID, "note-author").send_keys("ana")
+        driver.find_element(By.ID, "note-kind").send_keys("ensemble")
+        driver.find_element(By.ID, "note-trial").click()
+        driver.find_element(By.ID, "note-text").send_keys("coverall #3 <b>washed</b> twice")
+        driver.find_element(By.ID, "note-add").click()
+        wait_for("the note is stored", lambda: "note: done" in result(), 10)
+        with urllib.request.urlopen(base + "/api/notes?campaign=console", timeout=5) as r:
+            notes = json.load(r)
+        check(len(notes) == 1 and notes[0]["author"] == "ana" and notes[0]["kind"] == "ensemble" and notes[0]["trial_id"],
+              f"the console's note is stored with its author, kind and trial ({notes})")
+        shown = wait_for("the note is listed as text", lambda: driver.execute_script(
+            "const li = document.querySelector('#notes-list li'); return li ? li.textContent : '';"), 15)
+        check(bool(shown) and "<b>washed</b>" in shown, "the note is listed as text, its markup not interpreted")
         abort_with("consle", "a typo in the name")
         wait_for("a mistyped campaign name aborts nothing", lambda: "not the running campaign" in result(), 10)
         check(status().get("campaign") == "console", "the campaign still runs after a mistyped confirmation")
@@ -183,10 +220,18 @@ def main():
         outside = [u for u in urls if not (u.startswith(base + "/") or u.startswith(f"ws://127.0.0.1:{port}/"))]
         check(len(urls) > 3 and not outside,
               f"every request the page made stayed on 127.0.0.1:{port} ({len(urls)} requests; outside: {outside})")
+
+        # The daemon gone: impossible to miss (the page greys out under a banner, the header says so).
+        stop_daemon(daemon, work)
+        daemon = None
+        gone = wait_for("the page shows the daemon is gone", lambda: driver.execute_script(
+            "return document.body.classList.contains('disconnected') && !document.getElementById('disconnected-banner').hidden;"), 15)
+        check(bool(gone), "with the daemon gone the page greys out under a DISCONNECTED banner")
     finally:
         if driver:
             driver.quit()
-        stop_daemon(daemon, work)
+        if daemon:
+            stop_daemon(daemon, work)
 
 
 if __name__ == "__main__":
