@@ -75,6 +75,7 @@ struct TrialInfo {
     std::string ensemble;              // clothing worn: an id of Campaign::ensembles, "nude", or empty (not a clothing test)
     std::string test;                  // "insulation", "evaporative", or empty
     std::string control;               // "physiological" (the thermoregulation model's control), or empty
+    bool partial = false;              // exported while running: up to its last committed reading ("partial": true)
 };
 
 // A clothing ensemble a campaign's trials wear (docs/formats.md, "ensembles").

@@ -679,9 +679,18 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
                     at_key("control"));
         if (info.control == "constant-skin") info.control.clear();
     }
+    if (t.contains("partial")) {
+        if (!t.at("partial").is_boolean()) cj.fail(path + "partial", fmt::format("expected true or false, found {}", t.at("partial").dump()), at_key("partial"));
+        info.partial = t.at("partial").get<bool>();
+        // Said, not hidden: its steady-state verdict and flux are of the trial so far.
+        if (info.partial)
+            warnings.push_back(fmt::format("{}:{}:{}: trial '{}' was exported while running (\"partial\": true): its data end at "
+                                           "the last reading committed then, and any verdict on it is of the trial so far",
+                                           cj.file(), at.line, at.column, info.id));
+    }
     static const std::set<std::string> known{"id",        "case",        "replicate", "file",     "skin_setpoint_c",
                                              "wet",       "wettedness",  "chamber_setpoint",      "started_utc",
-                                             "t0_utc",    "ensemble",    "test",      "control"};
+                                             "t0_utc",    "ensemble",    "test",      "control",  "partial"};
     for (const auto& [key, value] : t.items()) {
         (void)value;
         if (!known.count(key))

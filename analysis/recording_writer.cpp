@@ -216,6 +216,7 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
         if (!i.ensemble.empty()) e["ensemble"] = i.ensemble;
         if (!i.test.empty()) e["test"] = i.test;
         if (!i.control.empty()) e["control"] = i.control;
+        if (i.partial) e["partial"] = true;
         if (i.wettedness) {
             if (*i.wettedness == 0.0 || *i.wettedness == 1.0) e["wet"] = *i.wettedness == 1.0;
             else e["wettedness"] = *i.wettedness;

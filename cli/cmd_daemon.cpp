@@ -11,6 +11,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -20,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "analysis/analyze.hpp"
+#include "analysis/lab_report.hpp"
 #include "analysis/physio.hpp"
 #include "analysis/input_error.hpp"
 #include "daemon/campaign_plan.hpp"
@@ -608,6 +610,73 @@ void add_daemon_commands(CLI::App& app) {
         });
     }
     {
+        struct ReportOptions {
+            std::string db = "manikind.db", campaign, out, trial;
+            bool force = false;
+        };
+        auto o = std::make_shared<ReportOptions>();
+        auto* cmd = app.add_subcommand("report", "Write a printable campaign (or trial) report from the database: conditions, "
+                                                 "stage times, steady-state verdicts, fluxes with 95 % intervals, notes, alarms");
+        cmd->add_option("campaign", o->campaign, "Campaign name (manikin campaigns --db FILE lists them)")->required();
+        cmd->add_option("out", o->out, "The HTML file to write (new; print it from a browser, or save it as PDF there)")->required();
+        cmd->add_option("--db", o->db, "The daemon's database")->capture_default_str();
+        cmd->add_option("--trial", o->trial, "One trial only, by its id in the export (c01-r2)");
+        cmd->add_flag("--force", o->force, "Replace an existing report file (never a database, a device or a folder)");
+        cmd->footer("A running campaign is reported as far as it has gone (its running trial marked so).\n"
+                    "Example: manikin report --db lab.db validation-2026 validation-2026.html");
+        cmd->callback([o] {
+            ExportTarget target(o->out, ExportShape::file, o->force, {o->db});
+            auto db = recorder::Database::open_read_only(o->db);
+            const auto c = campaign_from_database(db, o->campaign, 5.0, true);
+            const auto result = analysis::analyze_campaign(c);
+            analysis::LabReportInput in;
+            in.campaign = &c;
+            in.result = &result;
+            in.only_trial = o->trial;
+            in.generated_utc = analysis::iso_utc_ms(
+                std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+            const auto campaign_id = db.find_campaign(o->campaign).value();
+            std::map<std::int64_t, int> case_number;
+            for (const auto& cs : db.cases(campaign_id)) {
+                const auto cond = nlohmann::json::parse(cs.conditions_json, nullptr, false);
+                case_number[cs.id] = cond.is_object() ? cond.value("id", static_cast<int>(cs.position + 1)) : static_cast<int>(cs.position + 1);
+            }
+            std::int64_t first_utc = 0, last_utc = 0;
+            for (const auto& row : db.campaigns())
+                if (row.id == campaign_id) first_utc = row.created_utc_ns;
+            for (const auto& t : db.trials(campaign_id)) {
+                analysis::ReportTrial rt;
+                rt.id = fmt::format("c{:02d}-r{}", case_number[t.case_id], t.replicate);
+                rt.database_id = t.id;
+                rt.state = recorder::is_terminal_trial_state(t.state) ? t.state : "running";
+                rt.reason = t.reason;
+                for (const auto& e : db.events(t.id)) {
+                    if (e.kind == "stage") rt.stages.push_back({e.utc_ns, e.severity, e.kind, e.message});
+                    if (e.severity == "warn" || e.severity == "error") rt.alarms.push_back({e.utc_ns, e.severity, e.kind, e.message});
+                    last_utc = std::max(last_utc, e.utc_ns);
+                }
+                in.trials.push_back(std::move(rt));
+            }
+            if (!o->trial.empty() && std::none_of(in.trials.begin(), in.trials.end(), [&](const auto& t) { return t.id == o->trial; }))
+                throw UserError(fmt::format("--trial {}: no such trial in '{}' (ids are c<case>-r<replicate>, as the export names them)",
+                                            o->trial, o->campaign),
+                                "bad_usage");
+            // The lab's alarms of no trial while the campaign ran (a device lost between trials, the disk).
+            for (const auto& e : db.events(std::nullopt))
+                if (!e.trial_id && (e.severity == "warn" || e.severity == "error") && e.utc_ns >= first_utc && (last_utc == 0 || e.utc_ns <= last_utc))
+                    in.campaign_alarms.push_back({e.utc_ns, e.severity, e.kind, e.message});
+            in.lab_name = c.provenance.count("lab") ? c.provenance.at("lab") : std::string("manikind");
+            {
+                std::ofstream out(target.staging(), std::ios::binary | std::ios::trunc);
+                out << analysis::lab_report_html(in);
+                out.flush();
+                if (!out) throw UserError(fmt::format("{}: write failed", o->out), "write_failed");
+            }
+            target.commit();
+            std::printf("%s report of '%s' written to %s\n", o->trial.empty() ? "campaign" : "trial", o->campaign.c_str(), o->out.c_str());
+        });
+    }
+    {
         struct ExportOptions {
             std::string db = "manikind.db", campaign, out, format, archive, lab;
             bool json = false, force = false;
@@ -658,7 +727,8 @@ void add_daemon_commands(CLI::App& app) {
                     return campaign_from_archive(o->archive, o->lab, o->campaign);
                 }
                 auto database = recorder::Database::open_read_only(o->db);
-                return campaign_from_database(database, o->campaign);
+                // A trial still acquiring goes too, up to its last committed reading, marked partial.
+                return campaign_from_database(database, o->campaign, 5.0, true);
             }();
             c.provenance["exported_utc"] = analysis::iso_utc_ms(
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
@@ -685,6 +755,11 @@ void add_daemon_commands(CLI::App& app) {
             } else {
                 std::printf("%zu trials of '%s' (%zu rows, %zu recorded channels) written to %s\n", c.trials.size(),
                             o->campaign.c_str(), rows, c.channels.size(), o->out.c_str());
+                for (const auto& t : c.trials)
+                    if (t.info.partial)
+                        std::printf("trial %s is still acquiring: exported up to its last committed reading (%.0f min), marked "
+                                    "\"partial\"\n",
+                                    t.info.id.c_str(), t.data.t_s.empty() ? 0.0 : t.data.t_s.back() / 60.0);
                 if (o->format == "csv") std::printf("analyse with: manikin analyze %s\n", o->out.c_str());
             }
         });

@@ -241,7 +241,10 @@ void ManikinCanDriver::check(std::int64_t now_mono_ns) {
     if (status_.last_good_mono_ns >= 0 && now_mono_ns - status_.last_good_mono_ns > limit_ns) {
         if (!status_.stale) {
             ++status_.timeouts;
+            // What came before (a bus-off, an error frame) stays said: it is likely the cause.
+            const std::string before = status_.last_error;
             status_.last_error = fmt::format("no good frame for more than {} s", options_.stale_after_s);
+            if (!before.empty() && before.rfind("no good frame", 0) != 0) status_.last_error += "; before that: " + before;
         }
         status_.stale = true;
     }

@@ -103,7 +103,9 @@ void SerialLineDriver::check(std::int64_t now_mono_ns) {
         if (status_.last_good_mono_ns >= 0 && now_mono_ns - status_.last_good_mono_ns > limit_ns) {
             if (!status_.stale) {
                 ++status_.timeouts;
+                const std::string before = status_.last_error;
                 status_.last_error = fmt::format("no good line for more than {} s", options_.stale_after_s);
+                if (!before.empty() && before.rfind("no good line", 0) != 0) status_.last_error += "; before that: " + before;
             }
             status_.stale = true;
             went_stale = true;

@@ -42,6 +42,8 @@ if [ "$with_tests" = yes ]; then
     # The tools labs read exports with (tests/export/): h5py, pandas and GNU Octave; rsvg-convert
     # renders every SVG the tool writes so a malformed one fails (tests/plot/).
     python3-h5py python3-pandas octave librsvg2-bin
+    # The README's plotting example (docs/examples/plot_trial.py), run by tests/export/.
+    python3-matplotlib
     # A real SMTP server to receive the daemon's e-mail (tests/daemon/notify_peers.py).
     python3-aiosmtpd
     # scripts/fuzz.sh: clang with libFuzzer and the sanitizer runtimes (libclang-rt-14-dev is

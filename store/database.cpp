@@ -1222,6 +1222,13 @@ std::int64_t Database::sample_count(std::int64_t trial_id) {
     return q.integer(0);
 }
 
+std::optional<std::int64_t> Database::last_sample_mono_ns(std::int64_t trial_id) {
+    Query q(*impl_, "SELECT max(mono_ns) FROM samples WHERE id >= ?1 AND id < ?2");
+    q.bind(trial_id_begin(trial_id), trial_id_end(trial_id));
+    if (!q.step()) return std::nullopt;
+    return q.optional_integer(0);
+}
+
 std::vector<EventRow> Database::events(std::optional<std::int64_t> trial_id) {
     // Two statements rather than "?1 IS NULL OR trial_id = ?1", which the planner cannot
     // answer from events_by_trial_time.

@@ -283,6 +283,7 @@ public:
     // trial's id range: the way to read many channels.
     void for_each_trial_sample(std::int64_t trial_id, const std::function<void(const SampleRow&)>& visit);
     std::int64_t sample_count(std::int64_t trial_id);
+    std::optional<std::int64_t> last_sample_mono_ns(std::int64_t trial_id);  // the latest committed; none before any
     // The idle log (rows pushed with trial_id 0): one channel's readings since a wall time.
     std::vector<SampleRow> idle_samples(std::int64_t channel_id, std::int64_t since_utc_ns);
     std::optional<std::int64_t> newest_idle_utc_ns();  // the idle log's last wall time (a key lookup)

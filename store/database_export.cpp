@@ -1,5 +1,6 @@
 #include "store/database_export.hpp"
 
+#include <set>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -99,7 +100,7 @@ std::vector<double> mean_of(const std::vector<const BinnedChannel*>& series, std
 
 }  // namespace
 
-analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s) {
+analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s, bool include_running) {
     const auto campaign_id = db.find_campaign(name);
     if (!campaign_id) throw UserError(fmt::format("{}: no campaign named '{}'", db.path().string(), name));
     analysis::Campaign c;
@@ -134,17 +135,29 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         std::int64_t start_mono_ns, end_mono_ns, start_utc_ns;
     };
     std::vector<Span> spans;
+    std::set<std::int64_t> partial;  // trial ids exported while running
     for (const auto& t : db.trials(campaign_id.value())) {
-        if (t.state != "done") continue;
+        const bool running = include_running && !recorder::is_terminal_trial_state(t.state) && t.state != "pending";
+        if (t.state != "done" && !running) continue;
         std::optional<recorder::EventRow> start, end;
         for (const auto& e : db.events(t.id)) {
             if (e.kind == "stage" && e.message == "acquiring") start = e;
             if (e.kind == "stage" && e.message == "stopping") end = e;
         }
+        if (running && start && !end) {
+            // Up to the last reading committed now: what a reader of the file sees is all there is.
+            const auto last = db.last_sample_mono_ns(t.id);
+            if (!last || *last <= start->mono_ns) continue;
+            spans.push_back({t, start->mono_ns, *last, start->utc_ns});
+            partial.insert(t.id);
+            continue;
+        }
         if (!start || !end || end->mono_ns <= start->mono_ns) continue;
         spans.push_back({t, start->mono_ns, end->mono_ns, start->utc_ns});
     }
-    if (spans.empty()) throw UserError(fmt::format("campaign '{}' has no finished trial yet", name));
+    if (spans.empty())
+        throw UserError(fmt::format("campaign '{}' has no finished trial yet{}", name,
+                                    include_running ? " and none acquiring" : " (manikin export takes a running one too)"));
 
     // Every channel with samples in any exported trial gets a column in every trial (a fixed
     // set, so a script reads each trial alike).
@@ -206,6 +219,7 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         trial.info.chamber_setpoint_rh_pct = cond.value("chamber_rh_pct", 0.0);
         trial.info.started_utc = sp.row.started_utc_ns ? iso_utc(*sp.row.started_utc_ns) : "";
         trial.info.t0_utc_ns = sp.start_utc_ns;
+        trial.info.partial = partial.count(sp.row.id) > 0;
         auto& d = trial.data;
         for (std::size_t i = 0; i < n; ++i) {
             d.t_s.push_back(static_cast<double>(i) * period_s);

@@ -11,9 +11,11 @@
 
 namespace manikind {
 
-// Throws UserError when the campaign is unknown or has no finished trial.
+// Throws UserError when the campaign is unknown or has no finished trial (with `include_running`:
+// no finished or running one). `include_running`: a trial still acquiring is exported too, from the
+// manikin's start to its last committed reading, marked `partial` (an export taken mid-campaign).
 analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& campaign_name,
-                                          double sample_period_s = 5.0);
+                                          double sample_period_s = 5.0, bool include_running = false);
 
 // `manikin export`: writes campaign.json and trials/*.csv into `folder`.
 void export_campaign(recorder::Database& db, const std::string& campaign_name, const std::filesystem::path& folder);

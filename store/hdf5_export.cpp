@@ -252,6 +252,7 @@ void write_file(const std::filesystem::path& path, const analysis::Campaign& c, 
         if (!t.info.ensemble.empty()) w.attribute(g.get(), "ensemble", t.info.ensemble);
         if (!t.info.test.empty()) w.attribute(g.get(), "test", t.info.test);
         if (!t.info.control.empty()) w.attribute(g.get(), "control", t.info.control);
+        if (t.info.partial) w.attribute(g.get(), "partial", std::int64_t{1});  // exported while running
         if (t.info.t0_utc_ns) w.attribute(g.get(), "t0_utc", analysis::iso_utc_ms(*t.info.t0_utc_ns));
         w.dataset(g.get(), "t_s", d.t_s, H5T_NATIVE_DOUBLE, "s");
         if (!d.utc_ns.empty()) w.dataset(g.get(), "utc_ns", d.utc_ns, H5T_NATIVE_INT64, "ns since 1970-01-01T00:00:00Z");

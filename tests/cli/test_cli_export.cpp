@@ -336,3 +336,51 @@ TEST_CASE("SQLite views: trial_table has a row per 5-s step and a column per cha
     CHECK(sqlite3_column_double(q, 1) > 0.0);
     sqlite3_finalize(q);
 }
+
+TEST_CASE("report: a printable campaign and trial report with conditions, stages, verdicts, fluxes, notes and alarms",
+          "[cli][report]") {
+    const fs::path db_path = recorded_database();
+    std::string campaign;
+    {
+        auto db = manikind::recorder::Database::open(db_path);
+        campaign = only_campaign(db);
+        // A note on the campaign and one on its first trial, as `manikin note` stores them.
+        const auto id = db.find_campaign(campaign).value();
+        const auto first = db.trials(id).front().id;
+        db.add_note({0, id, std::nullopt, 1'790'000'000'000'000'000, "ana", "operator", "Ana ran it <script>alert(1)</script>"});
+        db.add_note({0, id, first, 1'790'000'001'000'000'000, "bo", "garment", "sleeve torn"});
+    }
+    const fs::path out = db_path.parent_path() / "report.html";
+    fs::remove(out);
+    const auto r = run_manikin("report --db " + db_path.string() + " " + campaign + " " + out.string());
+    REQUIRE(r.exit_code == 0);
+    std::ifstream in(out);
+    const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    CHECK(html.find("<h2>Conditions and whole-body heat flux</h2>") != std::string::npos);
+    CHECK(html.find("<svg") != std::string::npos);                         // the results figure
+    CHECK(html.find("<section class=\"trial\"><h2>Trial c01-r1") != std::string::npos);
+    CHECK(html.find("<section class=\"trial\"><h2>Trial c02-r1") != std::string::npos);
+    CHECK(html.find("<td>acquiring</td>") != std::string::npos);           // the stage table
+    CHECK(html.find("Steady state: steady") != std::string::npos);
+    CHECK(html.find("sleeve torn") != std::string::npos);
+    CHECK(html.find("<script>") == std::string::npos);                     // a note is text, never markup
+    CHECK(html.find("&lt;script&gt;") != std::string::npos);
+    // The case's flux and interval, as `manikin analyze --db` gives them.
+    const auto a = run_manikin("analyze --db " + db_path.string() + " --campaign " + campaign + " --json");
+    REQUIRE(a.exit_code == 0);
+    const auto wb = nlohmann::json::parse(a.out)["cases"][0]["whole_body"];
+    CHECK(html.find(fmt::format("<td>{:.2f}</td><td>{:.2f}</td>", wb["q_w_m2"].get<double>(), wb["U"].get<double>())) !=
+          std::string::npos);
+    // One trial only; an unknown trial and the database as the output are refused.
+    const fs::path one = db_path.parent_path() / "trial.html";
+    fs::remove(one);
+    REQUIRE(run_manikin("report --db " + db_path.string() + " " + campaign + " " + one.string() + " --trial c02-r1").exit_code == 0);
+    std::ifstream in1(one);
+    const std::string html1((std::istreambuf_iterator<char>(in1)), std::istreambuf_iterator<char>());
+    CHECK(html1.find("Trial c02-r1") != std::string::npos);
+    CHECK(html1.find("Trial c01-r1") == std::string::npos);
+    CHECK(run_manikin("report --db " + db_path.string() + " " + campaign + " " + (db_path.parent_path() / "x.html").string() +
+                      " --trial c09-r9").exit_code == 2);
+    CHECK(run_manikin("report --db " + db_path.string() + " " + campaign + " " + db_path.string() + " --force").exit_code != 0);
+    CHECK(fs::file_size(db_path) > 100000);  // still the database
+}

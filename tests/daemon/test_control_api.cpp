@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "daemon/control_api.hpp"
+#include "analysis/recording.hpp"
 #include "store/database_export.hpp"
 #include "daemon_fixture.hpp"
 
@@ -204,4 +205,33 @@ TEST_CASE("control API: the lab notebook takes notes on a campaign and its trial
     CHECK(c.notes[0].kind == "operator");
     CHECK(c.notes[1].trial == c.trials[0].info.id);
     CHECK(c.notes[1].text == "coverall #3,\nwashed twice");
+}
+
+TEST_CASE("export of a running campaign: the trial still acquiring goes up to its last committed reading, marked partial",
+          "[daemon][export]") {
+    DaemonFixture f;
+    auto& d = f.daemon();
+    REQUIRE(d.start_campaign(manikind::test::quick_plan("midway", 35.0)).empty());
+    for (int i = 0; i < 4 * 3600 && d.status_json()["stage"] != "acquiring"; ++i) d.step_virtual(1.0);
+    REQUIRE(d.status_json()["stage"] == "acquiring");
+    for (int i = 0; i < 600; ++i) d.step_virtual(1.0);  // ten minutes into the trial
+    d.flush_recorder();
+    auto& db = d.db();
+    // As before for the analysis: only finished trials.
+    CHECK_THROWS_WITH(manikind::campaign_from_database(db, "midway"), Catch::Contains("no finished trial yet"));
+    const auto c = manikind::campaign_from_database(db, "midway", 5.0, true);
+    REQUIRE(c.trials.size() == 1);
+    CHECK(c.trials[0].info.partial);
+    const double last_t_s = c.trials[0].data.t_s.back();
+    CHECK(last_t_s >= 590.0);
+    CHECK(last_t_s <= 605.0);
+    // Written and read back: marked, and the reader says so.
+    const auto folder = f.dir() / "export";
+    manikind::analysis::write_campaign(folder, c);
+    const auto back = manikind::analysis::read_campaign(folder);
+    REQUIRE(back.trials.size() == 1);
+    CHECK(back.trials[0].info.partial);
+    bool said = false;
+    for (const auto& w : back.warnings) said = said || w.find("exported while running") != std::string::npos;
+    CHECK(said);
 }

@@ -124,7 +124,7 @@ TEST_CASE("notifier: e-mail through a real SMTP server, headers that cannot be s
     CHECK(n.status_json()["email"]["notices_sent"] == 1);
 }
 
-TEST_CASE("notifier: within the interval notices wait and go together; a dead receiver never holds the caller",
+TEST_CASE("notifier: within the interval notices wait and go together, and a dead receiver never holds the caller",
           "[daemon][notify]") {
     SECTION("rate limit: the first at once, the next three as one message") {
         Peer peer("http", 2);

@@ -151,6 +151,22 @@ try:
             fail(f"only {checked} values compared")
         print(f"h5py: {checked} values equal to the CSV export and the database")
 
+        # The plotting example of the README (docs/examples/plot_trial.py, matplotlib) on this export.
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            fail("python3-matplotlib is not installed (scripts/setup.sh --tests installs it): the README's plotting example cannot run")
+        png = os.path.join(work, "trial.png")
+        run = subprocess.run(["/usr/bin/python3", os.path.join(repo, "docs", "examples", "plot_trial.py"), h5_path, png],
+                             capture_output=True, text=True)
+        print(run.stdout, run.stderr)
+        if run.returncode != 0 or not os.path.exists(png):
+            fail("the plotting example failed")
+        with open(png, "rb") as f:
+            head = f.read(8)
+        if head != b"\x89PNG\r\n\x1a\n" or os.path.getsize(png) < 20000:
+            fail(f"the plotting example wrote no real figure ({os.path.getsize(png)} bytes)")
+
     elif mode == "pandas":
         run = subprocess.run(["/usr/bin/python3", os.path.join(repo, "docs", "examples", "pandas_trial_table.py"), db],
                              capture_output=True, text=True)
