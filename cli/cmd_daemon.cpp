@@ -612,7 +612,7 @@ void add_daemon_commands(CLI::App& app) {
     {
         struct ReportOptions {
             std::string db = "manikind.db", campaign, out, trial;
-            bool force = false;
+            bool force = false, json = false;
         };
         auto o = std::make_shared<ReportOptions>();
         auto* cmd = app.add_subcommand("report", "Write a printable campaign (or trial) report from the database: conditions, "
@@ -622,6 +622,7 @@ void add_daemon_commands(CLI::App& app) {
         cmd->add_option("--db", o->db, "The daemon's database")->capture_default_str();
         cmd->add_option("--trial", o->trial, "One trial only, by its id in the export (c01-r2)");
         cmd->add_flag("--force", o->force, "Replace an existing report file (never a database, a device or a folder)");
+        cmd->add_flag("--json", o->json, "Print what was written as one JSON object");
         cmd->footer("A running campaign is reported as far as it has gone (its running trial marked so).\n"
                     "Example: manikin report --db lab.db validation-2026 validation-2026.html");
         cmd->callback([o] {
@@ -673,7 +674,12 @@ void add_daemon_commands(CLI::App& app) {
                 if (!out) throw UserError(fmt::format("{}: write failed", o->out), "write_failed");
             }
             target.commit();
-            std::printf("%s report of '%s' written to %s\n", o->trial.empty() ? "campaign" : "trial", o->campaign.c_str(), o->out.c_str());
+            if (o->json)
+                std::printf("%s\n", nlohmann::json{{"campaign", o->campaign}, {"path", o->out}, {"format", "html"},
+                                                   {"trial", o->trial.empty() ? nlohmann::json(nullptr) : nlohmann::json(o->trial)},
+                                                   {"trials", in.trials.size()}}.dump(2).c_str());
+            else
+                std::printf("%s report of '%s' written to %s\n", o->trial.empty() ? "campaign" : "trial", o->campaign.c_str(), o->out.c_str());
         });
     }
     {
