@@ -84,7 +84,8 @@ void ChamberHistory::add(double now_s, std::int64_t utc_ms, const nlohmann::json
         const auto& c = status.contains("campaign") ? status["campaign"] : nlohmann::json();
         if (c.is_string() && c.get<std::string>() != campaign_) {
             campaign_ = c.get<std::string>();
-            campaign_start_utc_ms_ = utc_ms;
+            const auto known = campaign_starts_.find(campaign_);
+            campaign_start_utc_ms_ = known != campaign_starts_.end() ? known->second : utc_ms;
         }
     }
     if (now_s - last_s_ < step_s_) return;
@@ -108,6 +109,23 @@ void ChamberHistory::add(double now_s, std::int64_t utc_ms, const nlohmann::json
                        value("windsonic/air_speed_m_s"),
                        status.is_object() && status.contains("stage") && status["stage"].is_string() ? status["stage"].get<std::string>() : ""});
     while (!points_.empty() && now_s - points_.front().t_s > keep_s_) points_.pop_front();
+}
+
+void ChamberHistory::seed(std::vector<Point> points, double now_s, std::int64_t now_utc_ms,
+                          std::map<std::string, std::int64_t> campaign_starts_utc_ms) {
+    campaign_starts_ = std::move(campaign_starts_utc_ms);
+    if (!campaign_.empty())
+        if (const auto it = campaign_starts_.find(campaign_); it != campaign_starts_.end()) campaign_start_utc_ms_ = it->second;
+    const std::int64_t first_live_ms = points_.empty() ? now_utc_ms + 1 : points_.front().utc_ms;
+    std::deque<Point> older;
+    for (auto& p : points) {
+        if (p.utc_ms >= first_live_ms || now_utc_ms - p.utc_ms > static_cast<std::int64_t>(keep_s_ * 1000)) continue;
+        p.t_s = now_s - static_cast<double>(now_utc_ms - p.utc_ms) / 1000.0;  // this console's steady clock
+        older.push_back(std::move(p));
+    }
+    if (!older.empty()) seeded_until_utc_ms_ = older.back().utc_ms;
+    for (auto& p : points_) older.push_back(std::move(p));
+    points_ = std::move(older);
 }
 
 std::size_t ChamberHistory::first_of(const std::string& span) const {
@@ -158,6 +176,7 @@ nlohmann::json ChamberHistory::to_json(const std::string& span, std::size_t max_
             {"step_s", step_s_},
             {"keep_s", keep_s_},
             {"covers_from_utc_ms", first < points_.size() ? nlohmann::json(points_[first].utc_ms) : nlohmann::json(nullptr)},
+            {"from_database_until_utc_ms", seeded_until_utc_ms_ > 0 ? nlohmann::json(seeded_until_utc_ms_) : nlohmann::json(nullptr)},
             {"trial_start_utc_ms", trial_start_utc_ms_ > 0 ? nlohmann::json(trial_start_utc_ms_) : nlohmann::json(nullptr)},
             {"campaign", campaign_.empty() ? nlohmann::json(nullptr) : nlohmann::json(campaign_)},
             {"campaign_start_utc_ms", campaign_start_utc_ms_ > 0 ? nlohmann::json(campaign_start_utc_ms_) : nlohmann::json(nullptr)},

@@ -48,13 +48,21 @@ public:
     // The points alone (the span's), as the page's older /api/history gave them.
     nlohmann::json points_json(const std::string& span = "1h", std::size_t max_points = 720) const;
 
-private:
     struct Point {
         double t_s;
         std::int64_t utc_ms;
         double air_temp_c, air_temp_pv_c, air_temp_setpoint_c, air_rh_pct, air_rh_pv_pct, air_rh_setpoint_pct, air_speed_m_s;
         std::string stage;
     };
+    // The history before this console started, read from the database (the idle log and the
+    // trials' samples: docs/daemon.md, "Console"), in time order with t_s unset: placed before
+    // the points already held (older than the first of them), on this console's clock
+    // (now_s, now_utc_ms). `campaign_starts_utc_ms`: when each campaign was created, so a
+    // campaign span starts there rather than when this console first saw it.
+    void seed(std::vector<Point> points, double now_s, std::int64_t now_utc_ms,
+              std::map<std::string, std::int64_t> campaign_starts_utc_ms);
+
+private:
     std::size_t first_of(const std::string& span) const;
     double keep_s_, step_s_;
     double last_s_ = -1e300;
@@ -62,6 +70,8 @@ private:
     // Where the spans begin: the wall time the running (or last) trial and campaign were first seen.
     std::int64_t trial_id_ = 0, trial_start_utc_ms_ = 0, campaign_start_utc_ms_ = 0;
     std::string campaign_;
+    std::map<std::string, std::int64_t> campaign_starts_;  // from the database
+    std::int64_t seeded_until_utc_ms_ = 0;                  // 0: nothing from the database (yet)
 };
 
 // The baseline twin's heat flux for every zone at the live conditions (EE181 air temperature and

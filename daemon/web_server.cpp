@@ -15,7 +15,10 @@
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <deque>
+#include <limits>
+#include <map>
 #include <list>
 #include <mutex>
 #include <sstream>
@@ -23,6 +26,7 @@
 
 #include "analysis/zone_map.hpp"
 #include "daemon/console_model.hpp"
+#include "store/database.hpp"
 #include "base/text.hpp"
 #include "base/user_error.hpp"
 
@@ -36,6 +40,58 @@ using tcp = asio::ip::tcp;
 using steady = std::chrono::steady_clock;
 
 namespace {
+
+// The chamber's history before this console started, from the database (read-only, its own
+// connection: the daemon's lock is never held): the idle log of the five charted channels and,
+// for trials that ran in the window, their samples of them, binned to `step_s`, each trial's
+// chamber setpoints from its case. Errors leave the history as it is (said in the log).
+std::vector<console::ChamberHistory::Point> history_from_database(const std::filesystem::path& db_path, std::int64_t since_utc_ns,
+                                                                  double step_s, std::map<std::string, std::int64_t>& campaign_starts_ms) {
+    constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+    std::map<std::int64_t, console::ChamberHistory::Point> bins;
+    auto db = recorder::Database::open_read_only(db_path);
+    enum Field { air, air_pv, rh, rh_pv, speed };
+    const std::map<std::string, Field> wanted{{"datalogger/ee181_1.air_temp_c", air}, {"chamber/air_temp_pv_c", air_pv},
+                                              {"datalogger/ee181_1.air_rh_pct", rh}, {"chamber/air_rh_pv_pct", rh_pv},
+                                              {"windsonic/air_speed_m_s", speed}};
+    std::map<std::int64_t, Field> channels;
+    for (const auto& ch : db.channels())
+        if (const auto it = wanted.find(ch.device_name + "/" + ch.name); it != wanted.end()) channels[ch.id] = it->second;
+    const auto step_ns = static_cast<std::int64_t>(step_s * 1e9);
+    auto put = [&](const recorder::SampleRow& r, Field f, double sp_air, double sp_rh, const char* stage) {
+        if (r.utc_ns < since_utc_ns || r.quality != 0) return;
+        auto [it, fresh] = bins.try_emplace(r.utc_ns / step_ns, console::ChamberHistory::Point{0.0, (r.utc_ns / step_ns) * step_ns / 1'000'000,
+                                                                                                 nan, nan, sp_air, nan, nan, sp_rh, nan, stage});
+        (void)fresh;
+        double* slot[] = {&it->second.air_temp_c, &it->second.air_temp_pv_c, &it->second.air_rh_pct, &it->second.air_rh_pv_pct,
+                          &it->second.air_speed_m_s};
+        *slot[f] = r.value;
+    };
+    for (const auto& [id, field] : channels)
+        for (const auto& r : db.idle_samples(id, since_utc_ns)) put(r, field, nan, nan, "idle");
+    for (const auto& c : db.campaigns()) {
+        campaign_starts_ms[c.name] = c.created_utc_ns / 1'000'000;
+        std::map<std::int64_t, std::pair<double, double>> setpoints;  // case id -> chamber air, RH
+        for (const auto& k : db.cases(c.id)) {
+            const auto j = nlohmann::json::parse(k.conditions_json, nullptr, false);
+            const auto number = [&](const char* key) {
+                return j.is_object() && j.contains(key) && j[key].is_number() ? j[key].get<double>() : nan;
+            };
+            setpoints[k.id] = {number("chamber_temp_c"), number("chamber_rh_pct")};
+        }
+        for (const auto& t : db.trials(c.id)) {
+            const bool in_window = (t.ended_utc_ns && *t.ended_utc_ns >= since_utc_ns) || (!t.ended_utc_ns && t.started_utc_ns);
+            if (!in_window) continue;
+            const auto sp = setpoints[t.case_id];
+            for (const auto& [id, field] : channels)
+                for (const auto& r : db.samples(t.id, id)) put(r, field, sp.first, sp.second, "trial");
+        }
+    }
+    std::vector<console::ChamberHistory::Point> out;
+    out.reserve(bins.size());
+    for (auto& [bin, p] : bins) out.push_back(std::move(p));
+    return out;
+}
 
 // A query value with its %XX escapes and '+' decoded (a malformed escape is kept as typed).
 std::string percent_decoded(std::string_view v) {
@@ -120,6 +176,11 @@ struct WebServer::Impl {
     bool push_scheduled = false;
     console::DeviceSeverity severity;
     console::ChamberHistory history;
+    // The history before this console started, read from the database on a thread of its own.
+    std::thread seeder;
+    std::mutex seed_lock;
+    std::condition_variable seed_done;
+    bool seeded = false;
     std::vector<std::string> allowed_hosts;  // Host header values this server answers to
 
     // "127.0.0.1:8470", "[::1]:8470": how a browser names this server (URL and Host header).
@@ -579,11 +640,36 @@ void WebServer::start() {
     s.accept();
     s.tick();
     s.thread = std::thread([&s] { run_guarded("console", [&s] { s.io->run(); }); });
+    // The charts' spans reach back before this start: the database's last history_s, read on a
+    // thread of its own (seconds for a day of trials), merged on the server thread.
+    s.seeder = std::thread([&s] {
+        std::vector<console::ChamberHistory::Point> points;
+        std::map<std::string, std::int64_t> starts;
+        try {
+            const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+            points = history_from_database(s.daemon.database_path(), now_ns - static_cast<std::int64_t>(s.o.history_s * 1e9), 5.0, starts);
+        } catch (const std::exception& e) {
+            spdlog::warn("console: the chamber history before this start could not be read from the database: {}", e.what());
+        }
+        asio::post(*s.io, [&s, points = std::move(points), starts = std::move(starts)]() mutable {
+            s.history.seed(std::move(points), std::chrono::duration<double>(steady::now().time_since_epoch()).count(),
+                           static_cast<std::int64_t>(utc_ms()), std::move(starts));
+            std::lock_guard lk(s.seed_lock);
+            s.seeded = true;
+            s.seed_done.notify_all();
+        });
+    });
+}
+
+bool WebServer::wait_history_seeded(std::chrono::milliseconds within) {
+    std::unique_lock lk(impl_->seed_lock);
+    return impl_->seed_done.wait_for(lk, within, [this] { return impl_->seeded; });
 }
 
 void WebServer::stop() {
     Impl& s = *impl_;
     s.daemon.set_sample_listener({});
+    if (s.seeder.joinable()) s.seeder.join();  // its merge runs on the server thread, or not at all once stopped
     if (!s.io) return;
     if (s.thread.joinable()) {
         s.io->stop();

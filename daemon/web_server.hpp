@@ -11,6 +11,7 @@
 // Reading needs no token; anything that changes state needs the API token. Requests whose Host
 // is not this loopback address (DNS rebinding) or whose Origin is another site are refused.
 // Clients follow the control API's rules: a cap, an idle timeout, and a bound on unsent updates.
+#include <chrono>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -46,6 +47,9 @@ public:
     // Where it listens, as a browser is to be pointed at it: "http://127.0.0.2:8470/".
     std::string url() const;
     bool shutdown_requested() const;
+    // The chamber history before start() read from the database and merged (for tests); false
+    // when `within` passed first.
+    bool wait_history_seeded(std::chrono::milliseconds within);
     // One request's bytes parsed with the server's own limits and answered as the server
     // answers it: the response's bytes, or "" where the server would close without a reply. For
     // the fuzz target and tests, on a server that is not started (the server thread owns its state).

@@ -177,3 +177,35 @@ TEST_CASE("console: the URL it prints is where it listens", "[console]") {
     send_all(s.fd, "GET /api/status HTTP/1.1\r\nHost: " + at + "\r\nConnection: close\r\n\r\n");
     CHECK(read_until(s.fd, [](const std::string& t) { return response_length(t) > 0; }).rfind("HTTP/1.1 200", 0) == 0);
 }
+
+TEST_CASE("console: the charts reach back before the console started, read from the database (a campaign recorded earlier)",
+          "[console][history]") {
+    test::DaemonFixture fixture;
+    auto& d = fixture.daemon();
+    REQUIRE(d.start_campaign(test::quick_plan("before", 35.0)).empty());
+    for (int i = 0; i < 4 * 3600 && d.status_json()["campaign"].is_string(); ++i) d.step_virtual(1.0);
+    d.flush_recorder();
+    ControlOptions api;
+    api.token = "test-token-Zq81LmX0pR2v";
+    WebOptions o;
+    o.port = 0;
+    o.history_s = 400 * 86400.0;  // the virtual clock's recording lies in the past: keep all of it
+    WebServer web(d, api, o);
+    web.start();
+    REQUIRE(web.wait_history_seeded(std::chrono::seconds(60)));
+    const auto reply = get(web.port(), "/api/history?span=1h");
+    REQUIRE(reply.rfind("HTTP/1.1 200", 0) == 0);
+    const auto h = nlohmann::json::parse(reply.substr(reply.find("\r\n\r\n") + 4));
+    CHECK_FALSE(h["from_database_until_utc_ms"].is_null());
+    const auto& points = h["points"];
+    REQUIRE(points.size() > 100);  // an hour at 5 s, thinned to at most 720
+    CHECK(points.size() <= 720);
+    int with_setpoint = 0, with_air = 0;
+    for (const auto& p : points) {
+        with_air += p["air_temp_c"].is_number() ? 1 : 0;
+        with_setpoint += p["air_temp_setpoint_c"].is_number() && p["air_temp_setpoint_c"] == 35.0 ? 1 : 0;
+    }
+    CHECK(with_air > 100);
+    CHECK(with_setpoint > 0);  // the trial's case asked 35 °C of the chamber
+    web.stop();
+}

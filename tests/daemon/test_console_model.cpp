@@ -4,6 +4,9 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
+#include <vector>
+
 #include "daemon/console_model.hpp"
 
 using manikind::console::ChamberHistory;
@@ -123,4 +126,27 @@ TEST_CASE("the twin's zone fluxes at live conditions: every zone once inputs are
         CHECK(q.get<double>() > 0.0);
         CHECK(wet[zone].get<double>() > q.get<double>());
     }
+}
+
+TEST_CASE("chamber history: points read from the database go before the live ones, on the console's clock", "[daemon][console]") {
+    ChamberHistory h(24 * 3600.0, 5.0);
+    const std::int64_t now_ms = 1'780'000'000'000;
+    h.add(1000.0, now_ms, {{"datalogger/ee181_1.air_temp_c", {{"value", 30.0}}}});
+    std::vector<ChamberHistory::Point> older;
+    const double nan = std::nan("");
+    for (int i = 0; i < 10; ++i)  // the ten minutes before this console started, every minute
+        older.push_back({0.0, now_ms - (600 - 60 * i) * 1000LL, 29.0 + 0.1 * i, nan, 35.0, 40.0, nan, 30.0, nan, "trial"});
+    older.push_back({0.0, now_ms + 5000, 99.0, nan, nan, nan, nan, nan, nan, "idle"});   // not older than the live: dropped
+    older.push_back({0.0, now_ms - 25 * 3600 * 1000LL, 1.0, nan, nan, nan, nan, nan, nan, "idle"});  // beyond the day kept
+    h.seed(older, 1000.0, now_ms, {{"c", now_ms - 3'600'000}});
+    const auto all = h.points_json("1h", 1000);
+    REQUIRE(all.size() == 11);
+    CHECK(all.front()["utc_ms"] == now_ms - 600'000);
+    CHECK(all.front()["t_s"] == Approx(400.0));  // 600 s before now on the steady clock
+    CHECK(all.front()["air_temp_setpoint_c"] == 35.0);
+    CHECK(all.back()["air_temp_c"] == 30.0);  // the live point stays last
+    CHECK(h.to_json("1h")["from_database_until_utc_ms"] == now_ms - 60'000);
+    // A campaign the database knows starts its span where it was created.
+    h.add(1005.0, now_ms + 5000, {}, {{"campaign", "c"}});
+    CHECK(h.to_json("campaign")["campaign_start_utc_ms"] == now_ms - 3'600'000);
 }
