@@ -638,16 +638,13 @@ void add_daemon_commands(CLI::App& app) {
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
             const auto campaign_id = db.find_campaign(o->campaign).value();
             std::map<std::int64_t, int> case_number;
-            for (const auto& cs : db.cases(campaign_id)) {
-                const auto cond = nlohmann::json::parse(cs.conditions_json, nullptr, false);
-                case_number[cs.id] = cond.is_object() ? cond.value("id", static_cast<int>(cs.position + 1)) : static_cast<int>(cs.position + 1);
-            }
+            for (const auto& cs : db.cases(campaign_id)) case_number[cs.id] = case_number_of(cs);
             std::int64_t first_utc = 0, last_utc = 0;
             for (const auto& row : db.campaigns())
                 if (row.id == campaign_id) first_utc = row.created_utc_ns;
             for (const auto& t : db.trials(campaign_id)) {
                 analysis::ReportTrial rt;
-                rt.id = fmt::format("c{:02d}-r{}", case_number[t.case_id], t.replicate);
+                rt.id = exported_trial_id(case_number[t.case_id], t.replicate);
                 rt.database_id = t.id;
                 rt.state = recorder::is_terminal_trial_state(t.state) ? t.state : "running";
                 rt.reason = t.reason;

@@ -100,6 +100,14 @@ std::vector<double> mean_of(const std::vector<const BinnedChannel*>& series, std
 
 }  // namespace
 
+int case_number_of(const recorder::CaseRow& c) {
+    const auto j = nlohmann::json::parse(c.conditions_json, nullptr, false);
+    const int by_position = static_cast<int>(c.position + 1);
+    return j.is_object() && j.contains("id") && j["id"].is_number_integer() ? j["id"].get<int>() : by_position;
+}
+
+std::string exported_trial_id(int case_number, std::int64_t replicate) { return fmt::format("c{:02d}-r{}", case_number, replicate); }
+
 analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s, bool include_running) {
     const auto campaign_id = db.find_campaign(name);
     if (!campaign_id) throw UserError(fmt::format("{}: no campaign named '{}'", db.path().string(), name));
@@ -125,7 +133,8 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
     std::map<std::int64_t, int> case_number;
     for (const auto& cs : db.cases(campaign_id.value())) {
         conditions[cs.id] = nlohmann::json::parse(cs.conditions_json, nullptr, false);
-        case_number[cs.id] = conditions[cs.id].value("id", static_cast<int>(cs.position + 1));
+        if (!conditions[cs.id].is_object()) conditions[cs.id] = nlohmann::json::object();  // read as "nothing said"
+        case_number[cs.id] = case_number_of(cs);
     }
     const std::vector<recorder::ChannelRow> all_channels = db.channels();
 
@@ -207,7 +216,7 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         const nlohmann::json& cond = conditions[sp.row.case_id];
         trial.info.case_id = case_number[sp.row.case_id];
         trial.info.replicate = static_cast<int>(sp.row.replicate);
-        trial.info.id = fmt::format("c{:02d}-r{}", trial.info.case_id, sp.row.replicate);
+        trial.info.id = exported_trial_id(trial.info.case_id, sp.row.replicate);
         trial.info.file = "trials/" + trial.info.id + ".csv";
         trial.info.skin_setpoint_c = cond.value("skin_setpoint_c", 35.0);
         trial.info.wettedness = cond.value("wet", false) ? 1.0 : 0.0;

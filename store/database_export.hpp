@@ -17,6 +17,12 @@ namespace manikind {
 analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& campaign_name,
                                           double sample_period_s = 5.0, bool include_running = false);
 
+// A case's number as the export names it: the plan's id, else its position + 1 (also when the
+// stored conditions are not a JSON object).
+int case_number_of(const recorder::CaseRow& c);
+// The export's id of a trial: "c01-r2".
+std::string exported_trial_id(int case_number, std::int64_t replicate);
+
 // `manikin export`: writes campaign.json and trials/*.csv into `folder`.
 void export_campaign(recorder::Database& db, const std::string& campaign_name, const std::filesystem::path& folder);
 
