@@ -28,16 +28,21 @@ manikind::CampaignPlan physiological_plan(int case_id) {
     return plan;
 }
 
-// Runs the plan's one trial on the virtual clock: it must end done, without a fallback.
-manikind::recorder::Database& run_without_fallback(manikind::test::DaemonFixture& f, const manikind::CampaignPlan& plan) {
+// Runs the plan's one trial on the virtual clock: it must end done; `fell_back` says whether the
+// trial must carry the model-fallback flag.
+manikind::recorder::Database& run_one_trial(manikind::test::DaemonFixture& f, const manikind::CampaignPlan& plan, bool fell_back) {
     REQUIRE(f.daemon().start_campaign(plan).empty());
     f.daemon().run_virtual();
     auto& db = f.daemon().db();
     const auto trials = db.trials(*db.find_campaign(plan.name));
     REQUIRE(trials.size() == 1);
     CHECK(trials[0].state == "done");
-    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) == 0);
+    CHECK(((trials[0].quality_flags & manikind::flag_model_fallback) != 0) == fell_back);
     return db;
+}
+
+manikind::recorder::Database& run_without_fallback(manikind::test::DaemonFixture& f, const manikind::CampaignPlan& plan) {
+    return run_one_trial(f, plan, false);
 }
 
 // The mean of a recorded analysis column over the rows from t_from_s on.
@@ -206,13 +211,7 @@ TEST_CASE("physiological trial on the simulated lab: a zone whose heater fails m
     });
     auto plan = physiological_plan(1);
     plan.cases[0].model->duration_s = 3600.0;
-    REQUIRE(f.daemon().start_campaign(plan).empty());
-    f.daemon().run_virtual();
-    auto& db = f.daemon().db();
-    const auto trials = db.trials(*db.find_campaign(plan.name));
-    REQUIRE(trials.size() == 1);
-    CHECK(trials[0].state == "done");
-    CHECK((trials[0].quality_flags & manikind::flag_model_fallback) != 0);
+    auto& db = run_one_trial(f, plan, true);
     bool alarmed = false;
     for (const auto& e : db.events(std::nullopt))
         alarmed = alarmed || (e.kind == "physiological" && e.severity == "error" &&
