@@ -190,6 +190,13 @@ nlohmann::json notes_json(const std::vector<Note>& notes);
 // write/read round trip is exact. NaN samples are written as empty cells.
 void write_campaign(const std::filesystem::path& folder, const Campaign& campaign);
 
+// write_campaign's two halves, for writing one trial at a time: a trial's CSV (at its info's
+// `file`, else trials/<id>.csv), with a column pair for each of `campaign.channels`; and
+// campaign.json from `campaign`'s metadata and trial infos (their data unread), written last.
+void write_trial_file(const std::filesystem::path& folder, const Campaign& campaign, const TrialInfo& info,
+                      const TrialData& data);
+void write_campaign_json(const std::filesystem::path& folder, const Campaign& campaign);
+
 // Column names of the trial CSV for a map, in the order the writer uses.
 std::vector<std::string> trial_csv_columns(const ZoneMap& map, bool with_air_speed, bool with_wall_temp);
 

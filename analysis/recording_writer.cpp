@@ -175,9 +175,15 @@ nlohmann::json notes_json(const std::vector<Note>& notes) {
     return out;
 }
 
-void write_campaign(const std::filesystem::path& folder, const Campaign& campaign) {
+void write_trial_file(const std::filesystem::path& folder, const Campaign& campaign, const TrialInfo& info, const TrialData& data) {
+    const std::filesystem::path csv = folder / (info.file.empty() ? "trials/" + info.id + ".csv" : info.file);
+    std::filesystem::create_directories(csv.parent_path());
+    write_trial_csv(csv, campaign.zone_map, campaign.channels, data);
+}
+
+void write_campaign_json(const std::filesystem::path& folder, const Campaign& campaign) {
     using nlohmann::json;
-    std::filesystem::create_directories(folder / "trials");
+    std::filesystem::create_directories(folder);
     json doc;
     doc["format"] = kRecordingFormat;
     doc["name"] = campaign.name;
@@ -230,9 +236,6 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
         if (!i.started_utc.empty()) e["started_utc"] = i.started_utc;
         if (i.t0_utc_ns) e["t0_utc"] = iso_utc_ms(*i.t0_utc_ns);
         trials.push_back(e);
-        const std::filesystem::path csv = folder / file;
-        std::filesystem::create_directories(csv.parent_path());
-        write_trial_csv(csv, campaign.zone_map, campaign.channels, t.data);
     }
     doc["trials"] = trials;
     // Every byte checked: a full disk is an error here, not a campaign.json cut short.
@@ -244,6 +247,12 @@ void write_campaign(const std::filesystem::path& folder, const Campaign& campaig
     const int err = errno;
     if (std::fclose(out) != 0 || !written)
         throw InputError(json_path.string(), 0, 0, "", fmt::format("write failed: {}", std::strerror(written ? errno : err)));
+}
+
+void write_campaign(const std::filesystem::path& folder, const Campaign& campaign) {
+    std::filesystem::create_directories(folder / "trials");
+    for (const auto& t : campaign.trials) write_trial_file(folder, campaign, t.info, t.data);
+    write_campaign_json(folder, campaign);
 }
 
 }  // namespace manikind::analysis

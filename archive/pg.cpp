@@ -6,6 +6,7 @@
 
 #include <fmt/core.h>
 
+#include "base/lazy_library.hpp"
 #include "base/user_error.hpp"
 
 namespace manikind::archive {
@@ -19,24 +20,69 @@ std::string trimmed(const char* message) {
 
 }  // namespace
 
+const Libpq& libpq() {
+    static const Libpq api = [] {
+        static LazyLibrary library("libmanikind-pq.so", "the PostgreSQL client library (libpq, for the archive)");
+        Libpq a;
+        MANIKIND_BIND(library, a, clear, PQclear);
+        MANIKIND_BIND(library, a, cmdTuples, PQcmdTuples);
+        MANIKIND_BIND(library, a, connectdbParams, PQconnectdbParams);
+        MANIKIND_BIND(library, a, conninfoFree, PQconninfoFree);
+        MANIKIND_BIND(library, a, conninfoParse, PQconninfoParse);
+        MANIKIND_BIND(library, a, db, PQdb);
+        MANIKIND_BIND(library, a, errorMessage, PQerrorMessage);
+        MANIKIND_BIND(library, a, escapeLiteral, PQescapeLiteral);
+        MANIKIND_BIND(library, a, exec, PQexec);
+        MANIKIND_BIND(library, a, execParams, PQexecParams);
+        MANIKIND_BIND(library, a, finish, PQfinish);
+        MANIKIND_BIND(library, a, freemem, PQfreemem);
+        MANIKIND_BIND(library, a, getCopyData, PQgetCopyData);
+        MANIKIND_BIND(library, a, getResult, PQgetResult);
+        MANIKIND_BIND(library, a, getisnull, PQgetisnull);
+        MANIKIND_BIND(library, a, getvalue, PQgetvalue);
+        MANIKIND_BIND(library, a, host, PQhost);
+        MANIKIND_BIND(library, a, ntuples, PQntuples);
+        MANIKIND_BIND(library, a, port, PQport);
+        MANIKIND_BIND(library, a, putCopyData, PQputCopyData);
+        MANIKIND_BIND(library, a, putCopyEnd, PQputCopyEnd);
+        MANIKIND_BIND(library, a, resultErrorMessage, PQresultErrorMessage);
+        MANIKIND_BIND(library, a, resultStatus, PQresultStatus);
+        MANIKIND_BIND(library, a, setClientEncoding, PQsetClientEncoding);
+        MANIKIND_BIND(library, a, status, PQstatus);
+        return a;
+    }();
+    return api;
+}
+
 std::int64_t PgResult::int64(int row, int column) const {
-    return std::strtoll(PQgetvalue(r_, row, column), nullptr, 10);
+    return std::strtoll(libpq().getvalue(r_, row, column), nullptr, 10);
 }
 
 std::int64_t PgResult::affected() const {
-    const char* n = PQcmdTuples(r_);
+    const char* n = libpq().cmdTuples(r_);
     return n && *n ? std::strtoll(n, nullptr, 10) : 0;
 }
 
-void PgConnection::check_conninfo(const std::string& conninfo) {
+PgConnection::ConninfoParse PgConnection::parse_conninfo(const std::string& conninfo) {
+    ConninfoParse out;
     char* parse_error = nullptr;
-    PQconninfoOption* options = PQconninfoParse(conninfo.c_str(), &parse_error);
+    PQconninfoOption* options = libpq().conninfoParse(conninfo.c_str(), &parse_error);
     if (!options) {
-        const std::string why = trimmed(parse_error);
-        PQfreemem(parse_error);
-        throw UserError(fmt::format("archive conninfo '{}' does not parse: {}", conninfo, why), "bad_input");
+        out.error = parse_error ? trimmed(parse_error) : "out of memory";
+        if (out.error.empty()) out.error = "does not parse";
+        libpq().freemem(parse_error);
+        return out;
     }
-    PQconninfoFree(options);
+    for (const PQconninfoOption* o = options; o->keyword; ++o)
+        if (std::string(o->keyword) == "password" && o->val && *o->val) out.has_password = true;
+    libpq().conninfoFree(options);
+    return out;
+}
+
+void PgConnection::check_conninfo(const std::string& conninfo) {
+    const auto parsed = parse_conninfo(conninfo);
+    if (!parsed.error.empty())
+        throw UserError(fmt::format("archive conninfo '{}' does not parse: {}", conninfo, parsed.error), "bad_input");
 }
 
 PgConnection PgConnection::connect(const std::string& conninfo) {
@@ -47,22 +93,22 @@ PgConnection PgConnection::connect(const std::string& conninfo) {
     // rather than hang. Entries after the expanded dbname override the ones before it.
     const char* const keywords[] = {"connect_timeout", "tcp_user_timeout", "dbname", nullptr};
     const char* const values[] = {"10", "60000", conninfo.c_str(), nullptr};
-    PgConnection c(PQconnectdbParams(keywords, values, 1));
+    PgConnection c(libpq().connectdbParams(keywords, values, 1));
     if (!c.c_) throw UserError::unreachable("libpq could not allocate a connection", "archive_unreachable");
-    if (PQstatus(c.c_) != CONNECTION_OK)
+    if (libpq().status(c.c_) != CONNECTION_OK)
         throw UserError::unreachable(
-            fmt::format("cannot reach the archive server ({}): {}", conninfo, trimmed(PQerrorMessage(c.c_))),
+            fmt::format("cannot reach the archive server ({}): {}", conninfo, trimmed(libpq().errorMessage(c.c_))),
             "archive_unreachable");
-    PQsetClientEncoding(c.c_, "UTF8");
+    libpq().setClientEncoding(c.c_, "UTF8");
     // The migrations' "already exists, skipping" notices are not news to the person pushing.
     c.exec("SET client_min_messages = warning");
     return c;
 }
 
 std::string PgConnection::describe() const {
-    const char* host = PQhost(c_);
-    const char* port = PQport(c_);
-    const char* db = PQdb(c_);
+    const char* host = libpq().host(c_);
+    const char* port = libpq().port(c_);
+    const char* db = libpq().db(c_);
     return fmt::format("{}:{}/{}", host ? host : "?", port ? port : "?", db ? db : "?");
 }
 
@@ -70,7 +116,7 @@ void PgConnection::fail(const std::string& what, const char* server_message) con
     const std::string message = fmt::format("archive {}: {}: {}", describe(), what, trimmed(server_message));
     // A lost connection (server stopped, network gone) is "unreachable": the push can be run
     // again once the server is back, and resumes (docs/archive.md).
-    if (PQstatus(c_) == CONNECTION_BAD) throw UserError::unreachable(message, "archive_unreachable");
+    if (libpq().status(c_) == CONNECTION_BAD) throw UserError::unreachable(message, "archive_unreachable");
     throw UserError(message, "archive_refused", ExitStatus::refused);
 }
 
@@ -83,12 +129,12 @@ PgResult PgConnection::exec_nullable(const std::string& sql, const std::vector<s
     std::vector<const char*> values;
     values.reserve(params.size());
     for (std::size_t i = 0; i < params.size(); ++i) values.push_back(is_null[i] ? nullptr : params[i].c_str());
-    PGresult* r = PQexecParams(c_, sql.c_str(), static_cast<int>(params.size()), nullptr, values.data(), nullptr,
+    PGresult* r = libpq().execParams(c_, sql.c_str(), static_cast<int>(params.size()), nullptr, values.data(), nullptr,
                                nullptr, 0);
-    const auto status = PQresultStatus(r);
+    const auto status = libpq().resultStatus(r);
     if (status != PGRES_COMMAND_OK && status != PGRES_TUPLES_OK) {
-        const std::string server = r ? trimmed(PQresultErrorMessage(r)) : trimmed(PQerrorMessage(c_));
-        PQclear(r);
+        const std::string server = r ? trimmed(libpq().resultErrorMessage(r)) : trimmed(libpq().errorMessage(c_));
+        libpq().clear(r);
         // The statement's first line names it without pasting a whole migration into the message.
         fail(sql.substr(0, sql.find('\n', 1)), server.c_str());
     }
@@ -96,38 +142,38 @@ PgResult PgConnection::exec_nullable(const std::string& sql, const std::vector<s
 }
 
 void PgConnection::exec_script(const std::string& sql) {
-    PGresult* r = PQexec(c_, sql.c_str());
-    const bool ok = PQresultStatus(r) == PGRES_COMMAND_OK || PQresultStatus(r) == PGRES_TUPLES_OK;
-    const std::string server = r ? trimmed(PQresultErrorMessage(r)) : trimmed(PQerrorMessage(c_));
-    PQclear(r);
+    PGresult* r = libpq().exec(c_, sql.c_str());
+    const bool ok = libpq().resultStatus(r) == PGRES_COMMAND_OK || libpq().resultStatus(r) == PGRES_TUPLES_OK;
+    const std::string server = r ? trimmed(libpq().resultErrorMessage(r)) : trimmed(libpq().errorMessage(c_));
+    libpq().clear(r);
     if (!ok) fail("schema migration", server.c_str());
 }
 
 void PgConnection::copy_in(const std::string& copy_sql, std::string_view data) {
-    PGresult* start = PQexec(c_, copy_sql.c_str());
-    const bool ready = PQresultStatus(start) == PGRES_COPY_IN;
-    const std::string start_error = start ? trimmed(PQresultErrorMessage(start)) : trimmed(PQerrorMessage(c_));
-    PQclear(start);
+    PGresult* start = libpq().exec(c_, copy_sql.c_str());
+    const bool ready = libpq().resultStatus(start) == PGRES_COPY_IN;
+    const std::string start_error = start ? trimmed(libpq().resultErrorMessage(start)) : trimmed(libpq().errorMessage(c_));
+    libpq().clear(start);
     if (!ready) fail(copy_sql, start_error.c_str());
-    // Blocking connection: PQputCopyData sends or buffers everything; 1 MB pieces keep each
+    // Blocking connection: libpq().putCopyData sends or buffers everything; 1 MB pieces keep each
     // call's length within int.
     constexpr std::size_t piece_bytes = 1 << 20;
     for (std::size_t at = 0; at < data.size(); at += piece_bytes) {
         const auto n = std::min(piece_bytes, data.size() - at);
-        if (PQputCopyData(c_, data.data() + at, static_cast<int>(n)) != 1) {
-            PQputCopyEnd(c_, "send failed");
-            fail(copy_sql, PQerrorMessage(c_));
+        if (libpq().putCopyData(c_, data.data() + at, static_cast<int>(n)) != 1) {
+            libpq().putCopyEnd(c_, "send failed");
+            fail(copy_sql, libpq().errorMessage(c_));
         }
     }
-    if (PQputCopyEnd(c_, nullptr) != 1) fail(copy_sql, PQerrorMessage(c_));
+    if (libpq().putCopyEnd(c_, nullptr) != 1) fail(copy_sql, libpq().errorMessage(c_));
     std::string error;
     bool failed = false;
-    while (PGresult* r = PQgetResult(c_)) {  // the COPY's own result, then nullptr
-        if (PQresultStatus(r) != PGRES_COMMAND_OK) {
+    while (PGresult* r = libpq().getResult(c_)) {  // the COPY's own result, then nullptr
+        if (libpq().resultStatus(r) != PGRES_COMMAND_OK) {
             failed = true;
-            error = trimmed(PQresultErrorMessage(r));
+            error = trimmed(libpq().resultErrorMessage(r));
         }
-        PQclear(r);
+        libpq().clear(r);
     }
     if (failed) fail(copy_sql, error.c_str());
 }

@@ -13,6 +13,38 @@
 
 namespace manikind::archive {
 
+// libpq, loaded by the first archive command rather than at every program's start
+// (base/lazy_library.hpp); each member is the PQ function of the same name without "PQ".
+struct Libpq {
+    decltype(&::PQclear) clear = nullptr;
+    decltype(&::PQcmdTuples) cmdTuples = nullptr;
+    decltype(&::PQconnectdbParams) connectdbParams = nullptr;
+    decltype(&::PQconninfoFree) conninfoFree = nullptr;
+    decltype(&::PQconninfoParse) conninfoParse = nullptr;
+    decltype(&::PQdb) db = nullptr;
+    decltype(&::PQerrorMessage) errorMessage = nullptr;
+    decltype(&::PQescapeLiteral) escapeLiteral = nullptr;
+    decltype(&::PQexec) exec = nullptr;
+    decltype(&::PQexecParams) execParams = nullptr;
+    decltype(&::PQfinish) finish = nullptr;
+    decltype(&::PQfreemem) freemem = nullptr;
+    decltype(&::PQgetCopyData) getCopyData = nullptr;
+    decltype(&::PQgetResult) getResult = nullptr;
+    decltype(&::PQgetisnull) getisnull = nullptr;
+    decltype(&::PQgetvalue) getvalue = nullptr;
+    decltype(&::PQhost) host = nullptr;
+    decltype(&::PQntuples) ntuples = nullptr;
+    decltype(&::PQport) port = nullptr;
+    decltype(&::PQputCopyData) putCopyData = nullptr;
+    decltype(&::PQputCopyEnd) putCopyEnd = nullptr;
+    decltype(&::PQresultErrorMessage) resultErrorMessage = nullptr;
+    decltype(&::PQresultStatus) resultStatus = nullptr;
+    decltype(&::PQsetClientEncoding) setClientEncoding = nullptr;
+    decltype(&::PQstatus) status = nullptr;
+};
+// UserError (code missing_library) when libpq cannot be loaded; tried again at the next call.
+const Libpq& libpq();
+
 // One statement's result; frees itself.
 class PgResult {
 public:
@@ -21,11 +53,11 @@ public:
     PgResult& operator=(PgResult&&) = delete;
     PgResult(const PgResult&) = delete;
     PgResult& operator=(const PgResult&) = delete;
-    ~PgResult() { PQclear(r_); }
+    ~PgResult() { if (r_) libpq().clear(r_); }
 
-    int rows() const { return PQntuples(r_); }
-    bool is_null(int row, int column) const { return PQgetisnull(r_, row, column) != 0; }
-    std::string text(int row, int column) const { return PQgetvalue(r_, row, column); }
+    int rows() const { return libpq().ntuples(r_); }
+    bool is_null(int row, int column) const { return libpq().getisnull(r_, row, column) != 0; }
+    std::string text(int row, int column) const { return libpq().getvalue(r_, row, column); }
     std::int64_t int64(int row, int column) const;
     std::int64_t affected() const;  // PQcmdTuples: rows an INSERT/UPDATE touched
 
@@ -40,12 +72,19 @@ public:
     static PgConnection connect(const std::string& conninfo);
     // UserError (status 2) when `conninfo` does not parse as a libpq connection string or URI.
     static void check_conninfo(const std::string& conninfo);
+    // The same parse without throwing on a bad conninfo: the parser's message (empty when it
+    // parses) and whether it carries a password (the config check warns of one in a readable file).
+    struct ConninfoParse {
+        std::string error;
+        bool has_password = false;
+    };
+    static ConninfoParse parse_conninfo(const std::string& conninfo);
 
     PgConnection(PgConnection&& other) noexcept : c_(other.c_) { other.c_ = nullptr; }
     PgConnection& operator=(PgConnection&&) = delete;
     PgConnection(const PgConnection&) = delete;
     PgConnection& operator=(const PgConnection&) = delete;
-    ~PgConnection() { PQfinish(c_); }
+    ~PgConnection() { if (c_) libpq().finish(c_); }
 
     // One statement with text parameters ($1, $2 ...); exec_nullable for NULL parameters.
     PgResult exec(const std::string& sql, const std::vector<std::string>& params = {});
@@ -55,7 +94,7 @@ public:
     // Several statements separated by ";" and no parameters (a migration).
     void exec_script(const std::string& sql);
     // Ends a failed transaction; never throws (the connection may already be gone).
-    void rollback() noexcept { PQclear(PQexec(c_, "ROLLBACK")); }
+    void rollback() noexcept { libpq().clear(libpq().exec(c_, "ROLLBACK")); }
     // COPY ... FROM STDIN with `data` as its whole input (text format, one row a line).
     void copy_in(const std::string& copy_sql, std::string_view data);
 

@@ -106,43 +106,43 @@ double parse_value(std::string_view s) {
     return v;
 }
 
-// COPY (...) TO STDOUT, one text row at a time to `row` (blocking: PQgetCopyData waits for each).
+// COPY (...) TO STDOUT, one text row at a time to `row` (blocking: libpq().getCopyData waits for each).
 template <typename RowFn>
 void copy_out(PgConnection& pg, const std::string& copy_sql, RowFn&& row) {
     PGconn* c = pg.raw();
     const auto failure = [&](const std::string& server) {
         const std::string message = fmt::format("archive {}: {}: {}", pg.describe(), copy_sql.substr(0, 60), server);
-        if (PQstatus(c) == CONNECTION_BAD) return UserError::unreachable(message, "archive_unreachable");
+        if (libpq().status(c) == CONNECTION_BAD) return UserError::unreachable(message, "archive_unreachable");
         return UserError(message, "archive_refused", ExitStatus::refused);
     };
-    PGresult* start = PQexec(c, copy_sql.c_str());
-    const bool ready = PQresultStatus(start) == PGRES_COPY_OUT;
-    const std::string start_error = start ? PQresultErrorMessage(start) : PQerrorMessage(c);
-    PQclear(start);
+    PGresult* start = libpq().exec(c, copy_sql.c_str());
+    const bool ready = libpq().resultStatus(start) == PGRES_COPY_OUT;
+    const std::string start_error = start ? libpq().resultErrorMessage(start) : libpq().errorMessage(c);
+    libpq().clear(start);
     if (!ready) throw failure(start_error);
     for (;;) {
         char* buffer = nullptr;
-        const int n = PQgetCopyData(c, &buffer, 0);
+        const int n = libpq().getCopyData(c, &buffer, 0);
         if (n == -1) break;  // the end of the data; the COPY's own result follows
-        if (n < 0) throw failure(PQerrorMessage(c));
-        std::unique_ptr<char, decltype(&PQfreemem)> owned(buffer, &PQfreemem);
+        if (n < 0) throw failure(libpq().errorMessage(c));
+        std::unique_ptr<char, decltype(libpq().freemem)> owned(buffer, libpq().freemem);
         row(std::string_view(buffer, static_cast<std::size_t>(n)));
     }
     std::string error;
-    while (PGresult* r = PQgetResult(c)) {
-        if (PQresultStatus(r) != PGRES_COMMAND_OK) error = PQresultErrorMessage(r);
-        PQclear(r);
+    while (PGresult* r = libpq().getResult(c)) {
+        if (libpq().resultStatus(r) != PGRES_COMMAND_OK) error = libpq().resultErrorMessage(r);
+        libpq().clear(r);
     }
     if (!error.empty()) throw failure(error);
 }
 
 // A quoted SQL literal for COPY, which takes no parameters.
 std::string literal(PgConnection& pg, const std::string& s) {
-    char* quoted = PQescapeLiteral(pg.raw(), s.c_str(), s.size());
+    char* quoted = libpq().escapeLiteral(pg.raw(), s.c_str(), s.size());
     if (!quoted) throw UserError(fmt::format("archive {}: cannot quote '{}'", pg.describe(), s), "archive_refused",
                                  ExitStatus::refused);
     std::string out(quoted);
-    PQfreemem(quoted);
+    libpq().freemem(quoted);
     return out;
 }
 

@@ -5,15 +5,39 @@
 
 #include <openssl/evp.h>
 
+#include "base/lazy_library.hpp"
+
 namespace manikind {
+
+namespace {
+
+// libcrypto, loaded by the first fingerprint rather than at every program's start
+// (base/lazy_library.hpp): `manikin --version` and `status` never hash anything.
+struct Crypto {
+    decltype(&::EVP_Digest) Digest = nullptr;
+    decltype(&::EVP_sha256) sha256 = nullptr;
+};
+
+const Crypto& crypto() {
+    static const Crypto api = [] {
+        static LazyLibrary library("libmanikind-crypto.so", "OpenSSL's libcrypto (for SHA-256 fingerprints)");
+        Crypto a;
+        MANIKIND_BIND(library, a, Digest, EVP_Digest);
+        MANIKIND_BIND(library, a, sha256, EVP_sha256);
+        return a;
+    }();
+    return api;
+}
+
+}  // namespace
 
 // FIPS 180-4 SHA-256 from OpenSSL's libcrypto (Debian's libssl-dev, which libpq already needs):
 // a hash is not something to write again.
 std::string sha256_hex(std::string_view bytes) {
+    const Crypto& c = crypto();
     std::array<unsigned char, EVP_MAX_MD_SIZE> digest{};
     unsigned int digest_bytes = 0;
-    if (EVP_Digest(bytes.data(), bytes.size(), digest.data(), &digest_bytes, EVP_sha256(), nullptr) != 1 ||
-        digest_bytes != 32)
+    if (c.Digest(bytes.data(), bytes.size(), digest.data(), &digest_bytes, c.sha256(), nullptr) != 1 || digest_bytes != 32)
         throw std::runtime_error("SHA-256: libcrypto's EVP_Digest failed");
     static constexpr char hex[] = "0123456789abcdef";
     std::string out;

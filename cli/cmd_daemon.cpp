@@ -8,11 +8,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -196,7 +198,7 @@ void print_status(const nlohmann::json& s) {
 }  // namespace
 
 void add_daemon_commands(CLI::App& app) {
-    {
+    if (building("status")) {
         auto c = std::make_shared<Conn>();
         auto* cmd = app.add_subcommand("status", "The running daemon: campaign, trial stage, devices and their counters");
         add_conn_options(cmd, *c, false);
@@ -207,7 +209,7 @@ void add_daemon_commands(CLI::App& app) {
             else print_status(r["status"]);
         });
     }
-    {
+    if (building("campaign")) {
         auto* campaign = app.add_subcommand("campaign", "Start, abort, pause or resume a campaign on the running daemon");
         campaign->require_subcommand(1);
         auto c = std::make_shared<Conn>();
@@ -348,7 +350,7 @@ void add_daemon_commands(CLI::App& app) {
             });
         }
     }
-    {
+    if (building("setpoint")) {
         auto c = std::make_shared<Conn>();
         auto temp = std::make_shared<double>(), rh = std::make_shared<double>();
         auto* cmd = app.add_subcommand("setpoint", "Set the chamber's temperature and humidity (checked against [safety])");
@@ -364,7 +366,7 @@ void add_daemon_commands(CLI::App& app) {
                 std::printf("chamber setpoints sent\n");
         });
     }
-    {
+    if (building("note")) {
         struct NoteArgs {
             std::string campaign, kind = "comment", text, author;
             std::int64_t trial = 0;
@@ -397,7 +399,7 @@ void add_daemon_commands(CLI::App& app) {
             else std::printf("note stored on '%s'%s\n", a->campaign.c_str(), a->trial > 0 ? fmt::format(" trial {}", a->trial).c_str() : "");
         });
     }
-    {
+    if (building("notes")) {
         auto c = std::make_shared<Conn>();
         auto campaign = std::make_shared<std::string>();
         auto* cmd = app.add_subcommand("notes", "The lab notebook of a campaign, from the running daemon: time, author, kind, trial, text");
@@ -417,7 +419,7 @@ void add_daemon_commands(CLI::App& app) {
             }
         });
     }
-    {
+    if (building("alarms")) {
         auto c = std::make_shared<Conn>();
         auto history = std::make_shared<bool>(false);
         auto* cmd = app.add_subcommand("alarms", "The daemon's open alarms (active, returned but unacknowledged, shelved), or the closed ones");
@@ -438,7 +440,7 @@ void add_daemon_commands(CLI::App& app) {
                             al.value("count", 1) > 1 ? fmt::format(" (x{})", al.value("count", 1)).c_str() : "");
         });
     }
-    {
+    if (building("trial")) {
         auto c = std::make_shared<Conn>();
         auto once = std::make_shared<bool>(false);
         auto* trial = app.add_subcommand("trial", "Follow the running trial");
@@ -464,7 +466,7 @@ void add_daemon_commands(CLI::App& app) {
             }
         });
     }
-    {
+    if (building("results")) {
         auto c = std::make_shared<Conn>();
         auto campaign = std::make_shared<std::string>();
         auto* cmd = app.add_subcommand("results", "Whole-body heat flux per case with 95 % CIs, from the running daemon");
@@ -506,7 +508,7 @@ void add_daemon_commands(CLI::App& app) {
                 std::printf("%s", analysis::physio::summary_text(r["results"]["physiological"]).c_str());
         });
     }
-    {
+    if (building("live")) {
         auto c = std::make_shared<Conn>();
         auto* cmd = app.add_subcommand("live", "Every live channel of the running daemon: value, unit, quality and age");
         add_conn_options(cmd, *c, false);
@@ -526,7 +528,7 @@ void add_daemon_commands(CLI::App& app) {
             }
         });
     }
-    {
+    if (building("campaigns")) {
         auto db = std::make_shared<std::string>("manikind.db");
         auto json = std::make_shared<bool>(false);
         auto* cmd = app.add_subcommand("campaigns", "The campaigns in a daemon's database: name, created, trials done/total, state");
@@ -564,7 +566,7 @@ void add_daemon_commands(CLI::App& app) {
                             r["trials_failed_or_aborted"].get<int>(), r["state"].get<std::string>().c_str());
         });
     }
-    {
+    if (building("log")) {
         auto db = std::make_shared<std::string>("manikind.db");
         auto wanted = std::make_shared<std::vector<std::string>>();
         auto last_min = std::make_shared<double>(60.0);
@@ -609,7 +611,7 @@ void add_daemon_commands(CLI::App& app) {
             if (*json) std::printf("%s\n", out.dump().c_str());
         });
     }
-    {
+    if (building("report")) {
         struct ReportOptions {
             std::string db = "manikind.db", campaign, out, trial;
             bool force = false, json = false;
@@ -679,7 +681,7 @@ void add_daemon_commands(CLI::App& app) {
                 std::printf("%s report of '%s' written to %s\n", o->trial.empty() ? "campaign" : "trial", o->campaign.c_str(), o->out.c_str());
         });
     }
-    {
+    if (building("export")) {
         struct ExportOptions {
             std::string db = "manikind.db", campaign, out, format, archive, lab;
             bool json = false, force = false;
@@ -724,31 +726,62 @@ void add_daemon_commands(CLI::App& app) {
             std::vector<std::filesystem::path> inputs;
             if (o->archive.empty()) inputs.emplace_back(o->db);
             ExportTarget target(o->out, o->format == "hdf5" ? ExportShape::file : ExportShape::folder, o->force, inputs);
-            auto c = [&] {
-                if (!o->archive.empty()) {
-                    if (o->lab.empty()) throw UserError("--archive needs --lab <id>: the lab the campaign was pushed under");
-                    return campaign_from_archive(o->archive, o->lab, o->campaign);
-                }
-                auto database = recorder::Database::open_read_only(o->db);
+            // From the database one trial at a time: read, written, freed (memory: one trial's,
+            // whatever the campaign's length). From the archive: the campaign pulled whole.
+            std::optional<recorder::Database> database;
+            std::unique_ptr<CampaignReader> reader;
+            analysis::Campaign pulled;
+            if (!o->archive.empty()) {
+                if (o->lab.empty()) throw UserError("--archive needs --lab <id>: the lab the campaign was pushed under");
+                pulled = campaign_from_archive(o->archive, o->lab, o->campaign);
+            } else {
+                database.emplace(recorder::Database::open_read_only(o->db));
                 // A trial still acquiring goes too, up to its last committed reading, marked partial.
-                return campaign_from_database(database, o->campaign, 5.0, true);
-            }();
+                reader = std::make_unique<CampaignReader>(*database, o->campaign, 5.0, true);
+            }
+            analysis::Campaign& c = reader ? reader->campaign() : pulled;
             c.provenance["exported_utc"] = analysis::iso_utc_ms(
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
-            std::size_t rows = 0;
-            for (const auto& t : c.trials) rows += t.data.rows();
+            // Progress on stderr where a person watches: the trial count as it goes.
+            const bool show_progress = !o->json && ::isatty(STDERR_FILENO) != 0;
+            const ExportProgress progress = [&](std::size_t done, std::size_t all) {
+                if (show_progress) std::fprintf(stderr, "\rexporting: %zu of %zu trials%s", done, all, done == all ? "\n" : "");
+            };
+            ExportCounts counts;
             try {
-                if (o->format == "hdf5") {
-                    const auto analysis = analysis::analyze_campaign(c);
-                    write_campaign_hdf5(target.staging(), c, analysis::to_json(analysis));
+                if (!reader) {
+                    for (const auto& t : c.trials) {
+                        counts.rows += t.data.rows();
+                        counts.last_t_s.push_back(t.data.t_s.empty() ? 0.0 : t.data.t_s.back());
+                    }
+                    if (o->format == "hdf5") write_campaign_hdf5(target.staging(), c, analysis::analyze_campaign(c));
+                    else analysis::write_campaign(target.staging(), c);
+                } else if (o->format == "hdf5") {
+                    // The analysis beside the data, from each trial's summary as it passes.
+                    Hdf5CampaignFile file(target.staging(), c);
+                    std::vector<analysis::TrialResult> summaries;
+                    std::vector<std::size_t> generation;
+                    for (std::size_t s = 0; s < reader->trial_count(); ++s) {
+                        analysis::Trial trial{c.trials[s].info, reader->read(s)};
+                        summaries.push_back(analysis::summarize_trial(trial, c.zone_map));
+                        file.write_trial(c, trial.info, trial.data);
+                        generation.push_back(reader->channel_generation());
+                        counts.rows += trial.data.rows();
+                        counts.last_t_s.push_back(trial.data.t_s.empty() ? 0.0 : trial.data.t_s.back());
+                        progress(s + 1, reader->trial_count());
+                    }
+                    for (std::size_t s = 0; s < reader->trial_count(); ++s)  // a later trial added a channel
+                        if (generation[s] != reader->channel_generation()) file.write_trial(c, c.trials[s].info, reader->read(s));
+                    file.finish(analysis::aggregate_trials(c, summaries));
                 } else {
-                    analysis::write_campaign(target.staging(), c);
+                    counts = export_campaign_csv(*reader, target.staging(), progress);
                 }
             } catch (const analysis::InputError& e) {  // a write failed (a full disk): named, exit 2
                 throw UserError(fmt::format("{}: the export was not written: {}", o->out, e.what()), "write_failed");
             } catch (const UserError& e) {
                 throw UserError(fmt::format("{}: the export was not written: {}", o->out, e.what()), e.code(), e.status());
             }
+            const std::size_t rows = counts.rows;
             target.commit();
             if (o->json) {
                 const nlohmann::json doc{{"campaign", o->campaign}, {"format", o->format == "hdf5" ? kHdf5Format : analysis::kRecordingFormat},
@@ -758,11 +791,11 @@ void add_daemon_commands(CLI::App& app) {
             } else {
                 std::printf("%zu trials of '%s' (%zu rows, %zu recorded channels) written to %s\n", c.trials.size(),
                             o->campaign.c_str(), rows, c.channels.size(), o->out.c_str());
-                for (const auto& t : c.trials)
-                    if (t.info.partial)
+                for (std::size_t s = 0; s < c.trials.size(); ++s)
+                    if (c.trials[s].info.partial)
                         std::printf("trial %s is still acquiring: exported up to its last committed reading (%.0f min), marked "
                                     "\"partial\"\n",
-                                    t.info.id.c_str(), t.data.t_s.empty() ? 0.0 : t.data.t_s.back() / 60.0);
+                                    c.trials[s].info.id.c_str(), s < counts.last_t_s.size() ? counts.last_t_s[s] / 60.0 : 0.0);
                 if (o->format == "csv") std::printf("analyse with: manikin analyze %s\n", o->out.c_str());
             }
         });

@@ -2,6 +2,9 @@
 // Every `manikin` subcommand registers itself through one of these functions, each in its own
 // cmd_<name>.cpp; add_all_commands (app.cpp) calls them all, for main.cpp and for the tests
 // that walk the command tree.
+#include <string_view>
+#include <vector>
+
 #include <CLI/CLI.hpp>
 
 namespace manikind::cli {
@@ -23,5 +26,21 @@ void add_archive_command(CLI::App& app);     // cmd_archive.cpp: `manikin archiv
 
 // The whole `manikin` app: global options and every subcommand above.
 void add_all_commands(CLI::App& app);
+
+// The top-level commands each add_* function above adds, in the order of the whole tree (a test
+// builds each group alone and compares).
+struct CommandGroup {
+    void (*add)(CLI::App&);
+    std::vector<std::string_view> commands;
+};
+const std::vector<CommandGroup>& command_groups();
+
+// What main.cpp builds: only the group of the command named in argv (building all ~50 commands'
+// options was a third of `manikin status`'s start-up, issue 36), nothing but the global options
+// for a bare --version, and the whole tree otherwise (--help, a misspelt command).
+void add_commands_for(CLI::App& app, int argc, char** argv);
+// Inside a group's add function: whether to build the command `name` (false only while
+// add_commands_for builds another command of the same group).
+bool building(std::string_view name);
 
 }  // namespace manikind::cli

@@ -54,7 +54,7 @@ int main(int argc, char** argv) {
     app.footer("Every command takes --json. Exit status: 0 ok, 1 internal error, 2 bad usage or input, 3 daemon not\n"
                "reachable, 4 refused, 5 negative verdict (a check found problems). docs/cli.md has the contract.");
     try {
-        manikind::cli::add_all_commands(app);
+        manikind::cli::add_commands_for(app, argc, argv);
         app.parse(argc, argv);
     } catch (const CLI::Success& e) {
         return app.exit(e);  // --help and --version: text, status 0, even with --json

@@ -10,8 +10,8 @@
 #include <set>
 
 #include <fmt/core.h>
-#include <libpq-fe.h>
 
+#include "archive/pg.hpp"
 #include "daemon/config.hpp"
 #include "daemon/notifier.hpp"
 #include "daemon/web_server.hpp"
@@ -221,23 +221,14 @@ void check_archive(const Config& c, std::vector<std::string>& problems) {
                                            where_of(c, "archive.lab_id")));
         return;
     }
-    char* parse_error = nullptr;
-    PQconninfoOption* options = PQconninfoParse(a.postgresql.c_str(), &parse_error);
-    if (!options) {
-        std::string why = parse_error ? parse_error : "out of memory";
-        while (!why.empty() && (why.back() == '\n' || why.back() == ' ')) why.pop_back();
-        PQfreemem(parse_error);
+    const auto parsed = archive::PgConnection::parse_conninfo(a.postgresql);
+    if (!parsed.error.empty()) {
         problems.push_back(fmt::format("{}: archive.postgresql: does not parse as a libpq connection string or URI: {}",
-                                       where_of(c, "archive.postgresql"), why));
-    } else {
-        bool has_password = false;
-        for (const PQconninfoOption* o = options; o->keyword; ++o)
-            if (std::string(o->keyword) == "password" && o->val && *o->val) has_password = true;
-        PQconninfoFree(options);
-        if (has_password && set_in_file(c, "archive.postgresql") && c.file_mode != 0 && (c.file_mode & 0004) != 0)
-            problems.push_back(fmt::format("{}: archive.postgresql holds a password but the file is readable by every "
-                                           "user (mode {:04o}): chmod 640 {}, or move the password to ~/.pgpass",
-                                           c.source_name, c.file_mode & 07777, c.source_name));
+                                       where_of(c, "archive.postgresql"), parsed.error));
+    } else if (parsed.has_password && set_in_file(c, "archive.postgresql") && c.file_mode != 0 && (c.file_mode & 0004) != 0) {
+        problems.push_back(fmt::format("{}: archive.postgresql holds a password but the file is readable by every "
+                                       "user (mode {:04o}): chmod 640 {}, or move the password to ~/.pgpass",
+                                       c.source_name, c.file_mode & 07777, c.source_name));
     }
     const bool ok_chars = std::all_of(a.lab_id.begin(), a.lab_id.end(), [](char ch) {
         return std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' || ch == '.';

@@ -9,6 +9,8 @@
 #include <ctime>
 
 #include "base/guarded.hpp"
+#include "base/lazy_library.hpp"
+#include "base/user_error.hpp"
 #include "base/text.hpp"
 
 namespace manikind {
@@ -17,18 +19,48 @@ namespace {
 
 using steady = std::chrono::steady_clock;
 
-// curl_global_init once, before any thread uses libcurl (it is not thread-safe itself).
-void curl_once() {
-    static const bool done = [] { return curl_global_init(CURL_GLOBAL_DEFAULT) == CURLE_OK; }();
-    (void)done;
+// libcurl, loaded when notifications are configured, not at every program's start
+// (base/lazy_library.hpp). Each member is the curl_ function of the same name without "curl_".
+struct Curl {
+    decltype(&::curl_easy_cleanup) easy_cleanup = nullptr;
+    decltype(&::curl_easy_getinfo) easy_getinfo = nullptr;
+    decltype(&::curl_easy_init) easy_init = nullptr;
+    decltype(&::curl_easy_perform) easy_perform = nullptr;
+    decltype(&::curl_easy_setopt) easy_setopt = nullptr;
+    decltype(&::curl_easy_strerror) easy_strerror = nullptr;
+    decltype(&::curl_global_init) global_init = nullptr;
+    decltype(&::curl_slist_append) slist_append = nullptr;
+    decltype(&::curl_slist_free_all) slist_free_all = nullptr;
+};
+
+// UserError (code missing_library) when libcurl cannot be loaded. curl_global_init runs here, once,
+// before any thread uses libcurl (it is not thread-safe itself).
+const Curl& curl() {
+    static const Curl api = [] {
+        static LazyLibrary library("libmanikind-curl.so", "libcurl (for notifications)");
+        Curl a;
+        MANIKIND_BIND(library, a, easy_cleanup, curl_easy_cleanup);
+        MANIKIND_BIND(library, a, easy_getinfo, curl_easy_getinfo);
+        MANIKIND_BIND(library, a, easy_init, curl_easy_init);
+        MANIKIND_BIND(library, a, easy_perform, curl_easy_perform);
+        MANIKIND_BIND(library, a, easy_setopt, curl_easy_setopt);
+        MANIKIND_BIND(library, a, easy_strerror, curl_easy_strerror);
+        MANIKIND_BIND(library, a, global_init, curl_global_init);
+        MANIKIND_BIND(library, a, slist_append, curl_slist_append);
+        MANIKIND_BIND(library, a, slist_free_all, curl_slist_free_all);
+        if (a.global_init(CURL_GLOBAL_DEFAULT) != CURLE_OK)
+            throw UserError("libcurl did not initialise (curl_global_init failed)", "missing_library");
+        return a;
+    }();
+    return api;
 }
 
 struct Easy {
-    CURL* h = curl_easy_init();
+    CURL* h = curl().easy_init();
     curl_slist* list = nullptr;
     ~Easy() {
-        if (list) curl_slist_free_all(list);
-        if (h) curl_easy_cleanup(h);
+        if (list) curl().slist_free_all(list);
+        if (h) curl().easy_cleanup(h);
     }
 };
 
@@ -112,9 +144,9 @@ std::string Notifier::mail_text(const std::string& from, const std::vector<std::
 }
 
 Notifier::Notifier(NotifierOptions options) : o_(std::move(options)) {
-    curl_once();
     if (!o_.webhook_url.empty()) dest_.push_back({"webhook", {}, {}, 0, 0, 0, 0, {}});
     if (!o_.smtp_url.empty() && !o_.mail_to.empty()) dest_.push_back({"email", {}, {}, 0, 0, 0, 0, {}});
+    if (!dest_.empty()) (void)curl();  // loaded now: a daemon without libcurl says so at start, not at its first notice
     worker_ = std::thread([this] { run_guarded("notifier", [this] { run(); }); });
 }
 
@@ -217,40 +249,40 @@ std::string Notifier::send(Destination& d, const std::vector<Notice>& batch) {
     Easy e;
     if (!e.h) return "libcurl could not start a transfer";
     char err[CURL_ERROR_SIZE] = {0};
-    curl_easy_setopt(e.h, CURLOPT_ERRORBUFFER, err);
-    curl_easy_setopt(e.h, CURLOPT_NOSIGNAL, 1L);
-    curl_easy_setopt(e.h, CURLOPT_TIMEOUT_MS, static_cast<long>(o_.timeout_s * 1000));
-    curl_easy_setopt(e.h, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(std::min(o_.timeout_s, 5.0) * 1000));
+    curl().easy_setopt(e.h, CURLOPT_ERRORBUFFER, err);
+    curl().easy_setopt(e.h, CURLOPT_NOSIGNAL, 1L);
+    curl().easy_setopt(e.h, CURLOPT_TIMEOUT_MS, static_cast<long>(o_.timeout_s * 1000));
+    curl().easy_setopt(e.h, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(std::min(o_.timeout_s, 5.0) * 1000));
     Upload up;
     std::int64_t date_ns = batch.empty() ? 0 : batch.back().utc_ns;
     if (d.name == "webhook") {
         up.text = webhook_body(o_.webhook_format, o_.lab_name, batch);
-        curl_easy_setopt(e.h, CURLOPT_URL, o_.webhook_url.c_str());
+        curl().easy_setopt(e.h, CURLOPT_URL, o_.webhook_url.c_str());
         // Only the web's own schemes: a URL cannot turn the daemon into a file or gopher client.
-        curl_easy_setopt(e.h, CURLOPT_PROTOCOLS_STR, "http,https");
-        curl_easy_setopt(e.h, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
-        e.list = curl_slist_append(e.list, "Content-Type: application/json");
-        if (!batch.empty()) e.list = curl_slist_append(e.list, fmt::format("Title: [{}] {}", header_safe(o_.lab_name), header_safe(summary(batch))).c_str());
-        curl_easy_setopt(e.h, CURLOPT_HTTPHEADER, e.list);
-        curl_easy_setopt(e.h, CURLOPT_POSTFIELDS, up.text.c_str());
-        curl_easy_setopt(e.h, CURLOPT_POSTFIELDSIZE, static_cast<long>(up.text.size()));
-        curl_easy_setopt(e.h, CURLOPT_WRITEFUNCTION, discard);
+        curl().easy_setopt(e.h, CURLOPT_PROTOCOLS_STR, "http,https");
+        curl().easy_setopt(e.h, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
+        e.list = curl().slist_append(e.list, "Content-Type: application/json");
+        if (!batch.empty()) e.list = curl().slist_append(e.list, fmt::format("Title: [{}] {}", header_safe(o_.lab_name), header_safe(summary(batch))).c_str());
+        curl().easy_setopt(e.h, CURLOPT_HTTPHEADER, e.list);
+        curl().easy_setopt(e.h, CURLOPT_POSTFIELDS, up.text.c_str());
+        curl().easy_setopt(e.h, CURLOPT_POSTFIELDSIZE, static_cast<long>(up.text.size()));
+        curl().easy_setopt(e.h, CURLOPT_WRITEFUNCTION, discard);
     } else {
         up.text = mail_text(o_.mail_from, o_.mail_to, o_.lab_name, batch, date_ns);
-        curl_easy_setopt(e.h, CURLOPT_URL, o_.smtp_url.c_str());
-        curl_easy_setopt(e.h, CURLOPT_PROTOCOLS_STR, "smtp,smtps");
-        curl_easy_setopt(e.h, CURLOPT_MAIL_FROM, ("<" + o_.mail_from + ">").c_str());
-        for (const auto& r : o_.mail_to) e.list = curl_slist_append(e.list, ("<" + r + ">").c_str());
-        curl_easy_setopt(e.h, CURLOPT_MAIL_RCPT, e.list);
-        curl_easy_setopt(e.h, CURLOPT_READFUNCTION, read_upload);
-        curl_easy_setopt(e.h, CURLOPT_READDATA, &up);
-        curl_easy_setopt(e.h, CURLOPT_UPLOAD, 1L);
+        curl().easy_setopt(e.h, CURLOPT_URL, o_.smtp_url.c_str());
+        curl().easy_setopt(e.h, CURLOPT_PROTOCOLS_STR, "smtp,smtps");
+        curl().easy_setopt(e.h, CURLOPT_MAIL_FROM, ("<" + o_.mail_from + ">").c_str());
+        for (const auto& r : o_.mail_to) e.list = curl().slist_append(e.list, ("<" + r + ">").c_str());
+        curl().easy_setopt(e.h, CURLOPT_MAIL_RCPT, e.list);
+        curl().easy_setopt(e.h, CURLOPT_READFUNCTION, read_upload);
+        curl().easy_setopt(e.h, CURLOPT_READDATA, &up);
+        curl().easy_setopt(e.h, CURLOPT_UPLOAD, 1L);
     }
-    const CURLcode rc = curl_easy_perform(e.h);
-    if (rc != CURLE_OK) return fmt::format("{}: {}", curl_easy_strerror(rc), err[0] ? err : "");
+    const CURLcode rc = curl().easy_perform(e.h);
+    if (rc != CURLE_OK) return fmt::format("{}: {}", curl().easy_strerror(rc), err[0] ? err : "");
     if (d.name == "webhook") {
         long status = 0;
-        curl_easy_getinfo(e.h, CURLINFO_RESPONSE_CODE, &status);
+        curl().easy_getinfo(e.h, CURLINFO_RESPONSE_CODE, &status);
         if (status < 200 || status >= 300) return fmt::format("the receiver answered HTTP {}", status);
     }
     return {};

@@ -1169,6 +1169,18 @@ void Database::for_each_trial_sample(std::int64_t trial_id, const std::function<
     // within an instant. Memory: one trial.
     std::vector<SampleRow> rows;
     {
+        // Sized once: a trial's ids run from its range's start without gaps but for rows a
+        // failed write left out, so the last id bounds the count, found by two key lookups.
+        // Growing by doubling instead held the old and the new buffer at once (26 MB for a
+        // trial of 182 000 rows), the peak of an export.
+        Query last(*impl_, "SELECT max(id) FROM samples WHERE id >= ?1 AND id < ?2");
+        last.bind(trial_id_begin(trial_id), trial_id_end(trial_id));
+        if (last.step() && last.optional_integer(0)) {
+            const auto span = *last.optional_integer(0) - trial_id_begin(trial_id) + 1;
+            if (span > 0 && span < (std::int64_t{1} << 28)) rows.reserve(static_cast<std::size_t>(span));
+        }
+    }
+    {
         Query q(*impl_, "SELECT mono_ns, channel_id, utc_ns, value, quality FROM samples WHERE id >= ?1 AND id < ?2");
         q.bind(trial_id_begin(trial_id), trial_id_end(trial_id));
         while (q.step())

@@ -78,6 +78,8 @@ private:
     bool any_ = false;
 };
 
+constexpr std::size_t kNoChannel = static_cast<std::size_t>(-1);
+
 // Good values only, for the analysis columns (a flagged reading never enters a mean).
 std::vector<double> good_values(const BinnedChannel& c) {
     std::vector<double> out = c.value;
@@ -108,10 +110,16 @@ int case_number_of(const recorder::CaseRow& c) {
 
 std::string exported_trial_id(int case_number, std::int64_t replicate) { return fmt::format("c{:02d}-r{}", case_number, replicate); }
 
-analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s, bool include_running) {
+struct CampaignReader::Span {
+    recorder::TrialRow row;
+    std::int64_t start_mono_ns, end_mono_ns, start_utc_ns;
+};
+
+CampaignReader::CampaignReader(recorder::Database& db, const std::string& name, double period_s, bool include_running)
+    : db_(db), period_s_(period_s) {
     const auto campaign_id = db.find_campaign(name);
     if (!campaign_id) throw UserError(fmt::format("{}: no campaign named '{}'", db.path().string(), name));
-    analysis::Campaign c;
+    auto& c = campaign_;
     c.name = name;
     c.zone_map = analysis::andi35_zone_map();
     c.zone_map_inline = true;  // the export names every zone with its area and region, not only "andi35"
@@ -136,15 +144,9 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         if (!conditions[cs.id].is_object()) conditions[cs.id] = nlohmann::json::object();  // read as "nothing said"
         case_number[cs.id] = case_number_of(cs);
     }
-    const std::vector<recorder::ChannelRow> all_channels = db.channels();
+    all_channels_ = db.channels();
 
     // The finished trials and their time bases (the manikin's start to the trial's end).
-    struct Span {
-        recorder::TrialRow row;
-        std::int64_t start_mono_ns, end_mono_ns, start_utc_ns;
-    };
-    std::vector<Span> spans;
-    std::set<std::int64_t> partial;  // trial ids exported while running
     for (const auto& t : db.trials(campaign_id.value())) {
         const bool running = include_running && !recorder::is_terminal_trial_state(t.state) && t.state != "pending";
         if (t.state != "done" && !running) continue;
@@ -153,65 +155,18 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
             if (e.kind == "stage" && e.message == "acquiring") start = e;
             if (e.kind == "stage" && e.message == "stopping") end = e;
         }
+        bool partial = false;
         if (running && start && !end) {
             // Up to the last reading committed now: what a reader of the file sees is all there is.
             const auto last = db.last_sample_mono_ns(t.id);
             if (!last || *last <= start->mono_ns) continue;
-            spans.push_back({t, start->mono_ns, *last, start->utc_ns});
-            partial.insert(t.id);
-            continue;
+            spans_.push_back({t, start->mono_ns, *last, start->utc_ns});
+            partial = true;
+        } else {
+            if (!start || !end || end->mono_ns <= start->mono_ns) continue;
+            spans_.push_back({t, start->mono_ns, end->mono_ns, start->utc_ns});
         }
-        if (!start || !end || end->mono_ns <= start->mono_ns) continue;
-        spans.push_back({t, start->mono_ns, end->mono_ns, start->utc_ns});
-    }
-    if (spans.empty())
-        throw UserError(fmt::format("campaign '{}' has no finished trial yet{}", name,
-                                    include_running ? " and none acquiring" : " (manikin export takes a running one too)"));
-
-    // Every channel with samples in any exported trial gets a column in every trial (a fixed
-    // set, so a script reads each trial alike).
-    std::vector<std::vector<BinnedChannel>> per_trial(spans.size());
-    std::vector<bool> recorded(all_channels.size(), false);
-    // Channel id -> index into all_channels, looked up once per sample: a vector by id (ids are
-    // SQLite rowids from 1, one per channel, so it stays small), not a map.
-    constexpr std::size_t no_channel = static_cast<std::size_t>(-1);
-    std::vector<std::size_t> index_of_id;
-    for (std::size_t k = 0; k < all_channels.size(); ++k) {
-        const auto id = static_cast<std::size_t>(std::max<std::int64_t>(all_channels[k].id, 0));
-        if (id >= index_of_id.size()) index_of_id.resize(id + 1, no_channel);
-        index_of_id[id] = k;
-    }
-    for (std::size_t s = 0; s < spans.size(); ++s) {
-        const auto& sp = spans[s];
-        const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(sp.end_mono_ns - sp.start_mono_ns) * 1e-9 / period_s)) + 1;
-        std::vector<ChannelBinner> binners(all_channels.size(), ChannelBinner(sp.start_mono_ns, n, period_s));
-        db.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {
-            const auto id = static_cast<std::size_t>(r.channel_id);
-            if (r.channel_id >= 0 && id < index_of_id.size() && index_of_id[id] != no_channel)
-                binners[index_of_id[id]].add(r);
-        });
-        for (std::size_t k = 0; k < all_channels.size(); ++k) {
-            if (binners[k].any_sample()) recorded[k] = true;
-            per_trial[s].push_back(binners[k].finish());
-        }
-    }
-    std::vector<std::size_t> exported;  // indexes into all_channels
-    for (std::size_t k = 0; k < all_channels.size(); ++k)
-        if (recorded[k]) {
-            exported.push_back(k);
-            c.channels.push_back({all_channels[k].device_name, all_channels[k].name, all_channels[k].unit});
-        }
-    std::map<std::string, std::size_t> index_of;  // "device/name" -> index into all_channels
-    for (std::size_t k = 0; k < all_channels.size(); ++k) index_of[all_channels[k].device_name + "/" + all_channels[k].name] = k;
-
-    for (std::size_t s = 0; s < spans.size(); ++s) {
-        const auto& sp = spans[s];
-        auto& bins = per_trial[s];
-        const std::size_t n = bins.empty() ? 0 : bins.front().value.size();
-        const auto find = [&](const std::string& key) -> const BinnedChannel* {
-            const auto it = index_of.find(key);
-            return it == index_of.end() || !recorded[it->second] ? nullptr : &bins[it->second];
-        };
+        const auto& sp = spans_.back();
         analysis::Trial trial;
         const nlohmann::json& cond = conditions[sp.row.case_id];
         trial.info.case_id = case_number[sp.row.case_id];
@@ -228,41 +183,27 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
         trial.info.chamber_setpoint_rh_pct = cond.value("chamber_rh_pct", 0.0);
         trial.info.started_utc = sp.row.started_utc_ns ? iso_utc(*sp.row.started_utc_ns) : "";
         trial.info.t0_utc_ns = sp.start_utc_ns;
-        trial.info.partial = partial.count(sp.row.id) > 0;
-        auto& d = trial.data;
-        for (std::size_t i = 0; i < n; ++i) {
-            d.t_s.push_back(static_cast<double>(i) * period_s);
-            d.utc_ns.push_back(sp.start_utc_ns + static_cast<std::int64_t>(std::llround(static_cast<double>(i) * period_s * 1e9)));
-        }
-        // The analysis columns: air and wall as the mean of their instruments (Text S3.2).
-        std::vector<const BinnedChannel*> temps, rhs, walls;
-        for (int k = 1; k <= 8; ++k) {
-            if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_temp_c", k))) temps.push_back(b);
-            if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_rh_pct", k))) rhs.push_back(b);
-            if (const auto* b = find(fmt::format("datalogger/wall_tc_{}.wall_temp_c", k))) walls.push_back(b);
-        }
-        d.air_temp_c = mean_of(temps, n);
-        d.air_rh_pct = mean_of(rhs, n);
-        if (!walls.empty()) d.wall_temp_c = mean_of(walls, n);
-        if (const auto* b = find("windsonic/air_speed_m_s")) d.air_speed_m_s = good_values(*b);
-        const std::vector<double> missing(n, std::numeric_limits<double>::quiet_NaN());
-        for (const auto& z : c.zone_map.zones) {
-            const auto* skin = find(fmt::format("manikin/z{:02d}.skin_temp_c", z.zone));
-            const auto* flux = find(fmt::format("manikin/z{:02d}.heat_flux_w_m2", z.zone));
-            d.skin_temp_c.push_back(skin ? good_values(*skin) : missing);
-            d.heat_flux_w_m2.push_back(flux ? good_values(*flux) : missing);
-        }
-        for (const std::size_t k : exported) {
-            d.channel_values.push_back(std::move(bins[k].value));
-            d.channel_quality.push_back(std::move(bins[k].quality));
-        }
+        trial.info.partial = partial;
         c.trials.push_back(std::move(trial));
     }
+    if (spans_.empty())
+        throw UserError(fmt::format("campaign '{}' has no finished trial yet{}", name,
+                                    include_running ? " and none acquiring" : " (manikin export takes a running one too)"));
+
+    // Channel id -> index into all_channels_, looked up once per sample: a vector by id (ids are
+    // SQLite rowids from 1, one per channel, so it stays small), not a map.
+    for (std::size_t k = 0; k < all_channels_.size(); ++k) {
+        const auto id = static_cast<std::size_t>(std::max<std::int64_t>(all_channels_[k].id, 0));
+        if (id >= index_of_id_.size()) index_of_id_.resize(id + 1, kNoChannel);
+        index_of_id_[id] = k;
+    }
+    recorded_.assign(all_channels_.size(), false);
+    for (std::size_t k = 0; k < all_channels_.size(); ++k) index_of_key_[all_channels_[k].device_name + "/" + all_channels_[k].name] = k;
 
     // The lab notebook: every note of the campaign; one about a trial names it by its exported id
     // (a trial not exported, one that did not finish, keeps its note on the campaign, saying so).
     std::map<std::int64_t, std::string> exported_id;
-    for (std::size_t s = 0; s < spans.size(); ++s) exported_id[spans[s].row.id] = c.trials[s].info.id;
+    for (std::size_t s = 0; s < spans_.size(); ++s) exported_id[spans_[s].row.id] = c.trials[s].info.id;
     for (const auto& n : db.notes(campaign_id.value())) {
         analysis::Note note{n.utc_ns, n.author, n.kind, n.text, {}};
         if (n.trial_id) {
@@ -276,18 +217,120 @@ analysis::Campaign campaign_from_database(recorder::Database& db, const std::str
     c.provenance["program"] = std::string("manikind ") + MANIKIND_VERSION;
     c.provenance["database"] = db.path().filename().string();
     c.provenance["twin_version"] = db.latest_twin_version().value_or("baseline");
-    const std::int64_t first_start_utc_ns = spans.front().start_utc_ns;
+    const std::int64_t first_start_utc_ns = spans_.front().start_utc_ns;
     std::int64_t config_utc_ns = 0;  // the configuration the daemon ran under at the first trial
     for (const auto& e : db.events(std::nullopt))
         if (e.kind == "config" && e.utc_ns <= first_start_utc_ns && e.utc_ns >= config_utc_ns && e.message.starts_with("sha256 ")) {
             c.provenance["config_sha256"] = e.message.substr(7, 64);
             config_utc_ns = e.utc_ns;
         }
+}
+
+CampaignReader::~CampaignReader() = default;
+
+std::size_t CampaignReader::trial_count() const { return spans_.size(); }
+
+analysis::TrialData CampaignReader::read(std::size_t s) {
+    const auto& sp = spans_.at(s);
+    const double period_s = period_s_;
+    const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(sp.end_mono_ns - sp.start_mono_ns) * 1e-9 / period_s)) + 1;
+    std::vector<ChannelBinner> binners(all_channels_.size(), ChannelBinner(sp.start_mono_ns, n, period_s));
+    db_.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {
+        const auto id = static_cast<std::size_t>(r.channel_id);
+        if (r.channel_id >= 0 && id < index_of_id_.size() && index_of_id_[id] != kNoChannel) binners[index_of_id_[id]].add(r);
+    });
+    // Every channel with samples in any trial read so far gets a column in every trial (a fixed
+    // set once all are read, so a script reads each trial alike); one first seen here is added
+    // in the database's order of channels.
+    bool grew = false;
+    for (std::size_t k = 0; k < all_channels_.size(); ++k)
+        if (binners[k].any_sample() && !recorded_[k]) recorded_[k] = grew = true;
+    if (grew) {
+        ++generation_;
+        campaign_.channels.clear();
+        for (std::size_t k = 0; k < all_channels_.size(); ++k)
+            if (recorded_[k]) campaign_.channels.push_back({all_channels_[k].device_name, all_channels_[k].name, all_channels_[k].unit});
+    }
+    std::vector<BinnedChannel> bins;
+    bins.reserve(all_channels_.size());
+    for (auto& b : binners) bins.push_back(b.finish());
+    binners.clear();
+
+    const auto find = [&](const std::string& key) -> const BinnedChannel* {
+        const auto it = index_of_key_.find(key);
+        return it == index_of_key_.end() || !recorded_[it->second] ? nullptr : &bins[it->second];
+    };
+    analysis::TrialData d;
+    for (std::size_t i = 0; i < n; ++i) {
+        d.t_s.push_back(static_cast<double>(i) * period_s);
+        d.utc_ns.push_back(sp.start_utc_ns + static_cast<std::int64_t>(std::llround(static_cast<double>(i) * period_s * 1e9)));
+    }
+    // The analysis columns: air and wall as the mean of their instruments (Text S3.2).
+    std::vector<const BinnedChannel*> temps, rhs, walls;
+    for (int k = 1; k <= 8; ++k) {
+        if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_temp_c", k))) temps.push_back(b);
+        if (const auto* b = find(fmt::format("datalogger/ee181_{}.air_rh_pct", k))) rhs.push_back(b);
+        if (const auto* b = find(fmt::format("datalogger/wall_tc_{}.wall_temp_c", k))) walls.push_back(b);
+    }
+    d.air_temp_c = mean_of(temps, n);
+    d.air_rh_pct = mean_of(rhs, n);
+    if (!walls.empty()) d.wall_temp_c = mean_of(walls, n);
+    if (const auto* b = find("windsonic/air_speed_m_s")) d.air_speed_m_s = good_values(*b);
+    const std::vector<double> missing(n, std::numeric_limits<double>::quiet_NaN());
+    for (const auto& z : campaign_.zone_map.zones) {
+        const auto* skin = find(fmt::format("manikin/z{:02d}.skin_temp_c", z.zone));
+        const auto* flux = find(fmt::format("manikin/z{:02d}.heat_flux_w_m2", z.zone));
+        d.skin_temp_c.push_back(skin ? good_values(*skin) : missing);
+        d.heat_flux_w_m2.push_back(flux ? good_values(*flux) : missing);
+    }
+    for (std::size_t k = 0; k < all_channels_.size(); ++k)
+        if (recorded_[k]) {
+            d.channel_values.push_back(std::move(bins[k].value));
+            d.channel_quality.push_back(std::move(bins[k].quality));
+        }
+    return d;
+}
+
+analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s, bool include_running) {
+    CampaignReader reader(db, name, period_s, include_running);
+    std::vector<std::size_t> generation(reader.trial_count());
+    std::vector<analysis::TrialData> data(reader.trial_count());
+    for (std::size_t s = 0; s < reader.trial_count(); ++s) {
+        data[s] = reader.read(s);
+        generation[s] = reader.channel_generation();
+    }
+    // A trial read before a later one added a channel is read again with the final set.
+    for (std::size_t s = 0; s < reader.trial_count(); ++s)
+        if (generation[s] != reader.channel_generation()) data[s] = reader.read(s);
+    analysis::Campaign c = reader.campaign();
+    for (std::size_t s = 0; s < c.trials.size(); ++s) c.trials[s].data = std::move(data[s]);
     return c;
 }
 
 void export_campaign(recorder::Database& db, const std::string& name, const std::filesystem::path& folder) {
-    analysis::write_campaign(folder, campaign_from_database(db, name));
+    CampaignReader reader(db, name);
+    export_campaign_csv(reader, folder);
+}
+
+ExportCounts export_campaign_csv(CampaignReader& reader, const std::filesystem::path& folder, const ExportProgress& progress) {
+    ExportCounts counts;
+    std::vector<std::size_t> generation(reader.trial_count());
+    for (std::size_t s = 0; s < reader.trial_count(); ++s) {
+        const auto data = reader.read(s);
+        analysis::write_trial_file(folder, reader.campaign(), reader.campaign().trials[s].info, data);
+        generation[s] = reader.channel_generation();
+        counts.rows += data.rows();
+        counts.last_t_s.push_back(data.t_s.empty() ? 0.0 : data.t_s.back());
+        if (progress) progress(s + 1, reader.trial_count());
+    }
+    // A trial written before a later one added a channel is written again with the final set.
+    for (std::size_t s = 0; s < reader.trial_count(); ++s)
+        if (generation[s] != reader.channel_generation()) {
+            analysis::write_trial_file(folder, reader.campaign(), reader.campaign().trials[s].info, reader.read(s));
+            ++counts.rewritten;
+        }
+    analysis::write_campaign_json(folder, reader.campaign());
+    return counts;
 }
 
 }  // namespace manikind

@@ -5,21 +5,46 @@
 // libhdf5 (C API); read back by h5py, GNU Octave's `load` and MATLAB's `h5read`.
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "analysis/analyze.hpp"
 #include "analysis/recording.hpp"
 
 namespace manikind {
 
 inline constexpr const char* kHdf5Format = "manikin-hdf5/1";
 
-// Writes `file` (via a temporary file renamed into place: a failed export leaves nothing).
+// An HDF5 export written one trial at a time (memory: one trial's, issue 36). The constructor
+// creates a temporary file beside `file` and writes the campaign's metadata (root attributes, zone
+// map, notes: `metadata`'s trials are not read); write_trial adds a trial's group (or replaces it,
+// when a trial is written again with the campaign's final channels); finish writes the results
+// and renames the file into place. Destroyed unfinished (an error), it removes the temporary
+// file: a failed export leaves nothing. UserError (code write_failed) naming the file on failure.
+class Hdf5CampaignFile {
+public:
+    Hdf5CampaignFile(const std::filesystem::path& file, const analysis::Campaign& metadata);
+    ~Hdf5CampaignFile();
+    Hdf5CampaignFile(const Hdf5CampaignFile&) = delete;
+    Hdf5CampaignFile& operator=(const Hdf5CampaignFile&) = delete;
+
+    // `campaign` gives the zone map and the recorded channels `data` has columns for.
+    void write_trial(const analysis::Campaign& campaign, const analysis::TrialInfo& info, const analysis::TrialData& data);
+    // `analysis`: the campaign's analysis (written as `manikin analyze --json` gives it, and per case in columns).
+    void finish(const analysis::CampaignResult& analysis);
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+// The whole campaign in memory at once: Hdf5CampaignFile over its trials.
 // `analysis_json` is the `manikin analyze --json` document of the same campaign.
 void write_campaign_hdf5(const std::filesystem::path& file, const analysis::Campaign& campaign,
-                         const nlohmann::json& analysis_json);
+                         const analysis::CampaignResult& analysis);
 
 // Reading back one dataset or attribute (tests and tools). Throw UserError naming the file and
 // the object when it is absent or of another shape.

@@ -79,6 +79,36 @@ TEST_CASE("cli contract: every runnable subcommand takes --json", "[cli][contrac
     CHECK(missing.empty());
 }
 
+TEST_CASE("cli contract: each command group adds exactly the commands its table names, so main builds the right "
+          "one alone",
+          "[cli][contract]") {
+    std::vector<std::string> from_groups;
+    for (const auto& g : manikind::cli::command_groups()) {
+        CLI::App alone;
+        g.add(alone);
+        std::vector<std::string> built, listed(g.commands.begin(), g.commands.end());
+        for (auto* sub : subcommands_of(alone)) built.push_back(sub->get_name());
+        CHECK(built == listed);
+        from_groups.insert(from_groups.end(), listed.begin(), listed.end());
+    }
+    CLI::App whole;
+    manikind::cli::add_all_commands(whole);
+    std::vector<std::string> all;
+    for (auto* sub : subcommands_of(whole)) all.push_back(sub->get_name());
+    CHECK(all == from_groups);
+    CHECK(all.size() >= 25);
+    // The program built from argv: a command's own options are there, others' are not needed.
+    CHECK(manikind::test::run_manikin("status --help > /dev/null").exit_code == 0);
+    CHECK(manikind::test::run_manikin("-v export --help > /dev/null").exit_code == 0);
+    const auto version = manikind::test::run_manikin("--version");
+    CHECK(version.exit_code == 0);
+    CHECK(version.out == "manikin 0.1.0\n");
+    const auto help = manikind::test::run_manikin("--help");  // the whole tree: every command listed
+    CHECK(help.exit_code == 0);
+    for (const auto& name : all) CHECK_THAT(help.out, Catch::Contains(name));
+    CHECK(manikind::test::run_manikin("statsu > /dev/null 2>&1").exit_code == 2);
+}
+
 TEST_CASE("cli contract: input and usage errors under --json are one error object, exit 2", "[cli][contract]") {
     const auto dir = fresh_dir("input");
     SECTION("a campaign folder that does not exist") {
