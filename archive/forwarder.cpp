@@ -233,7 +233,7 @@ private:
             has_setups ? "s.sha256" : "NULL", has_setups ? "LEFT JOIN setups s ON s.id = t.setup_id" : "");
         Source::Stmt trials(src_, trials_sql.c_str());
         while (trials.step()) {
-            TrialInfo info{trials.int64(0), trials.text(1), recorder::is_terminal_trial_state(trials.text(5))};
+            TrialInfo info{trials.int64(0), trials.text(1), recorder::is_terminal_trial_state(trials.text(5)), {}};
             std::optional<std::int64_t> started, ended;
             if (!trials.is_null(7)) started = trials.int64(7);
             if (!trials.is_null(8)) ended = trials.int64(8);
@@ -257,7 +257,8 @@ private:
                  trials.text(6), opt_text(started), opt_text(ended), trials.text(9), no_setup ? "" : trials.text(10)},
                 {false, false, false, false, false, false, false, !started, !ended, false, no_setup});
             count(result_.trials, r.affected());
-            auto owner = pg_.exec("SELECT lab_id FROM trials WHERE trial_uuid = $1", {info.uuid});
+            auto owner = pg_.exec("SELECT lab_id, trial_key FROM trials WHERE trial_uuid = $1", {info.uuid});
+            info.key = std::to_string(owner.int64(0, 1));
             if (owner.text(0, 0) != lab_)
                 throw UserError(fmt::format("archive {}: trial {} belongs to lab '{}' there, not '{}': was this "
                                             "database pushed under another lab id?",
@@ -275,13 +276,16 @@ private:
                               " WHERE c.unit IS DISTINCT FROM EXCLUDED.unit",
                               {lab_, device, channel, channels.text(3)});
             count(result_.channels, r.affected());
-            // Samples carry the names, pre-escaped for COPY.
+            // Idle samples carry the names, pre-escaped for COPY; trial samples the archive's key.
             std::string names;
             append_copy_text(names, device);
             names += '\t';
             append_copy_text(names, channel);
             names += '\t';
             channel_names_.emplace(channels.int64(0), std::move(names));
+            auto key = pg_.exec("SELECT channel_key FROM channels WHERE lab_id = $1 AND device = $2 AND channel = $3",
+                                {lab_, device, channel});
+            channel_keys_.emplace(channels.int64(0), std::to_string(key.int64(0, 0)) + '\t');
         }
 
         // The SQLite column is the device's address (host:port, serial port, CAN interface).
@@ -401,10 +405,15 @@ private:
     // A running trial is sent up to the snapshot. Its rows need not commit in key order (each
     // device's batch commits on its own), so a row committed later may sort before the progress
     // key: the first push after the trial ends therefore sends it again from the start (a
-    // "terminal pass"; the rows already there cost a key lookup each and are not added twice),
-    // and only that pass marks it complete.
+    // "terminal pass"), and only that pass marks it complete.
+    //
+    // Rows past the saved progress key were never committed to the archive (the key commits with
+    // its rows), so they go straight in with COPY; only the chunks of a terminal pass that reach
+    // back to what an earlier pass sent go through a staging table and ON CONFLICT DO NOTHING.
+    // Were the progress row lost while its rows stayed, the plain COPY would meet a key already
+    // there: that chunk is sent again the careful way (counted in result_.chunks_resent).
     void send_samples() {
-        pg_.exec("CREATE TEMP TABLE IF NOT EXISTS sample_staging (device text, channel text, mono_ns bigint,"
+        pg_.exec("CREATE TEMP TABLE IF NOT EXISTS sample_staging (trial_key integer, mono_ns bigint, channel_key integer,"
                  " utc_ns bigint, value double precision, quality smallint) ON COMMIT DELETE ROWS");
         Source::Stmt read(src_, "SELECT mono_ns, channel_id, utc_ns, value, quality FROM samples"
                                 " WHERE id >= (?1 << 36) AND id < ((?1 + 1) << 36) AND (mono_ns, channel_id) > (?2, ?3)"
@@ -416,10 +425,17 @@ private:
                 ++result_.trials_complete;
                 continue;
             }
+            // Up to this key (mono_ns, channel id) rows may already be in the archive.
+            std::optional<std::pair<std::int64_t, std::int64_t>> sent_up_to;
+            if (progress.last_mono_ns && progress.last_channel_id)
+                sent_up_to = std::pair{*progress.last_mono_ns, *progress.last_channel_id};
             if (trial.terminal && !progress.terminal_pass) {
                 progress = SampleProgress{};
                 progress.terminal_pass = true;
+            } else {
+                sent_up_to.reset();  // resuming past the key: nothing ahead of it was committed
             }
+            const std::string row_start = trial.key + '\t';
             for (;;) {
                 read.reset();
                 read.bind(1, trial.id);
@@ -428,14 +444,18 @@ private:
                 read.bind(4, chunk_rows);
                 std::string data;
                 std::int64_t n = 0;
+                std::optional<std::pair<std::int64_t, std::int64_t>> first_key;
                 while (read.step()) {
                     const auto channel = read.int64(1);
-                    const auto names = channel_names_.find(channel);
-                    if (names == channel_names_.end()) src_.fail("a sample names a channel that does not exist");
+                    const auto key = channel_keys_.find(channel);
+                    if (key == channel_keys_.end()) src_.fail("a sample names a channel that does not exist");
                     progress.last_mono_ns = read.int64(0);
                     progress.last_channel_id = channel;
-                    data += names->second;
-                    data += fmt::format("{}\t{}\t", read.int64(0), read.int64(2));
+                    if (!first_key) first_key = std::pair{read.int64(0), channel};
+                    data += row_start;
+                    data += fmt::format("{}\t", read.int64(0));
+                    data += key->second;
+                    data += fmt::format("{}\t", read.int64(2));
                     append_copy_double(data, read, 3);
                     data += fmt::format("\t{}\n", read.int64(4));
                     ++n;
@@ -444,18 +464,38 @@ private:
                 if (n == 0 && !trial.terminal) break;  // a running trial with nothing new: no progress to record
                 progress.rows_sent += n;
                 progress.complete = trial.terminal && last_chunk;
+                // A re-send: this chunk starts at or before what an earlier pass committed.
+                const bool resend = sent_up_to && first_key && *first_key <= *sent_up_to;
                 std::int64_t added = 0;
-                in_transaction([&] {
-                    if (n > 0) {
-                        pg_.copy_in("COPY sample_staging FROM STDIN", data);
-                        added = pg_.exec("INSERT INTO samples (trial_uuid, device, channel, mono_ns, utc_ns, value,"
-                                         " quality) SELECT $1, device, channel, mono_ns, utc_ns, value, quality"
-                                         " FROM sample_staging ON CONFLICT DO NOTHING",
-                                         {trial.uuid})
-                                    .affected();
+                const auto send = [&](bool careful) {
+                    in_transaction([&] {
+                        if (n > 0) {
+                            // The trial, checked once per chunk (sample_rows has no foreign key).
+                            if (pg_.exec("SELECT 1 FROM trials WHERE trial_key = $1 FOR KEY SHARE", {trial.key}).rows() != 1)
+                                throw UserError(fmt::format("archive {}: trial {} vanished during the push", result_.archive, trial.uuid),
+                                                "archive_refused", ExitStatus::refused);
+                            if (careful) {
+                                pg_.copy_in("COPY sample_staging FROM STDIN", data);
+                                added = pg_.exec("INSERT INTO sample_rows SELECT * FROM sample_staging ON CONFLICT DO NOTHING").affected();
+                            } else {
+                                pg_.copy_in("COPY sample_rows (trial_key, mono_ns, channel_key, utc_ns, value, quality) FROM STDIN", data);
+                                added = n;
+                            }
+                        }
+                        save_progress(trial.uuid, progress);
+                    });
+                };
+                if (resend) {
+                    send(true);
+                } else {
+                    try {
+                        send(false);
+                    } catch (const UserError& e) {
+                        if (e.code() != "archive_refused") throw;  // the server gone: resumed by the next push
+                        send(true);  // a key already there though no progress said so
+                        ++result_.chunks_resent;
                     }
-                    save_progress(trial.uuid, progress);
-                });
+                }
                 if (n > 0) {
                     ++result_.chunks;
                     result_.samples.sent += n;
@@ -584,6 +624,7 @@ private:
         std::int64_t id;
         std::string uuid;
         bool terminal;
+        std::string key;  // the archive's trial_key, as text
     };
 
     Source& src_;
@@ -593,6 +634,7 @@ private:
     PushResult result_;
     std::vector<TrialInfo> trials_;
     std::unordered_map<std::int64_t, std::string> channel_names_;  // id -> "device\tchannel\t", COPY-escaped
+    std::unordered_map<std::int64_t, std::string> channel_keys_;   // id -> "<archive channel_key>\t"
 };
 
 }  // namespace

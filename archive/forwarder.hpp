@@ -45,6 +45,7 @@ struct PushResult {
     TableCounts setups;  // lab, chamber, manikin, calibration, configuration (recorder schema v7)
     TableCounts notes;   // the lab notebook (recorder schema v9)
     std::int64_t chunks = 0;       // of samples
+    std::int64_t chunks_resent = 0;  // sent plainly, met a row already there, sent again with ON CONFLICT
     std::int64_t idle_chunks = 0;  // of idle_samples
     bool idle_resent = false;      // rows appeared behind the idle log's progress (clock stepped back): resent all
     std::int64_t trials_complete = 0;  // terminal trials whose samples the archive now holds in full

@@ -2,16 +2,20 @@
 // PostgreSQL 15 server started for the run (as tests/archive/pg_server.hpp does; fsync off, so
 // the figures are the protocol's and the server's CPU, not this disk's).
 //
-// 1. Rows per second into the archive's samples table, three ways, interleaved, each into a fresh
-//    database, from the same recorder file of 400 000 samples (35 channels, one done trial):
-//    - push():   COPY into a staging table, then INSERT ... ON CONFLICT DO NOTHING, 50 000 rows a
-//                transaction (what `manikin archive push` and the daemon do);
+// 1. Rows per second into the archive's sample_rows table, three ways, interleaved, each into a
+//    fresh database, from the same recorder file of 400 000 samples (35 channels, one done trial):
+//    - push():   COPY straight into sample_rows (integer keys; rows past the progress key were
+//                never committed), 50 000 rows a transaction (what `manikin archive push` and the
+//                daemon do);
 //    - inserts:  one prepared INSERT ... ON CONFLICT DO NOTHING per row, same transactions;
 //    - floor:    the same rows read from the same SQLite file, written as COPY text and copied
 //                straight into a table with no key, index or foreign key (what the server cannot
 //                beat for this data). Inside its timer, as push has inside its own: the
 //                connection, the table's creation, the SQLite reading and the text (issue 36:
 //                the text had been built before the floor's timer started).
+//    Then what each key and check costs: the same rows as COPY text built before the timers, into
+//    a table with no key, an integer key, an integer key and a foreign key, through a staging
+//    table with ON CONFLICT, and with the old key of three text columns.
 // 2. The lag behind acquisition in real time: a Recorder fed at the simulated lab's rate times
 //    ten (390 rows/s), committing every second as the daemon does, and the daemon's forwarding
 //    thread (BackgroundForwarder) at its default 5-s interval and at 1 s; every 250 ms, now minus
@@ -106,32 +110,36 @@ double run_push(const std::string& conninfo, const fs::path& db) {
     return static_cast<double>(total_rows) / s;
 }
 
-// Per-row prepared INSERTs into the archive's own samples table (after a push has created the
+// Per-row prepared INSERTs into the archive's own sample_rows table (after a push has created the
 // schema, the lab, the trial and the channels, with its samples deleted again).
 double run_inserts(const std::string& conninfo, const fs::path& db) {
     ar::PushOptions o;
     o.chunk_rows = chunk_rows;
     (void)ar::push(db, conninfo, "bench-lab", o);
     auto pg = ar::PgConnection::connect(conninfo);
-    const std::string uuid = pg.exec("SELECT trial_uuid FROM trials").text(0, 0);
-    pg.exec("DELETE FROM samples");
-    pg.exec("VACUUM samples");
+    const std::string trial_key = pg.exec("SELECT trial_key FROM trials").text(0, 0);
+    std::vector<std::string> channel_keys;
+    for (int z = 1; z <= channels; ++z)
+        channel_keys.push_back(
+            pg.exec("SELECT channel_key FROM channels WHERE channel = $1", {fmt::format("zone{:02}.heat_flux_w_m2", z)}).text(0, 0));
+    pg.exec("DELETE FROM sample_rows");
+    pg.exec("VACUUM sample_rows");
     PQclear(PQprepare(pg.raw(), "ins",
-                      "INSERT INTO samples (trial_uuid, device, channel, mono_ns, utc_ns, value, quality)"
-                      " VALUES ($1, $2, $3, $4, $5, $6, $7) ON CONFLICT DO NOTHING",
-                      7, nullptr));
+                      "INSERT INTO sample_rows (trial_key, mono_ns, channel_key, utc_ns, value, quality)"
+                      " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT DO NOTHING",
+                      6, nullptr));
     const auto t0 = Clock::now();
     for (std::int64_t first = 0; first < total_rows; first += static_cast<std::int64_t>(chunk_rows)) {
         pg.exec("BEGIN");
         for (std::int64_t i = first; i < std::min<std::int64_t>(total_rows, first + static_cast<std::int64_t>(chunk_rows));
              ++i) {
             const std::int64_t tick = i / channels;
-            const std::string channel = fmt::format("zone{:02}.heat_flux_w_m2", i % channels + 1);
+            const std::string& channel = channel_keys[static_cast<std::size_t>(i % channels)];
             const std::string mono = std::to_string(tick * period_ns);
             const std::string utc = std::to_string(1'790'000'000'000'000'000 + tick * period_ns);
             const std::string value = fmt::format("{}", 40.0 + static_cast<double>(i % 997) * 0.013);
-            const char* params[] = {uuid.c_str(), "manikin", channel.c_str(), mono.c_str(), utc.c_str(), value.c_str(), "0"};
-            PGresult* r = PQexecPrepared(pg.raw(), "ins", 7, params, nullptr, nullptr, 0);
+            const char* params[] = {trial_key.c_str(), mono.c_str(), channel.c_str(), utc.c_str(), value.c_str(), "0"};
+            PGresult* r = PQexecPrepared(pg.raw(), "ins", 6, params, nullptr, nullptr, 0);
             const bool ok = PQresultStatus(r) == PGRES_COMMAND_OK;
             PQclear(r);
             if (!ok) throw std::runtime_error(std::string("insert failed: ") + PQerrorMessage(pg.raw()));
@@ -139,6 +147,60 @@ double run_inserts(const std::string& conninfo, const fs::path& db) {
         pg.exec("COMMIT");
     }
     return static_cast<double>(total_rows) / seconds_since(t0);
+}
+
+// What each key and check costs on the server: the same rows, as COPY text built before the
+// timer (integer keys, or the names the archive keyed on before schema v5), copied in chunks of
+// chunk_rows into a table of each kind. Rows per second.
+struct KeyCosts {
+    double keyless = 0, integer_key = 0, integer_key_fk = 0, staged_on_conflict = 0, text_key = 0;
+};
+KeyCosts run_key_costs(const std::string& conninfo) {
+    auto pg = ar::PgConnection::connect(conninfo);
+    pg.exec("CREATE TABLE parent (trial_key integer PRIMARY KEY)");
+    pg.exec("INSERT INTO parent VALUES (1)");
+    std::vector<std::string> int_chunks, text_chunks;
+    for (std::int64_t first = 0; first < total_rows; first += static_cast<std::int64_t>(chunk_rows)) {
+        std::string ints, texts;
+        for (std::int64_t i = first; i < std::min<std::int64_t>(total_rows, first + static_cast<std::int64_t>(chunk_rows)); ++i) {
+            const std::int64_t tick = i / channels, mono = tick * period_ns, utc = 1'790'000'000'000'000'000 + tick * period_ns;
+            const double value = 40.0 + static_cast<double>(i % 997) * 0.013;
+            ints += fmt::format("1\t{}\t{}\t{}\t{}\t0\n", mono, i % channels + 1, utc, value);
+            texts += fmt::format("0123456789abcdef0123456789abcdef\tmanikin\tzone{:02}.heat_flux_w_m2\t{}\t{}\t{}\t0\n", i % channels + 1,
+                                 mono, utc, value);
+        }
+        int_chunks.push_back(std::move(ints));
+        text_chunks.push_back(std::move(texts));
+    }
+    const auto timed = [&](const std::string& ddl, const std::string& copy, const std::vector<std::string>& chunks,
+                           const std::string& after = {}) {
+        pg.exec("DROP TABLE IF EXISTS t");
+        pg.exec("DROP TABLE IF EXISTS staging");
+        pg.exec(ddl);
+        if (!after.empty()) pg.exec("CREATE TEMP TABLE staging (LIKE t) ON COMMIT DELETE ROWS");
+        const auto t0 = Clock::now();
+        for (const auto& chunk : chunks) {
+            pg.exec("BEGIN");
+            pg.copy_in(copy, chunk);
+            if (!after.empty()) pg.exec(after);
+            pg.exec("COMMIT");
+        }
+        return static_cast<double>(total_rows) / seconds_since(t0);
+    };
+    const std::string cols = "(trial_key integer NOT NULL, mono_ns bigint NOT NULL, channel_key integer NOT NULL, utc_ns bigint NOT NULL,"
+                             " value double precision, quality smallint NOT NULL";
+    KeyCosts k;
+    k.keyless = timed("CREATE TABLE t " + cols + ")", "COPY t FROM STDIN", int_chunks);
+    k.integer_key = timed("CREATE TABLE t " + cols + ", PRIMARY KEY (trial_key, mono_ns, channel_key))", "COPY t FROM STDIN", int_chunks);
+    k.integer_key_fk = timed("CREATE TABLE t " + cols + ", PRIMARY KEY (trial_key, mono_ns, channel_key), FOREIGN KEY (trial_key) REFERENCES parent)",
+                             "COPY t FROM STDIN", int_chunks);
+    k.staged_on_conflict = timed("CREATE TABLE t " + cols + ", PRIMARY KEY (trial_key, mono_ns, channel_key))", "COPY staging FROM STDIN",
+                                 int_chunks, "INSERT INTO t SELECT * FROM staging ON CONFLICT DO NOTHING");
+    k.text_key = timed("CREATE TABLE t (trial_uuid text NOT NULL, device text NOT NULL, channel text NOT NULL, mono_ns bigint NOT NULL,"
+                       " utc_ns bigint NOT NULL, value double precision, quality smallint NOT NULL,"
+                       " PRIMARY KEY (trial_uuid, device, channel, mono_ns))",
+                       "COPY t FROM STDIN", text_chunks);
+    return k;
 }
 
 double run_floor(const std::string& conninfo, const fs::path& db) {
@@ -239,22 +301,40 @@ int main() {
     make_source(source, true);
 
     std::vector<double> push_rps, insert_rps, floor_rps;
+    std::vector<KeyCosts> costs;
     for (int run = 0; run < 3; ++run) {
         push_rps.push_back(run_push(fresh_database(server.conninfo(), fmt::format("push{}", run)), source));
         insert_rps.push_back(run_inserts(fresh_database(server.conninfo(), fmt::format("ins{}", run)), source));
         floor_rps.push_back(run_floor(fresh_database(server.conninfo(), fmt::format("floor{}", run)), source));
-        std::printf("run %d: push (COPY) %.0f rows/s, per-row INSERT %.0f rows/s, COPY floor %.0f rows/s\n", run + 1,
+        costs.push_back(run_key_costs(fresh_database(server.conninfo(), fmt::format("keys{}", run))));
+        std::printf("run %d: push %.0f rows/s, per-row INSERT %.0f rows/s, COPY floor %.0f rows/s\n", run + 1,
                     push_rps.back(), insert_rps.back(), floor_rps.back());
         std::fflush(stdout);
     }
     std::printf("\n%lld samples, %d channels, %zu rows per transaction; medians of 3 interleaved runs:\n",
                 static_cast<long long>(total_rows), channels, chunk_rows);
-    std::printf("  push (COPY -> staging -> INSERT ON CONFLICT)  %9.0f rows/s  %.2f of the floor\n", median(push_rps),
+    std::printf("  push (plain COPY into sample_rows past the progress key)  %9.0f rows/s  %.2f of the floor\n", median(push_rps),
                 median(push_rps) / median(floor_rps));
-    std::printf("  per-row prepared INSERT ON CONFLICT           %9.0f rows/s  %.2f of the floor\n", median(insert_rps),
+    std::printf("  per-row prepared INSERT ON CONFLICT                        %9.0f rows/s  %.2f of the floor\n", median(insert_rps),
                 median(insert_rps) / median(floor_rps));
-    std::printf("  floor: COPY into a table with no key          %9.0f rows/s\n", median(floor_rps));
+    std::printf("  floor: SQLite read + COPY into a table with no key         %9.0f rows/s\n", median(floor_rps));
     std::printf("  push / per-row INSERT: %.1fx\n\n", median(push_rps) / median(insert_rps));
+    const auto med = [&](double KeyCosts::*field) {
+        std::vector<double> v;
+        for (const auto& c : costs) v.push_back(c.*field);
+        return median(v);
+    };
+    const double keyless = med(&KeyCosts::keyless);
+    std::printf("what each key and check costs on the server (the same COPY text built before the timers; medians of 3):\n");
+    const auto line = [&](const char* what, double rps) {
+        std::printf("  %-62s %9.0f rows/s  %+6.2f s per million rows\n", what, rps, 1e6 / rps - 1e6 / keyless);
+    };
+    std::printf("  %-62s %9.0f rows/s\n", "COPY, integer columns, no key", keyless);
+    line("COPY, integer key (trial, mono_ns, channel): what a push does", med(&KeyCosts::integer_key));
+    line("  + a foreign key to trials checked per row", med(&KeyCosts::integer_key_fk));
+    line("COPY into staging, INSERT ... ON CONFLICT DO NOTHING (re-send)", med(&KeyCosts::staged_on_conflict));
+    line("COPY, key of three text columns (the archive before schema v5)", med(&KeyCosts::text_key));
+    std::printf("\n");
 
     for (const auto interval : {std::chrono::milliseconds(5000), std::chrono::milliseconds(1000)}) {
         const auto lag = run_lag(fresh_database(server.conninfo(), fmt::format("lag{}", interval.count())),

@@ -58,6 +58,7 @@ void run_push(const PushArgs& a) {
                                     {"setups", to_json(r.setups)},
                                     {"notes", to_json(r.notes)},
                                     {"chunks", r.chunks},
+                                    {"chunks_resent", r.chunks_resent},
                                     {"idle_chunks", r.idle_chunks},
                                     {"idle_resent", r.idle_resent},
                                     {"trials_complete", r.trials_complete},
@@ -82,6 +83,9 @@ void run_push(const PushArgs& a) {
     row("idle_samples", r.idle_samples);
     row("setups", r.setups);
     row("notes", r.notes);
+    if (r.chunks_resent)
+        std::printf("samples: %lld chunks met rows the archive already had though no progress said so: sent again, none doubled\n",
+                    static_cast<long long>(r.chunks_resent));
     if (r.idle_resent) std::printf("idle log: rows appeared behind what was sent (clock stepped back?): resent all\n");
     std::printf("trials with every sample archived: %lld; still running, sent so far: %lld\n",
                 static_cast<long long>(r.trials_complete), static_cast<long long>(r.trials_partial));

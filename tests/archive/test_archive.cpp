@@ -261,6 +261,26 @@ TEST_CASE("archive push sends everything once and a second push adds nothing", "
         server.start();
     }
 
+    SECTION("progress rows lost while their samples stayed: the plain COPY meets a key already there, the chunk goes "
+            "again with ON CONFLICT, and every row is still there once") {
+        {
+            auto pg = PgConnection::connect(server.conninfo());
+            pg.exec("DELETE FROM forward_progress WHERE source_table = 'samples'");
+        }
+        auto again = push(db_path, server.conninfo(), "lab-3");
+        CHECK(again.samples.sent == (1500 + 1200) * 3);
+        CHECK(again.samples.added == 0);
+        CHECK(again.chunks_resent >= 1);
+        check_archive_equals_sqlite(db_path, server.conninfo());
+        CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM sample_rows") == (1500 + 1200) * 3);
+    }
+
+    SECTION("samples are stored under integer keys, and the samples view gives them back with their names") {
+        CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM sample_rows") == (1500 + 1200) * 3);
+        CHECK(archive_count(server.conninfo(), "SELECT count(DISTINCT channel_key) FROM sample_rows") == 3);
+        CHECK(archive_count(server.conninfo(), "SELECT count(*) FROM samples WHERE channel = 'zone\\1 skin_c'") == 2700);
+    }
+
     SECTION("the same file under another lab id is refused: its trials belong to lab-3") {
         try {
             push(db_path, server.conninfo(), "lab-4");
@@ -603,7 +623,7 @@ TEST_CASE("archive push sends the idle log and lab metadata once and trial_steps
 }
 
 TEST_CASE("the daemon's forwarder counts the idle log for stepped-back rows at its first pass and then once per "
-          "idle_check_interval, not at every pass",
+          "idle_check_interval and not at every pass",
           "[archive]") {
     SKIP_WITHOUT_POSTGRES();
     LabAndServer f;
@@ -642,4 +662,32 @@ TEST_CASE("the daemon's forwarder counts the idle log for stepped-back rows at i
         REQUIRE(forwarder.forward_now());
         CHECK(idle_count() == 75 * 3);  // and by a later pass's, once the interval has passed
     }
+}
+
+TEST_CASE("archive schema v5: an archive of version 4 with samples keeps every one under the integer keys", "[archive]") {
+    SKIP_WITHOUT_POSTGRES();
+    LabAndServer f;
+    // Version 4 as a push of the previous program left it (its four migrations, then another lab's rows).
+    {
+        auto pg = PgConnection::connect(f.server.conninfo());
+        pg.exec("CREATE TABLE schema_version (version integer NOT NULL)");
+        const auto migrations = manikind::archive::pg_migrations();
+        for (std::size_t v = 0; v < 4; ++v) pg.exec_script(migrations[v]);
+        pg.exec("INSERT INTO schema_version VALUES (4)");
+        pg.exec("INSERT INTO labs VALUES ('lab-0', 'lab-0', 1)");
+        pg.exec("INSERT INTO campaigns VALUES ('lab-0', 'c', '{}', 1, 'done')");
+        pg.exec("INSERT INTO trials (trial_uuid, lab_id, campaign_name, case_name, replicate, state, reason, conditions_json)"
+                " VALUES ('0123456789abcdef0123456789abcdef', 'lab-0', 'c', 'case 1', 1, 'done', '', '{}')");
+        pg.exec("INSERT INTO channels VALUES ('lab-0', 'manikin', 'z01.skin_temp_c', 'degC'), ('lab-0', 'chamber', 'pv', 'degC')");
+        pg.exec("INSERT INTO samples SELECT '0123456789abcdef0123456789abcdef', d, ch, g, g + 7, g * 0.5, 0"
+                " FROM generate_series(1, 500) g, (VALUES ('manikin', 'z01.skin_temp_c'), ('chamber', 'pv')) AS x(d, ch)");
+    }
+    // The next push migrates it, then sends its own file beside.
+    auto r = push(f.db_path, f.server.conninfo(), "lab-3");
+    CHECK(r.archive_schema_version == 5);
+    CHECK(archive_count(f.server.conninfo(), "SELECT count(*) FROM samples WHERE trial_uuid = '0123456789abcdef0123456789abcdef'") == 1000);
+    CHECK(archive_count(f.server.conninfo(), "SELECT sum(mono_ns) FROM samples WHERE trial_uuid = '0123456789abcdef0123456789abcdef'"
+                                             " AND device = 'chamber'") == 500 * 501 / 2);
+    CHECK(archive_count(f.server.conninfo(), "SELECT count(*) FROM trial_steps WHERE trial_uuid = '0123456789abcdef0123456789abcdef'") == 500);
+    check_archive_equals_sqlite(f.db_path, f.server.conninfo(), "lab-3");
 }
