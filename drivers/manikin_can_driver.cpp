@@ -76,8 +76,11 @@ void ManikinCanDriver::stop() {
 }
 
 void ManikinCanDriver::start_read() {
-    stream_->async_read_some(boost::asio::buffer(&rx_, sizeof rx_),
-                             [this, alive = alive_](const boost::system::error_code& ec, std::size_t n) {
+    // Wait for readiness, then read every frame waiting with recvmmsg. Not async_read_some: asio
+    // tries that read at once, before waiting, and on a bus that just went quiet it returned
+    // EAGAIN at every frame burst (80 % of the demo's recvmmsg calls, issue 36).
+    stream_->async_wait(boost::asio::posix::stream_descriptor::wait_read,
+                        [this, alive = alive_](const boost::system::error_code& ec) {
         if (!*alive) return;
         if (ec) {
             if (ec == boost::asio::error::operation_aborted) return;
@@ -87,10 +90,6 @@ void ManikinCanDriver::start_read() {
             status_.last_error = "read: " + ec.message();
             return;  // a socketpair or CAN socket that fails stays down; the daemon reports it
         }
-        take(rx_, n);
-        // The rest of a burst (a zone report is 35 frames at once) in a few recvmmsg calls rather
-        // than a read and a reactor round per frame. The next read is again asynchronous, so
-        // asio's readiness tracking stays as it was.
         if (stream_ && drain_waiting() && stream_) start_read();
     });
 }
@@ -126,6 +125,13 @@ bool ManikinCanDriver::drain_waiting() {
             status_.connected = false;
             ++status_.comm_errors;
             status_.last_error = std::string("read: ") + std::strerror(errno);
+            return false;
+        }
+        if (n == 0) {  // readable and nothing to read: the peer closed
+            std::lock_guard lk(lock_);
+            status_.connected = false;
+            ++status_.comm_errors;
+            status_.last_error = "read: End of file";
             return false;
         }
         for (int i = 0; i < n; ++i) {

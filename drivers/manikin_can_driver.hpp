@@ -78,7 +78,6 @@ private:
     SampleSink sink_;
     mutable std::mutex lock_;
     DriverStatus status_;
-    can_frame rx_{};
     bool run_ = false;
     std::uint8_t host_heartbeat_ = 0;
     std::optional<protocol::manikin_can::Heartbeat> heartbeat_;
