@@ -21,37 +21,34 @@ std::string trimmed(const char* message) {
 }  // namespace
 
 const Libpq& libpq() {
-    static const Libpq api = [] {
-        static LazyLibrary library("libmanikind-pq.so", "the PostgreSQL client library (libpq, for the archive)");
-        Libpq a;
-        MANIKIND_BIND(library, a, clear, PQclear);
-        MANIKIND_BIND(library, a, cmdTuples, PQcmdTuples);
-        MANIKIND_BIND(library, a, connectdbParams, PQconnectdbParams);
-        MANIKIND_BIND(library, a, conninfoFree, PQconninfoFree);
-        MANIKIND_BIND(library, a, conninfoParse, PQconninfoParse);
-        MANIKIND_BIND(library, a, db, PQdb);
-        MANIKIND_BIND(library, a, errorMessage, PQerrorMessage);
-        MANIKIND_BIND(library, a, escapeLiteral, PQescapeLiteral);
-        MANIKIND_BIND(library, a, exec, PQexec);
-        MANIKIND_BIND(library, a, execParams, PQexecParams);
-        MANIKIND_BIND(library, a, finish, PQfinish);
-        MANIKIND_BIND(library, a, freemem, PQfreemem);
-        MANIKIND_BIND(library, a, getCopyData, PQgetCopyData);
-        MANIKIND_BIND(library, a, getResult, PQgetResult);
-        MANIKIND_BIND(library, a, getisnull, PQgetisnull);
-        MANIKIND_BIND(library, a, getvalue, PQgetvalue);
-        MANIKIND_BIND(library, a, host, PQhost);
-        MANIKIND_BIND(library, a, ntuples, PQntuples);
-        MANIKIND_BIND(library, a, port, PQport);
-        MANIKIND_BIND(library, a, putCopyData, PQputCopyData);
-        MANIKIND_BIND(library, a, putCopyEnd, PQputCopyEnd);
-        MANIKIND_BIND(library, a, resultErrorMessage, PQresultErrorMessage);
-        MANIKIND_BIND(library, a, resultStatus, PQresultStatus);
-        MANIKIND_BIND(library, a, setClientEncoding, PQsetClientEncoding);
-        MANIKIND_BIND(library, a, status, PQstatus);
-        return a;
-    }();
-    return api;
+    static LazyLibrary library("libmanikind-pq.so", "the PostgreSQL client library (libpq, for the archive)");
+    return library.table<Libpq>([](LazyLibrary& l, Libpq& a) {
+        MANIKIND_BIND(l, a, clear, PQclear);
+        MANIKIND_BIND(l, a, cmdTuples, PQcmdTuples);
+        MANIKIND_BIND(l, a, connectdbParams, PQconnectdbParams);
+        MANIKIND_BIND(l, a, conninfoFree, PQconninfoFree);
+        MANIKIND_BIND(l, a, conninfoParse, PQconninfoParse);
+        MANIKIND_BIND(l, a, db, PQdb);
+        MANIKIND_BIND(l, a, errorMessage, PQerrorMessage);
+        MANIKIND_BIND(l, a, escapeLiteral, PQescapeLiteral);
+        MANIKIND_BIND(l, a, exec, PQexec);
+        MANIKIND_BIND(l, a, execParams, PQexecParams);
+        MANIKIND_BIND(l, a, finish, PQfinish);
+        MANIKIND_BIND(l, a, freemem, PQfreemem);
+        MANIKIND_BIND(l, a, getCopyData, PQgetCopyData);
+        MANIKIND_BIND(l, a, getResult, PQgetResult);
+        MANIKIND_BIND(l, a, getisnull, PQgetisnull);
+        MANIKIND_BIND(l, a, getvalue, PQgetvalue);
+        MANIKIND_BIND(l, a, host, PQhost);
+        MANIKIND_BIND(l, a, ntuples, PQntuples);
+        MANIKIND_BIND(l, a, port, PQport);
+        MANIKIND_BIND(l, a, putCopyData, PQputCopyData);
+        MANIKIND_BIND(l, a, putCopyEnd, PQputCopyEnd);
+        MANIKIND_BIND(l, a, resultErrorMessage, PQresultErrorMessage);
+        MANIKIND_BIND(l, a, resultStatus, PQresultStatus);
+        MANIKIND_BIND(l, a, setClientEncoding, PQsetClientEncoding);
+        MANIKIND_BIND(l, a, status, PQstatus);
+    });
 }
 
 std::int64_t PgResult::int64(int row, int column) const {

@@ -35,6 +35,18 @@ public:
     // Where the program looks for modules: the directory of /proc/self/exe.
     static std::string program_directory();
 
+    // The table `Api` of a library's functions, bound by `binder` at the first call (each type's
+    // table once per process); a failed load throws here and is tried again at the next call.
+    template <typename Api>
+    const Api& table(void (*binder)(LazyLibrary&, Api&)) {
+        static const Api api = [&] {
+            Api a{};
+            binder(*this, a);
+            return a;
+        }();
+        return api;
+    }
+
 private:
     void load();
     std::string module_file_, what_;

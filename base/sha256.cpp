@@ -19,14 +19,11 @@ struct Crypto {
 };
 
 const Crypto& crypto() {
-    static const Crypto api = [] {
-        static LazyLibrary library("libmanikind-crypto.so", "OpenSSL's libcrypto (for SHA-256 fingerprints)");
-        Crypto a;
-        MANIKIND_BIND(library, a, Digest, EVP_Digest);
-        MANIKIND_BIND(library, a, sha256, EVP_sha256);
-        return a;
-    }();
-    return api;
+    static LazyLibrary library("libmanikind-crypto.so", "OpenSSL's libcrypto (for SHA-256 fingerprints)");
+    return library.table<Crypto>([](LazyLibrary& l, Crypto& a) {
+        MANIKIND_BIND(l, a, Digest, EVP_Digest);
+        MANIKIND_BIND(l, a, sha256, EVP_sha256);
+    });
 }
 
 }  // namespace

@@ -25,6 +25,7 @@
 #include <fmt/core.h>
 
 #include "analysis/analyze.hpp"
+#include "bench/child_run.hpp"
 #include "analysis/recording.hpp"
 #include "analysis/synthetic.hpp"
 
@@ -128,21 +129,8 @@ struct ChildRun {
 
 // One fresh `manikin <args...>`, stdout to /dev/null.
 ChildRun run_child(const fs::path& manikin, const std::vector<std::string>& args) {
-    std::fflush(stdout);  // or the child's freopen would print our buffer twice
-    std::vector<char*> argv{const_cast<char*>("manikin")};
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    const auto t0 = Clock::now();
-    const pid_t pid = fork();
-    if (pid == 0) {
-        std::freopen("/dev/null", "w", stdout);
-        execv(manikin.c_str(), argv.data());
-        _exit(127);
-    }
-    int status = 0;
-    rusage child{};
-    wait4(pid, &status, 0, &child);
-    return {seconds_since(t0) * 1e3, static_cast<double>(child.ru_maxrss) / 1024.0, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
+    const auto r = manikind::bench::run_program(manikin.string(), args);
+    return {r.wall_s * 1e3, r.peak_mb, r.status};
 }
 
 // The median wall time of `runs` fresh processes, and the largest peak RSS among them.

@@ -23,6 +23,7 @@
 #include <sqlite3.h>
 
 #include "base/lazy_library.hpp"
+#include "bench/child_run.hpp"
 #include "store/database.hpp"
 
 namespace fs = std::filesystem;
@@ -72,33 +73,10 @@ void build_database(const fs::path& path, int trials) {
     }
 }
 
-struct Run {
-    double wall_s = 0, peak_mb = 0;
-    int status = -1;
-};
+using manikind::bench::ChildRun;
+using Run = ChildRun;
 
-Run wait_child(pid_t pid, Clock::time_point t0) {
-    int status = 0;
-    rusage u{};
-    wait4(pid, &status, 0, &u);
-    return {std::chrono::duration<double>(Clock::now() - t0).count(), static_cast<double>(u.ru_maxrss) / 1024.0,
-            WIFEXITED(status) ? WEXITSTATUS(status) : -1};
-}
-
-Run run_manikin(const std::string& manikin, std::vector<std::string> args) {
-    std::fflush(stdout);
-    std::vector<char*> argv{const_cast<char*>("manikin")};
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    const auto t0 = Clock::now();
-    const pid_t pid = fork();
-    if (pid == 0) {
-        std::freopen("/dev/null", "w", stdout);
-        execv(manikin.c_str(), argv.data());
-        _exit(127);
-    }
-    return wait_child(pid, t0);
-}
+Run run_manikin(const std::string& manikin, std::vector<std::string> args) { return manikind::bench::run_program(manikin, std::move(args)); }
 
 // The floor, in a child process of its own: every trial's rows, the reader's one statement.
 Run run_floor(const fs::path& db_path, int trials) {
@@ -127,7 +105,7 @@ Run run_floor(const fs::path& db_path, int trials) {
         sqlite3_close(db);
         _exit(n > 0 && sum != 0 ? 0 : 2);
     }
-    return wait_child(pid, t0);
+    return manikind::bench::wait_child(pid, t0);
 }
 
 template <typename F>

@@ -36,23 +36,20 @@ struct Curl {
 // UserError (code missing_library) when libcurl cannot be loaded. curl_global_init runs here, once,
 // before any thread uses libcurl (it is not thread-safe itself).
 const Curl& curl() {
-    static const Curl api = [] {
-        static LazyLibrary library("libmanikind-curl.so", "libcurl (for notifications)");
-        Curl a;
-        MANIKIND_BIND(library, a, easy_cleanup, curl_easy_cleanup);
-        MANIKIND_BIND(library, a, easy_getinfo, curl_easy_getinfo);
-        MANIKIND_BIND(library, a, easy_init, curl_easy_init);
-        MANIKIND_BIND(library, a, easy_perform, curl_easy_perform);
-        MANIKIND_BIND(library, a, easy_setopt, curl_easy_setopt);
-        MANIKIND_BIND(library, a, easy_strerror, curl_easy_strerror);
-        MANIKIND_BIND(library, a, global_init, curl_global_init);
-        MANIKIND_BIND(library, a, slist_append, curl_slist_append);
-        MANIKIND_BIND(library, a, slist_free_all, curl_slist_free_all);
+    static LazyLibrary library("libmanikind-curl.so", "libcurl (for notifications)");
+    return library.table<Curl>([](LazyLibrary& l, Curl& a) {
+        MANIKIND_BIND(l, a, easy_cleanup, curl_easy_cleanup);
+        MANIKIND_BIND(l, a, easy_getinfo, curl_easy_getinfo);
+        MANIKIND_BIND(l, a, easy_init, curl_easy_init);
+        MANIKIND_BIND(l, a, easy_perform, curl_easy_perform);
+        MANIKIND_BIND(l, a, easy_setopt, curl_easy_setopt);
+        MANIKIND_BIND(l, a, easy_strerror, curl_easy_strerror);
+        MANIKIND_BIND(l, a, global_init, curl_global_init);
+        MANIKIND_BIND(l, a, slist_append, curl_slist_append);
+        MANIKIND_BIND(l, a, slist_free_all, curl_slist_free_all);
         if (a.global_init(CURL_GLOBAL_DEFAULT) != CURLE_OK)
             throw UserError("libcurl did not initialise (curl_global_init failed)", "missing_library");
-        return a;
-    }();
-    return api;
+    });
 }
 
 struct Easy {

@@ -64,52 +64,51 @@ struct H5Api {
 // HDF5 is loaded by the first HDF5 call, not at start-up (base/lazy_library.hpp). A failed load
 // throws from here and is tried again at the next call.
 const H5Api& h5() {
-    static const H5Api api = [] {
-        static LazyLibrary library("libmanikind-hdf5.so", "HDF5 (libhdf5, for HDF5 exports)");
-        H5Api a{};
-        MANIKIND_BIND(library, a, Aclose, H5Aclose);
-        MANIKIND_BIND(library, a, Acreate2, H5Acreate2);
-        MANIKIND_BIND(library, a, Aget_type, H5Aget_type);
-        MANIKIND_BIND(library, a, Aopen_by_name, H5Aopen_by_name);
-        MANIKIND_BIND(library, a, Aread, H5Aread);
-        MANIKIND_BIND(library, a, Awrite, H5Awrite);
-        MANIKIND_BIND(library, a, Dclose, H5Dclose);
-        MANIKIND_BIND(library, a, Dcreate2, H5Dcreate2);
-        MANIKIND_BIND(library, a, Dget_space, H5Dget_space);
-        MANIKIND_BIND(library, a, Dget_type, H5Dget_type);
-        MANIKIND_BIND(library, a, Dopen2, H5Dopen2);
-        MANIKIND_BIND(library, a, Dread, H5Dread);
-        MANIKIND_BIND(library, a, Dwrite, H5Dwrite);
-        MANIKIND_BIND(library, a, Eset_auto2, H5Eset_auto2);
-        MANIKIND_BIND(library, a, Fclose, H5Fclose);
-        MANIKIND_BIND(library, a, Fcreate, H5Fcreate);
-        MANIKIND_BIND(library, a, Fflush, H5Fflush);
-        MANIKIND_BIND(library, a, Fopen, H5Fopen);
-        MANIKIND_BIND(library, a, Gclose, H5Gclose);
-        MANIKIND_BIND(library, a, Gcreate2, H5Gcreate2);
-        MANIKIND_BIND(library, a, Gopen2, H5Gopen2);
-        MANIKIND_BIND(library, a, Ldelete, H5Ldelete);
-        MANIKIND_BIND(library, a, Lexists, H5Lexists);
-        MANIKIND_BIND(library, a, Sclose, H5Sclose);
-        MANIKIND_BIND(library, a, Screate, H5Screate);
-        MANIKIND_BIND(library, a, Screate_simple, H5Screate_simple);
-        MANIKIND_BIND(library, a, Sget_simple_extent_npoints, H5Sget_simple_extent_npoints);
-        MANIKIND_BIND(library, a, Tclose, H5Tclose);
-        MANIKIND_BIND(library, a, Tcopy, H5Tcopy);
-        MANIKIND_BIND(library, a, Tget_class, H5Tget_class);
-        MANIKIND_BIND(library, a, Tget_size, H5Tget_size);
-        MANIKIND_BIND(library, a, Tis_variable_str, H5Tis_variable_str);
-        MANIKIND_BIND(library, a, Tset_cset, H5Tset_cset);
-        MANIKIND_BIND(library, a, Tset_size, H5Tset_size);
-        MANIKIND_BIND(library, a, Tset_strpad, H5Tset_strpad);
-        MANIKIND_BIND(library, a, dont_atexit, H5dont_atexit);
-        MANIKIND_BIND(library, a, free_memory, H5free_memory);
+    static LazyLibrary library("libmanikind-hdf5.so", "HDF5 (libhdf5, for HDF5 exports)");
+    return library.table<H5Api>([](LazyLibrary& l, H5Api& a) {
+        MANIKIND_BIND(l, a, Aclose, H5Aclose);
+        MANIKIND_BIND(l, a, Acreate2, H5Acreate2);
+        MANIKIND_BIND(l, a, Aget_type, H5Aget_type);
+        MANIKIND_BIND(l, a, Aopen_by_name, H5Aopen_by_name);
+        MANIKIND_BIND(l, a, Aread, H5Aread);
+        MANIKIND_BIND(l, a, Awrite, H5Awrite);
+        MANIKIND_BIND(l, a, Dclose, H5Dclose);
+        MANIKIND_BIND(l, a, Dcreate2, H5Dcreate2);
+        MANIKIND_BIND(l, a, Dget_space, H5Dget_space);
+        MANIKIND_BIND(l, a, Dget_type, H5Dget_type);
+        MANIKIND_BIND(l, a, Dopen2, H5Dopen2);
+        MANIKIND_BIND(l, a, Dread, H5Dread);
+        MANIKIND_BIND(l, a, Dwrite, H5Dwrite);
+        MANIKIND_BIND(l, a, Eset_auto2, H5Eset_auto2);
+        MANIKIND_BIND(l, a, Fclose, H5Fclose);
+        MANIKIND_BIND(l, a, Fcreate, H5Fcreate);
+        MANIKIND_BIND(l, a, Fflush, H5Fflush);
+        MANIKIND_BIND(l, a, Fopen, H5Fopen);
+        MANIKIND_BIND(l, a, Gclose, H5Gclose);
+        MANIKIND_BIND(l, a, Gcreate2, H5Gcreate2);
+        MANIKIND_BIND(l, a, Gopen2, H5Gopen2);
+        MANIKIND_BIND(l, a, Ldelete, H5Ldelete);
+        MANIKIND_BIND(l, a, Lexists, H5Lexists);
+        MANIKIND_BIND(l, a, Sclose, H5Sclose);
+        MANIKIND_BIND(l, a, Screate, H5Screate);
+        MANIKIND_BIND(l, a, Screate_simple, H5Screate_simple);
+        MANIKIND_BIND(l, a, Sget_simple_extent_npoints, H5Sget_simple_extent_npoints);
+        MANIKIND_BIND(l, a, Tclose, H5Tclose);
+        MANIKIND_BIND(l, a, Tcopy, H5Tcopy);
+        MANIKIND_BIND(l, a, Tget_class, H5Tget_class);
+        MANIKIND_BIND(l, a, Tget_size, H5Tget_size);
+        MANIKIND_BIND(l, a, Tis_variable_str, H5Tis_variable_str);
+        MANIKIND_BIND(l, a, Tset_cset, H5Tset_cset);
+        MANIKIND_BIND(l, a, Tset_size, H5Tset_size);
+        MANIKIND_BIND(l, a, Tset_strpad, H5Tset_strpad);
+        MANIKIND_BIND(l, a, dont_atexit, H5dont_atexit);
+        MANIKIND_BIND(l, a, free_memory, H5free_memory);
         // No library clean-up at exit, asked before anything initialises it (see library_setup).
         a.dont_atexit();
         decltype(&::H5open) open = nullptr;
-        library.bind(open, "H5open");
+        l.bind(open, "H5open");
         if (open() < 0) throw UserError("HDF5: the library did not initialise (H5open failed)", "missing_library");
-        const auto global = [&](const char* name) { return *static_cast<const hid_t*>(library.symbol(name)); };
+        const auto global = [&](const char* name) { return *static_cast<const hid_t*>(l.symbol(name)); };
         a.native_double = global("H5T_NATIVE_DOUBLE_g");
         a.native_int32 = global("H5T_NATIVE_INT32_g");
         a.native_int64 = global("H5T_NATIVE_INT64_g");
@@ -117,9 +116,7 @@ const H5Api& h5() {
         a.c_s1 = global("H5T_C_S1_g");
         a.ieee_f64le = global("H5T_IEEE_F64LE_g");
         a.std_i64le = global("H5T_STD_I64LE_g");
-        return a;
-    }();
-    return api;
+    });
 }
 
 // H5F_ACC_TRUNC and H5F_ACC_RDONLY without their macros' calls into the library (H5check, H5open).
