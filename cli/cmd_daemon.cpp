@@ -760,18 +760,15 @@ void add_daemon_commands(CLI::App& app) {
                     // The analysis beside the data, from each trial's summary as it passes.
                     Hdf5CampaignFile file(target.staging(), c);
                     std::vector<analysis::TrialResult> summaries;
-                    std::vector<std::size_t> generation;
-                    for (std::size_t s = 0; s < reader->trial_count(); ++s) {
-                        analysis::Trial trial{c.trials[s].info, reader->read(s)};
-                        summaries.push_back(analysis::summarize_trial(trial, c.zone_map));
-                        file.write_trial(c, trial.info, trial.data);
-                        generation.push_back(reader->channel_generation());
-                        counts.rows += trial.data.rows();
-                        counts.last_t_s.push_back(trial.data.t_s.empty() ? 0.0 : trial.data.t_s.back());
-                        progress(s + 1, reader->trial_count());
-                    }
-                    for (std::size_t s = 0; s < reader->trial_count(); ++s)  // a later trial added a channel
-                        if (generation[s] != reader->channel_generation()) file.write_trial(c, c.trials[s].info, reader->read(s));
+                    counts = stream_trials(
+                        *reader,
+                        [&](std::size_t s, analysis::TrialData&& data, bool again) {
+                            const analysis::Trial trial{c.trials[s].info, std::move(data)};
+                            // The summary once; a trial written again only gains an empty column.
+                            if (!again) summaries.push_back(analysis::summarize_trial(trial, c.zone_map));
+                            file.write_trial(c, trial.info, trial.data);
+                        },
+                        progress);
                     file.finish(analysis::aggregate_trials(c, summaries));
                 } else {
                     counts = export_campaign_csv(*reader, target.staging(), progress);

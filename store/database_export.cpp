@@ -291,17 +291,30 @@ analysis::TrialData CampaignReader::read(std::size_t s) {
     return d;
 }
 
-analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s, bool include_running) {
-    CampaignReader reader(db, name, period_s, include_running);
+ExportCounts stream_trials(CampaignReader& reader, const TrialVisitor& visit, const ExportProgress& progress) {
+    ExportCounts counts;
     std::vector<std::size_t> generation(reader.trial_count());
-    std::vector<analysis::TrialData> data(reader.trial_count());
     for (std::size_t s = 0; s < reader.trial_count(); ++s) {
-        data[s] = reader.read(s);
+        auto data = reader.read(s);
         generation[s] = reader.channel_generation();
+        counts.rows += data.rows();
+        counts.last_t_s.push_back(data.t_s.empty() ? 0.0 : data.t_s.back());
+        visit(s, std::move(data), false);
+        if (progress) progress(s + 1, reader.trial_count());
     }
     // A trial read before a later one added a channel is read again with the final set.
     for (std::size_t s = 0; s < reader.trial_count(); ++s)
-        if (generation[s] != reader.channel_generation()) data[s] = reader.read(s);
+        if (generation[s] != reader.channel_generation()) {
+            visit(s, reader.read(s), true);
+            ++counts.rewritten;
+        }
+    return counts;
+}
+
+analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s, bool include_running) {
+    CampaignReader reader(db, name, period_s, include_running);
+    std::vector<analysis::TrialData> data(reader.trial_count());
+    stream_trials(reader, [&](std::size_t s, analysis::TrialData&& d, bool) { data[s] = std::move(d); });
     analysis::Campaign c = reader.campaign();
     for (std::size_t s = 0; s < c.trials.size(); ++s) c.trials[s].data = std::move(data[s]);
     return c;
@@ -313,22 +326,12 @@ void export_campaign(recorder::Database& db, const std::string& name, const std:
 }
 
 ExportCounts export_campaign_csv(CampaignReader& reader, const std::filesystem::path& folder, const ExportProgress& progress) {
-    ExportCounts counts;
-    std::vector<std::size_t> generation(reader.trial_count());
-    for (std::size_t s = 0; s < reader.trial_count(); ++s) {
-        const auto data = reader.read(s);
-        analysis::write_trial_file(folder, reader.campaign(), reader.campaign().trials[s].info, data);
-        generation[s] = reader.channel_generation();
-        counts.rows += data.rows();
-        counts.last_t_s.push_back(data.t_s.empty() ? 0.0 : data.t_s.back());
-        if (progress) progress(s + 1, reader.trial_count());
-    }
-    // A trial written before a later one added a channel is written again with the final set.
-    for (std::size_t s = 0; s < reader.trial_count(); ++s)
-        if (generation[s] != reader.channel_generation()) {
-            analysis::write_trial_file(folder, reader.campaign(), reader.campaign().trials[s].info, reader.read(s));
-            ++counts.rewritten;
-        }
+    const auto counts = stream_trials(
+        reader,
+        [&](std::size_t s, analysis::TrialData&& data, bool) {
+            analysis::write_trial_file(folder, reader.campaign(), reader.campaign().trials[s].info, data);
+        },
+        progress);
     analysis::write_campaign_json(folder, reader.campaign());
     return counts;
 }

@@ -78,6 +78,12 @@ struct ExportCounts {
 // Called after each trial: (trials done, trials in all).
 using ExportProgress = std::function<void(std::size_t, std::size_t)>;
 
+// Each trial read once and handed to `visit(i, data, again = false)`; then every trial read before
+// a later one added a channel is read anew and handed again (`again` = true), so what a visitor
+// keeps of the last visit of each trial has every column. Rows and last t_s count the first visits.
+using TrialVisitor = std::function<void(std::size_t, analysis::TrialData&&, bool)>;  // the data is the visitor's to keep
+ExportCounts stream_trials(CampaignReader& reader, const TrialVisitor& visit, const ExportProgress& progress = {});
+
 // The CSV export one trial at a time: each trial's CSV written as it is read, campaign.json last.
 ExportCounts export_campaign_csv(CampaignReader& reader, const std::filesystem::path& folder,
                                  const ExportProgress& progress = {});
