@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <numeric>
 #include <optional>
+#include <random>
 
 #include <boost/math/special_functions/beta.hpp>
 #include <vector>
@@ -31,11 +32,29 @@ namespace rc = analysis::reconcile;
 namespace {
 
 std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersion& world, std::uint64_t seed, int replicates = 3,
-                                                 std::optional<rc::CarriedNoise> carried = std::nullopt) {
+                                                 std::optional<rc::CarriedNoise> carried = std::nullopt,
+                                                 bool probes_within_spec = false) {
     sim::GeneratorOptions g;
     g.seed = seed;
     g.world = world;
     g.replicates = replicates;
+    if (probes_within_spec) {
+        // A real lab's probes: each off by a fixed calibration error, uniform within its
+        // specification's limit (the campaign's `instruments`), the same in every trial.
+        const auto specs = analysis::default_instrument_specs();
+        std::mt19937_64 rng(seed ^ 0x9e3779b97f4a7c15ULL);
+        std::uniform_real_distribution<double> within(-1.0, 1.0);
+        auto limit = [&](const char* channel, double reading) {
+            const auto it = specs.find(channel);
+            return it == specs.end() ? 0.0 : it->second.limit(reading);
+        };
+        g.probe_air_bias_c = limit("air_temp_c", 30.0) * within(rng);
+        g.probe_rh_bias_pct = limit("air_rh_pct", 50.0) * within(rng);
+        g.probe_wall_bias_c = limit("wall_temp_c", 30.0) * within(rng);
+        // ... and the manikin's flux calibration, within the heat-flux spec (a + b |q|).
+        g.flux_calibration_offset_w_m2 = limit("heat_flux_w_m2", 0.0) * within(rng);
+        g.flux_calibration_gain = (limit("heat_flux_w_m2", 1.0) - limit("heat_flux_w_m2", 0.0)) * within(rng);
+    }
     const auto campaign = simulate_campaign("bench", sim::table_s3_cases(), g);
     const auto result = analysis::analyze_campaign(campaign);
     return rc::make_twin_model(rc::case_inputs_from_results(result, campaign.zone_map), {}, std::move(carried));
@@ -170,8 +189,23 @@ int main(int argc, char** argv) {
     }
     // 4. Power at the printed limits, through the whole decision.
     if (power_runs > 0) {
-        const auto planning = campaign_model({"world", {}}, 77, 3);
-        const auto plan = rc::detection_limits(*planning, opt, {3});
+        // Every campaign here, the planning one too, has probes off within their specification,
+        // as a real lab's are (the generator's default probes are exact).
+        const auto planning = campaign_model({"world", {}}, 77, 3, std::nullopt, true);
+        rc::PowerOptions po;
+        po.terms = {"humidity_buoyancy", "diffusion_floor", "mixed_convection", "wall_offset", "air_temp_bias",
+                    "textile_resistance", "partial_wettedness:head"};
+        t0 = clock::now();
+        const auto plan = rc::detection_limits(*planning, opt, {3}, po);
+        std::printf("power plan (--power, %d campaigns per value tried, 7 candidates, 3 replicates): %.0f s\n", po.campaigns,
+                    std::chrono::duration<double>(clock::now() - t0).count());
+        for (const auto& d : plan.limits) {
+            std::printf("  plan %s: %s", d.label.c_str(), d.value ? std::to_string(*d.value).c_str() : "not reached");
+            for (const auto& t : d.tried) std::printf("  [%.4g: %d/%d]", t.value, t.named, t.campaigns);
+            std::printf("\n");
+        }
+        std::fflush(stdout);
+        if (std::getenv("BENCH_PLAN_ONLY")) return 0;
         struct Term {
             const char* term;
             const char* region;
@@ -189,7 +223,7 @@ int main(int argc, char** argv) {
             int named = 0;
             for (int i = 0; i < power_runs; ++i) {
                 const auto m = campaign_model({"world", {{t.term, {{it->parameter, *it->value}}, t.region, {}}}},
-                                              7000 + static_cast<std::uint64_t>(i), 3);
+                                              7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true);
                 const auto r = rc::reconcile(*m);
                 named += r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label ? 1 : 0;
             }

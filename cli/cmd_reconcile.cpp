@@ -36,6 +36,9 @@ void add_reconcile_command(CLI::App& app) {
         bool json = false, no_pairs = false, power = false;
         double alpha = 0.01;
         int simulations = 2000;
+        int power_campaigns = 20;
+        std::vector<int> power_replicates = {3, 5, 10};
+        std::vector<std::string> power_terms;
         std::uint64_t seed = 20261123;
     };
     auto o = std::make_shared<Opts>();
@@ -61,7 +64,21 @@ void add_reconcile_command(CLI::App& app) {
                     "campaign in the same database) for a campaign with one replicate per case: without it no claim "
                     "is made there (docs/reconcile.md, \"One replicate\")");
     cmd->add_flag("--power", o->power, "Plan instead: per candidate, the smallest effect named with 80 % power for "
-                                       "this campaign's cases and noise, at its replicates and at 3, 5 and 10");
+                                       "this campaign's cases and noise, at its replicates and at --power-replicates; "
+                                       "each checked by running reconcile on campaigns of this design drawn anew");
+    cmd->add_option("--power-replicates", o->power_replicates, "Replicates per case to plan for (with --power)")
+        ->check(CLI::Range(1, 30))
+        ->delimiter(',')
+        ->capture_default_str();
+    cmd->add_option("--power-campaigns", o->power_campaigns,
+                    "Simulated campaigns through the whole decision per effect size tried (with --power); 0: the fast "
+                    "model's check only")
+        ->check(CLI::Range(0, 1000))
+        ->capture_default_str();
+    cmd->add_option("--power-terms", o->power_terms,
+                    "Plan only these candidates (a term such as humidity_buoyancy, or term:region), comma-separated "
+                    "(with --power; default: every candidate)")
+        ->delimiter(',');
     cmd->footer("The twin sees only the campaign's recorded conditions. The noise of every case mean comes from the\n"
                 "recordings: replicate scatter pooled per zone, the manikin's calibration shared by all points, each\n"
                 "case's probe errors shared by its zones (campaign.json `instruments`). A term is claimed only beyond\n"
@@ -110,8 +127,18 @@ void add_reconcile_command(CLI::App& app) {
         opt.seed = o->seed;
         opt.instruments = campaign.instruments;
         if (o->power) {
-            std::vector<int> reps = {3, 5, 10};
-            const auto plan = rc::detection_limits(*model, opt, reps);
+            rc::PowerOptions po;
+            po.campaigns = o->power_campaigns;
+            po.progress = [](int done, const std::string& label, int n) {
+                spdlog::info("power: {} checks done ({} at {} replicates)", done, label, n);
+            };
+            po.terms = o->power_terms;
+            rc::PowerReport plan;
+            try {
+                plan = rc::detection_limits(*model, opt, o->power_replicates, po);
+            } catch (const std::invalid_argument& e) {
+                throw UserError(fmt::format("--power-terms: {}", e.what()));
+            }
             const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             if (o->json) {
                 nlohmann::json j = rc::power_to_json(plan);

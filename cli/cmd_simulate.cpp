@@ -88,6 +88,8 @@ void add_simulate_command(CLI::App& app) {
         bool json = false;
         sim::ReplicateScatter scatter;
         bool no_scatter = false;
+        double probe_air_bias_c = 0.0, probe_rh_bias_pct = 0.0, probe_wall_bias_c = 0.0;
+        double flux_gain = 0.0, flux_offset_w_m2 = 0.0;
     };
     auto o = std::make_shared<Opts>();
     auto* cmd = app.add_subcommand("simulate-campaign",
@@ -131,6 +133,15 @@ void add_simulate_command(CLI::App& app) {
     auto* no_scatter = cmd->add_flag("--no-scatter", o->no_scatter,
                                      "No replicate scatter at all (every option above 0): replicates differ by sensor noise only");
     for (auto* spread : spreads) no_scatter->excludes(spread);
+    // A real lab's instruments are off by a fixed calibration error (the same in every trial).
+    cmd->add_option("--probe-air-bias", o->probe_air_bias_c, "Air probe's calibration error, deg C (recorded minus actual), every trial")
+        ->capture_default_str();
+    cmd->add_option("--probe-rh-bias", o->probe_rh_bias_pct, "RH probe's calibration error, % RH, every trial")->capture_default_str();
+    cmd->add_option("--probe-wall-bias", o->probe_wall_bias_c, "Wall thermocouple's calibration error, deg C, every trial")
+        ->capture_default_str();
+    cmd->add_option("--flux-gain", o->flux_gain, "Manikin heat-flux calibration gain: recorded = (1 + this) q + offset")
+        ->capture_default_str();
+    cmd->add_option("--flux-offset", o->flux_offset_w_m2, "Manikin heat-flux calibration offset, W/m2")->capture_default_str();
     cmd->add_flag("--json", o->json, "Print a JSON summary");
     cmd->footer("Example: manikin simulate-campaign --effect humidity_buoyancy:gamma=146 --out /tmp/c146\n"
                 "then:    manikin analyze /tmp/c146 ; manikin reconcile /tmp/c146");
@@ -140,6 +151,11 @@ void add_simulate_command(CLI::App& app) {
         g.seed = o->seed;
         g.unsteady_probability = o->unsteady;
         g.scatter = o->no_scatter ? sim::ReplicateScatter::none() : o->scatter;
+        g.probe_air_bias_c = o->probe_air_bias_c;
+        g.probe_rh_bias_pct = o->probe_rh_bias_pct;
+        g.probe_wall_bias_c = o->probe_wall_bias_c;
+        g.flux_calibration_gain = o->flux_gain;
+        g.flux_calibration_offset_w_m2 = o->flux_offset_w_m2;
         g.world.name = "world";
         try {
             for (const auto& e : o->effects) g.world.terms.push_back(sim::parse_effect(e));

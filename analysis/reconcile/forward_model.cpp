@@ -1,6 +1,8 @@
 // The forward models reconcile fits: the twin over recorded cases (with its noise model built
 // from the replicates and the instruments' specs), and the whole-body h of the paper's CFD table.
+#include <algorithm>
 #include <cmath>
+#include <random>
 #include <stdexcept>
 
 #include <fmt/core.h>
@@ -340,6 +342,125 @@ public:
         if (own.estimable) return std::make_unique<Resampler>(*this, std::move(parts), std::move(own), true);
         if (carried_) return std::make_unique<Resampler>(*this, std::move(parts), ScatterModel{}, false);
         return nullptr;
+    }
+
+    // A campaign of this design drawn anew (for `--power`). Everything comes from this campaign:
+    // the spread of the replicates' recorded conditions about their case mean (pooled over cases:
+    // air, humidity, wall, each zone's skin), the fitted scatter model (sigma0, kappa, the tau of
+    // the per-trial shared errors) and the instruments' Type B. A new campaign's case mean lands
+    // about this one's with the planning mean's own error (sd s/sqrt(n_here)) plus the new
+    // replicates' (s/sqrt(n)); the recorded conditions differ from the true ones by the probes'
+    // errors (calibration part common to every case, `shared_fraction`) and each trial's own
+    // reading errors; the flux is the twin with `truth` at the true conditions, through the
+    // manikin's calibration gain and offset. The twin is evaluated, not linearised: near the
+    // isothermal cases' kink where the conditions land is what decides detectability.
+    std::unique_ptr<ForwardModel> simulated(const std::vector<tw::Term>& truth, int replicates, std::uint64_t seed,
+                                            const Instruments& instruments, double shared_fraction) const override {
+        if (replicates < 1 || cases_.empty()) return nullptr;
+        const NoiseParts parts = noise_parts(instruments, shared_fraction, {});
+        const ScatterModel scatter = scatter_of(estimate_scatter(parts.data));
+        if (!scatter.estimable) return nullptr;
+        const std::size_t z_count = first_zones().size();
+        // Pooled within-case spread of the recorded conditions.
+        double ss_air = 0.0, ss_rh = 0.0, ss_wall = 0.0;
+        std::vector<double> ss_skin(z_count, 0.0);
+        int dof = 0;
+        for (const auto& in : cases_) {
+            if (in.trials.size() < 2 || in.conditions.zones.size() != z_count) continue;
+            for (const auto& t : in.trials) {
+                if (t.conditions.zones.size() != z_count) continue;
+                ss_air += std::pow(t.conditions.air_temp_c - in.conditions.air_temp_c, 2);
+                ss_rh += std::pow(t.conditions.air_rh_pct - in.conditions.air_rh_pct, 2);
+                if (t.conditions.wall_temp_c && in.conditions.wall_temp_c)
+                    ss_wall += std::pow(*t.conditions.wall_temp_c - *in.conditions.wall_temp_c, 2);
+                for (std::size_t z = 0; z < z_count; ++z)
+                    ss_skin[z] += std::pow(t.conditions.zones[z].skin_temp_c - in.conditions.zones[z].skin_temp_c, 2);
+            }
+            dof += static_cast<int>(in.trials.size()) - 1;
+        }
+        const double d = std::max(1, dof);
+        const double s_air = std::sqrt(ss_air / d), s_rh = std::sqrt(ss_rh / d), s_wall = std::sqrt(ss_wall / d);
+        std::vector<double> s_skin(z_count);
+        for (std::size_t z = 0; z < z_count; ++z) s_skin[z] = std::sqrt(ss_skin[z] / d);
+
+        std::mt19937_64 rng(seed);
+        std::normal_distribution<double> unit(0.0, 1.0);
+        auto tau = [&](std::size_t k) { return k < scatter.factor_sd.size() ? scatter.factor_sd[k] : 0.0; };
+        const double phi = std::clamp(shared_fraction, 0.0, 1.0);
+        const double probe_air = unit(rng), probe_rh = unit(rng), probe_wall = unit(rng);
+        const auto flux = instruments.count("heat_flux_w_m2") ? instruments.at("heat_flux_w_m2") : InstrumentSpec{};
+        const double u_offset = flux.standard_uncertainty(0.0), u_gain = flux.standard_uncertainty(1.0) - u_offset;
+        const double campaign_gain = u_gain * unit(rng), campaign_offset = u_offset * unit(rng);
+        tw::TwinVersion world = base_;
+        world.terms.insert(world.terms.end(), truth.begin(), truth.end());
+
+        std::vector<CaseInput> out;
+        out.reserve(cases_.size());
+        for (std::size_t ci = 0; ci < cases_.size(); ++ci) {
+            const CaseInput& in = cases_[ci];
+            if (in.conditions.zones.size() != z_count) continue;
+            const Eigen::MatrixXd& loadings = parts.data.loadings[ci];
+            const double here = std::sqrt(1.0 / std::max<double>(1.0, static_cast<double>(in.trials.size())));
+            const auto& mean = in.conditions;
+            tw::TrialConditions centre = mean;
+            centre.air_temp_c += s_air * here * unit(rng);
+            centre.air_rh_pct += s_rh * here * unit(rng);
+            if (centre.wall_temp_c) *centre.wall_temp_c += s_wall * here * unit(rng);
+            for (std::size_t z = 0; z < z_count; ++z) centre.zones[z].skin_temp_c += s_skin[z] * here * unit(rng);
+            // This case's probe errors: the calibration part common to every case, the rest its own.
+            auto probe = [&](const char* channel, double reading, double common) {
+                const double u = spec_u(instruments, channel, reading);
+                return u * (std::sqrt(phi) * common + std::sqrt(1.0 - phi) * unit(rng));
+            };
+            const double e_air = probe("air_temp_c", mean.air_temp_c, probe_air);
+            const double e_rh = probe("air_rh_pct", mean.air_rh_pct, probe_rh);
+            const double e_wall = mean.wall_temp_c ? probe("wall_temp_c", *mean.wall_temp_c, probe_wall) : 0.0;
+
+            CaseInput c = in;
+            c.trials.clear();
+            c.q_exp_w_m2.assign(z_count, 0.0);
+            tw::TrialConditions sum = mean;
+            sum.air_temp_c = sum.air_rh_pct = 0.0;
+            if (sum.wall_temp_c) *sum.wall_temp_c = 0.0;
+            for (auto& z : sum.zones) z.skin_temp_c = 0.0;
+            for (int r = 0; r < replicates; ++r) {
+                TrialInput t;
+                t.conditions = centre;
+                t.conditions.air_temp_c += s_air * unit(rng);
+                t.conditions.air_rh_pct += s_rh * unit(rng);
+                if (t.conditions.wall_temp_c) *t.conditions.wall_temp_c += s_wall * unit(rng);
+                for (std::size_t z = 0; z < z_count; ++z) t.conditions.zones[z].skin_temp_c += s_skin[z] * unit(rng);
+                tw::TrialConditions real = t.conditions;  // what the chamber really was
+                real.air_temp_c -= e_air;
+                real.air_rh_pct = std::clamp(real.air_rh_pct - e_rh, 0.5, 99.5);
+                if (real.wall_temp_c) *real.wall_temp_c -= e_wall;
+                // Each trial's own shared errors act as the scatter model fitted them: linearly,
+                // through the case's sensitivities (their estimate is rough, and pushed through
+                // the twin's kink it would scatter the isothermal cases more than the data did).
+                const double eta_air = tau(0) * unit(rng), eta_rh = tau(1) * unit(rng), eta_wall = tau(2) * unit(rng);
+                const double gain = campaign_gain + tau(3) * unit(rng), offset = campaign_offset + tau(4) * unit(rng);
+                const auto q = tw::predict(world, real);
+                t.q_w_m2.resize(z_count);
+                for (std::size_t z = 0; z < z_count; ++z) {
+                    const auto zi = static_cast<Eigen::Index>(z);
+                    const double sd = std::sqrt(scatter.variance(z, std::abs(q[z].q_total_w_m2)));
+                    const double shared = loadings(zi, 0) * eta_air + loadings(zi, 1) * eta_rh + loadings(zi, 2) * eta_wall;
+                    t.q_w_m2[z] = q[z].q_total_w_m2 * (1.0 + gain) + offset + shared + sd * unit(rng);
+                    c.q_exp_w_m2[z] += t.q_w_m2[z] / replicates;
+                }
+                sum.air_temp_c += t.conditions.air_temp_c / replicates;
+                sum.air_rh_pct += t.conditions.air_rh_pct / replicates;
+                if (sum.wall_temp_c) *sum.wall_temp_c += *t.conditions.wall_temp_c / replicates;
+                for (std::size_t z = 0; z < z_count; ++z) sum.zones[z].skin_temp_c += t.conditions.zones[z].skin_temp_c / replicates;
+                c.trials.push_back(std::move(t));
+            }
+            c.conditions = std::move(sum);
+            // The analysis's U shrinks with the replicates as its Type A part does (used for
+            // locating and the points outside their CI, not for the claims).
+            for (double& u : c.expanded_u_w_m2) u *= 1.0 / (here * std::sqrt(static_cast<double>(replicates)));
+            out.push_back(std::move(c));
+        }
+        return make_twin_model(std::move(out), base_, carried_);
     }
 
     // For `--noise-from`: this campaign's own scatter and how its estimate scatters.

@@ -84,6 +84,17 @@ public:
                                                             const std::vector<physics::twin::Term>& /*with*/ = {}) const {
         return nullptr;
     }
+    // For planning (`--power`): a campaign of this design as it could come out again, with
+    // `truth` concealed and `replicates` trials per case, drawn only from what this campaign's
+    // own estimates say (docs/reconcile.md, "Detection limits"): each case's conditions land
+    // anew (the replicates' spread), the probes err within their Type B, the manikin's
+    // calibration errs, and each trial scatters as the fitted scatter model. None where the
+    // scatter cannot be estimated (one replicate, or not a model of recorded trials).
+    virtual std::unique_ptr<ForwardModel> simulated(const std::vector<physics::twin::Term>& /*truth*/, int /*replicates*/,
+                                                    std::uint64_t /*seed*/, const Instruments&,
+                                                    double /*probe_shared_fraction*/) const {
+        return nullptr;
+    }
 };
 
 // One replicate's steady-window means: its own recorded conditions and zone fluxes.

@@ -23,7 +23,6 @@ namespace tw = physics::twin;
 namespace ev = evidence;
 namespace {
 
-constexpr int kGridSteps = 120;  // per single-parameter candidate, across its bounds
 
 std::string compress_ids(std::vector<int> ids) {
     std::sort(ids.begin(), ids.end());
@@ -475,13 +474,13 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
 
     // The library and its grids (computed once; a subset only re-whitens them).
     const std::vector<CandidateTerm> library = ev::single_library(model);
-    const std::vector<ev::Grid> grids = ev::make_grids(model, library, kGridSteps);
+    const std::vector<ev::Grid> grids = ev::make_grids(model, library, std::max(12, opt.grid_steps));
 
     // Without replicates (and no scatter carried from an earlier campaign) the random part is each
     // point's U/k: a lower bound on the real scatter, so nothing can be claimed at alpha on it.
     const bool lower_bound = !rep.noise.from_replicates && rep.noise.carried_from.empty() && model.supports("heat_leak");
     const std::unique_ptr<NoiseResampler> resampler = model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
-    Stage st = run_stage(model, rep.noise, resampler.get(), grids, all_idx, rep.predicted_before, opt);
+    Stage st = run_stage(model, rep.noise, resampler.get(), grids, all_idx, rep.predicted_before, opt, opt.null_threshold);
     rep.covariance_draws = st.covariance_draws;
     {
         const ev::Subset& all = st.subset;
@@ -518,7 +517,7 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
         for (std::size_t i = 0; i < pts.size(); ++i)
             if (!excluded.count(pts[i].zone)) keep.push_back(i);
         const double family_threshold = st.threshold;
-        st = run_stage(model, rep.noise, resampler.get(), grids, keep, rep.predicted_before, opt);
+        st = run_stage(model, rep.noise, resampler.get(), grids, keep, rep.predicted_before, opt, opt.null_threshold);
         st.threshold = std::max(st.threshold, family_threshold);
     };
     for (int pass = 0; pass < 2 && model.supports("heat_leak") && !lower_bound; ++pass) {
@@ -600,8 +599,10 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
                     std::vector<std::vector<double>> starts = {{va, vb}, {va, nb}, {na, vb}};
                     double best_scan = std::numeric_limits<double>::infinity();
                     std::vector<double> scan_start;
-                    for (std::size_t ga = 0; ga < grids[a].theta.size(); ga += 20)
-                        for (std::size_t gb = 0; gb < grids[b].theta.size(); gb += 20) {
+                    const std::size_t stride_a = std::max<std::size_t>(1, (grids[a].theta.size() - 1) / 6);
+                    const std::size_t stride_b = std::max<std::size_t>(1, (grids[b].theta.size() - 1) / 6);
+                    for (std::size_t ga = 0; ga < grids[a].theta.size(); ga += stride_a)
+                        for (std::size_t gb = 0; gb < grids[b].theta.size(); gb += stride_b) {
                             const std::vector<double> xy = {grids[a].theta[ga], grids[b].theta[gb]};
                             try {
                                 const double c2 = sub.chi2(model.predict(to_twin_terms({library[a], library[b]}, xy)));
@@ -774,6 +775,15 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
             rep.statement = fmt::format("The mismatch is real, but no term is claimed: {}. It is at {}; it correlates most "
                                         "with {} (|r| = {:.2f}).", why_not, where, rep.located.front().driver,
                                         rep.located.front().strength);
+        } else if (rep.family_evidence > st.threshold) {
+            // Evidence beyond the null, yet no single term passes and no few zones carry it (too
+            // many zones stand out to call it local): real and unexplained, never "consistent".
+            rep.statement = fmt::format("The mismatch is beyond the noise (the best evidence of any term or zone, {:.1f}, "
+                                        "exceeds the {:.1f} that noise alone reaches in {:.0f} % of simulated campaigns), but "
+                                        "no candidate term explains it and it is not confined to a few zones. It is at {}; it "
+                                        "correlates most with {} (|r| = {:.2f}). No explanation is claimed.",
+                                        rep.family_evidence, st.threshold, 100.0 * (1.0 - opt.alpha), where,
+                                        rep.located.front().driver, rep.located.front().strength);
         } else if (rep.gof_p_before >= opt.alpha) {
             rep.consistent_before = true;
             rep.statement = fmt::format("The twin agrees with the recordings within their noise; no physics is missing "

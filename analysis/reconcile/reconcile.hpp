@@ -13,6 +13,7 @@
 //            distinguishable from the runner-up; intervals that cover.
 //   Model:   the winner becomes a new twin version; before/after statistics.
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -115,6 +116,10 @@ struct Options {
     Instruments instruments = default_instrument_specs();
     double probe_shared_fraction = 0.5;      // of a probe's Type B variance, common to every case
     std::string new_version_name = "reconciled";
+    int grid_steps = 120;                    // per single-parameter candidate across its bounds (profile, null)
+    // Planning only (`--power`): the family's claim threshold given, computed once for the design
+    // and replicates, instead of the bootstrap null of each simulated campaign.
+    std::optional<double> null_threshold;
 };
 
 Report reconcile(const ForwardModel& model, const Options& options = {});
@@ -125,14 +130,25 @@ Report reconcile(const ForwardModel& model, const Options& options = {});
 CandidateResult fit_candidate(const ForwardModel& model, const std::vector<CandidateTerm>& terms, const Options& options = {});
 
 // Detection limits for planning (`manikin reconcile --power`): per candidate, the smallest
-// effect named with 80 % power for this campaign's cases and noise, at several replicate counts.
+// effect named with 80 % power for this campaign's design and noise, at several replicate counts.
+// Each limit is checked through the whole decision (reconcile itself) on campaigns of this
+// design drawn anew with the effect concealed (ForwardModel::simulated), starting from a fast
+// noncentral-chi2 model of the evidence; where the model cannot draw campaigns (no replicate
+// scatter), the fast model's own simulation checks it (`method`).
+struct PowerPoint {
+    double value = 0.0;                      // the effect concealed
+    int named = 0, campaigns = 0;            // simulated campaigns in which reconcile named it
+};
 struct DetectionLimit {
     std::string label;
     std::string parameter, unit;
     double null_value = 0.0;
     int replicates = 0;
     std::optional<double> value;             // none: not reached within the fit bounds
-    double simulated_power = 0.0;            // checked by simulation at that value (right term named)
+    double simulated_power = 0.0;            // fast model: its simulated share at that value; whole decision: 0.8
+    int campaigns = 0;                       // whole-decision campaigns behind it, over every value tried (0: fast model)
+    std::vector<PowerPoint> tried;           // whole decision: the values tried, nearest "no effect" first
+    std::string method;                      // "whole decision" or "fast model"
 };
 struct PowerReport {
     int campaign_replicates = 0;
@@ -140,7 +156,14 @@ struct PowerReport {
     std::vector<int> replicates;
     std::vector<DetectionLimit> limits;
 };
+struct PowerOptions {
+    double power = 0.8;
+    int campaigns = 20;                      // whole-decision campaigns per value tried (0: fast model only)
+    std::vector<std::string> terms;          // plan only these (a term, or term:region); empty: every candidate
+    // Called after each value tried: checks done so far, the candidate, the replicates.
+    std::function<void(int, const std::string&, int)> progress;
+};
 PowerReport detection_limits(const ForwardModel& model, const Options& options, const std::vector<int>& replicates,
-                             double power = 0.8);
+                             const PowerOptions& power = {});
 
 }  // namespace manikind::analysis::reconcile

@@ -113,7 +113,14 @@ nlohmann::json power_to_json(const PowerReport& plan) {
     for (const auto& d : plan.limits)
         j["limits"].push_back({{"term", d.label}, {"parameter", d.parameter}, {"unit", d.unit}, {"null", d.null_value},
                                {"replicates", d.replicates}, {"smallest_effect", d.value ? nlohmann::json(*d.value) : nlohmann::json()},
-                               {"simulated_power", d.simulated_power}});
+                               {"method", d.method},
+                               {"simulated_power", d.method == "scaled" ? nlohmann::json() : nlohmann::json(d.simulated_power)},
+                               {"campaigns", d.campaigns}, {"tried", [&] {
+                                    nlohmann::json t = nlohmann::json::array();
+                                    for (const auto& pt : d.tried)
+                                        t.push_back({{"value", pt.value}, {"named", pt.named}, {"campaigns", pt.campaigns}});
+                                    return t;
+                                }()}});
     return j;
 }
 
@@ -137,12 +144,21 @@ std::string power_to_text(const PowerReport& plan) {
                 }
         o << row << "\n";
     }
+    int campaigns = 0;
+    for (const auto& d : plan.limits)
+        if (!d.tried.empty()) campaigns = std::max(campaigns, d.tried.front().campaigns);
     o << "  * this campaign's replicates. Units: gamma K m3/kg, h0 W/m2K, delta_c and bias_c degC, r_m2k_w m2K/W;\n"
-         "    fraction: the wet fraction below which a region's dryness is found. Each value is checked by simulating\n"
-         "    400 campaigns with that effect: the right term's evidence must be the largest, beyond reconcile's\n"
-         "    family-wise threshold at n replicates, and beyond any zone's offset or gain. A fast model of the\n"
-         "    decision: optimistic where terms share evidence (gamma and an air-probe bias: read their limits as\n"
-         "    lower bounds; docs/reconcile.md, \"Detection limits\", has how often reconcile itself names each).\n";
+         "    fraction: the wet fraction below which a region's dryness is found.\n";
+    if (campaigns > 0)
+        o << fmt::format("    At n = {0}: each value tried was checked by running reconcile itself on up to {1} campaigns of this\n"
+                         "    design drawn anew with the effect concealed (conditions landing anew, probes and the manikin's\n"
+                         "    calibration off within their specifications, trials scattering as this campaign's do); the value\n"
+                         "    printed is where a power curve through every value tried reaches 80 %. Other n: a fast model,\n"
+                         "    scaled per term by how far the whole decision moved it at n = {0} (docs/reconcile.md).\n",
+                         plan.campaign_replicates, campaigns);
+    else
+        o << "    A fast model of the decision only (no replicate scatter to draw campaigns from, or --power-campaigns 0):\n"
+             "    optimistic where terms share evidence; read the limits as lower bounds (docs/reconcile.md).\n";
     return o.str();
 }
 

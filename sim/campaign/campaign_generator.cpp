@@ -42,6 +42,10 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
         throw std::invalid_argument("unsteady probability must be within 0..1");
     if (zones.empty()) throw std::invalid_argument("no zones");
     o.scatter.validate();
+    if (!(std::abs(o.flux_calibration_gain) < 0.5) || !std::isfinite(o.flux_calibration_offset_w_m2))
+        throw std::invalid_argument("the flux calibration gain must be within +-0.5 and its offset finite");
+    for (const double bias : {o.probe_air_bias_c, o.probe_rh_bias_pct, o.probe_wall_bias_c, o.flux_calibration_offset_w_m2 / 10.0})
+        if (!std::isfinite(bias) || std::abs(bias) > 20.0) throw std::invalid_argument("probe calibration errors must be finite and within 20");
     const ReplicateScatter& sc = o.scatter;
     std::mt19937_64 rng(o.seed);
     std::normal_distribution<double> gauss(0.0, 1.0);
@@ -73,9 +77,9 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
             std::vector<double> zone_flux_factor(zones.size());
             for (auto& f : zone_flux_factor) f = 1.0 + sc.replicate_flux_rel_sd * gauss(rng);
             // The probes' per-trial errors: only the recorded channels carry them.
-            const double probe_air_c = sc.probe_air_sd_c * gauss(rng);
-            const double probe_rh_pct = sc.probe_rh_sd_pct * gauss(rng);
-            const double probe_wall_c = sc.probe_wall_sd_c * gauss(rng);
+            const double probe_air_c = sc.probe_air_sd_c * gauss(rng) + o.probe_air_bias_c;
+            const double probe_rh_pct = sc.probe_rh_sd_pct * gauss(rng) + o.probe_rh_bias_pct;
+            const double probe_wall_c = sc.probe_wall_sd_c * gauss(rng) + o.probe_wall_bias_c;
             t.truth = {air_c, rh_pct, wall_c, probe_air_c, probe_rh_pct, probe_wall_c, zone_flux_factor, zone_offset_w_m2};
 
             t.skin_temp_c.assign(zones.size(), std::vector<double>(n_samples));
@@ -113,8 +117,9 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
                     t.skin_temp_c[z][k] = at_resolution(cond.zones[z].skin_temp_c + o.skin_noise_c * gauss(rng), 3);
                     // The relative scatter scales what the physics loses (fit and wetting change the
                     // heat transfer itself); the shell's storage is the heater's and stays unscaled.
-                    t.heat_flux_w_m2[z][k] = at_resolution(fluxes[z].q_total_w_m2 * zone_flux_factor[z] + storage_w_m2 +
-                                                               zone_offset_w_m2[z] + o.flux_noise_w_m2 * gauss(rng),
+                    const double flux_w_m2 = fluxes[z].q_total_w_m2 * zone_flux_factor[z] + storage_w_m2 + zone_offset_w_m2[z];
+                    t.heat_flux_w_m2[z][k] = at_resolution(flux_w_m2 * (1.0 + o.flux_calibration_gain) +
+                                                               o.flux_calibration_offset_w_m2 + o.flux_noise_w_m2 * gauss(rng),
                                                            2);
                 }
             }

@@ -46,6 +46,14 @@ struct GeneratorOptions {
     double wall_below_air_c = 0.4;          // walls run a little cooler (Text S3.3)
     double air_speed_mean_m_s = 0.01;       // sealed enclosure: < 0.02 m/s (Text S3.1)
     std::int64_t start_epoch_s = 1780304400;  // 2026-06-01T09:00:00Z; trials follow 2 h apart
+    // The probes' calibration errors, the same in every trial of the campaign (recorded minus
+    // actual): a real lab's EE181s are off by a fixed amount within their specification. 0: exact.
+    double probe_air_bias_c = 0.0;
+    double probe_rh_bias_pct = 0.0;
+    double probe_wall_bias_c = 0.0;
+    // The manikin's heat-flux calibration error, the same in every trial: recorded = (1 + gain) q + offset.
+    double flux_calibration_gain = 0.0;
+    double flux_calibration_offset_w_m2 = 0.0;
 };
 
 // What one trial really was, kept for tests (the recordings never carry it).

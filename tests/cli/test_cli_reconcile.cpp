@@ -3,6 +3,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <set>
 
 #include <nlohmann/json.hpp>
 
@@ -64,28 +65,47 @@ TEST_CASE("cli: bad --effect and --twin inputs are refused with what was expecte
     CHECK_THAT(r.out, Catch::Contains("--twin"));
 }
 
-TEST_CASE("cli: reconcile --power prints a detection limit per candidate at 3, 5 and 10 replicates, smaller with more",
-          "[cli][reconcile]") {
+TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at the campaign's replicates and scales "
+          "the others from it, smaller with more replicates", "[cli][reconcile]") {
     const std::string dir = temp_dir("power");
     REQUIRE(run_manikin("simulate-campaign --seed 5 --out " + dir).exit_code == 0);
-    const auto r = run_manikin("reconcile " + dir + " --power --json");
+    // Three candidates and few campaigns per value keep the test short; the figures are bench_reconcile's.
+    const auto r = run_manikin("reconcile " + dir +
+                               " --power --json --power-terms humidity_buoyancy,wall_offset,textile_resistance --power-campaigns 6");
     REQUIRE(r.exit_code == 0);
     const auto j = nlohmann::json::parse(r.out);
     CHECK(j["campaign_replicates"] == 3);
     CHECK(j["replicates"] == nlohmann::json::array({3, 5, 10}));
     std::map<std::string, std::map<int, double>> limits;
-    for (const auto& l : j["limits"])
-        if (!l["smallest_effect"].is_null()) {
-            limits[l["term"].get<std::string>()][l["replicates"].get<int>()] = l["smallest_effect"].get<double>();
-            CHECK(l["simulated_power"].get<double>() >= 0.8);  // checked by simulation at that value
+    std::set<std::string> terms;
+    for (const auto& l : j["limits"]) {
+        terms.insert(l["term"].get<std::string>());
+        if (l["smallest_effect"].is_null()) continue;
+        const int n = l["replicates"].get<int>();
+        limits[l["term"].get<std::string>()][n] = l["smallest_effect"].get<double>();
+        if (n == 3) {
+            // Checked by the whole decision on campaigns of this design drawn anew.
+            CHECK(l["method"] == "whole decision");
+            CHECK(l["simulated_power"].get<double>() >= 0.8);
+            CHECK(l["campaigns"].get<int>() >= 5);  // settled after 5 of 6 named, or all 6 tried
+        } else {
+            CHECK(l["method"] == "scaled");
+            CHECK(l["simulated_power"].is_null());
         }
-    for (const char* term : {"humidity_buoyancy", "diffusion_floor", "wall_offset", "air_temp_bias", "textile_resistance"}) {
+    }
+    CHECK(terms == std::set<std::string>{"humidity_buoyancy", "wall_offset", "textile_resistance"});
+    for (const char* term : {"humidity_buoyancy", "wall_offset", "textile_resistance"}) {
         INFO(term);
         REQUIRE(limits[term].count(3) == 1);
         REQUIRE(limits[term].count(10) == 1);
-        CHECK(std::abs(limits[term][10]) <= std::abs(limits[term][3]) + 1e-12);  // more replicates never hurt
+        CHECK(std::abs(limits[term][10]) <= std::abs(limits[term][5]) + 1e-12);  // more replicates never hurt
+        CHECK(std::abs(limits[term][5]) <= std::abs(limits[term][3]) + 1e-12);
         CHECK(limits[term][3] != 0.0);
     }
+    // A candidate this campaign does not have is refused, naming those it has.
+    const auto bad = run_manikin("reconcile " + dir + " --power --power-terms warp_drive 2>&1");
+    CHECK(bad.exit_code == 2);
+    CHECK_THAT(bad.out, Catch::Contains("warp_drive") && Catch::Contains("humidity_buoyancy"));
     std::filesystem::remove_all(dir);
 }
 

@@ -185,6 +185,33 @@ TEST_CASE("generator: without scatter replicates differ by sensor noise only, wi
     CHECK(pooled_absolute_sd(scattered) > 10.0 * exact_sd);
 }
 
+TEST_CASE("generator: a probe's calibration error shifts every trial's recording by the same amount, and the flux "
+          "calibration scales and offsets the recorded flux - the physics is unchanged", "[devices][scatter]") {
+    sim::GeneratorOptions g;
+    g.replicates = 2;
+    g.seed = 22;
+    const auto zones = andi35_zones();
+    const auto exact = sim::generate_campaign({table_s3_case(9)}, zones, g);
+    g.probe_air_bias_c = 0.15;
+    g.probe_rh_bias_pct = -1.2;
+    g.probe_wall_bias_c = 0.4;
+    g.flux_calibration_gain = 0.02;
+    g.flux_calibration_offset_w_m2 = 0.5;
+    const auto biased = sim::generate_campaign({table_s3_case(9)}, zones, g);
+    REQUIRE(biased.size() == exact.size());
+    for (std::size_t t = 0; t < exact.size(); ++t) {
+        // Same draws, same actual enclosure: only the recordings move.
+        CHECK(biased[t].truth.air_temp_c == exact[t].truth.air_temp_c);
+        CHECK(mean(biased[t].air_temp_c) - mean(exact[t].air_temp_c) == Approx(0.15).margin(0.002));
+        CHECK(mean(biased[t].air_rh_pct) - mean(exact[t].air_rh_pct) == Approx(-1.2).margin(0.02));
+        CHECK(mean(biased[t].wall_temp_c) - mean(exact[t].wall_temp_c) == Approx(0.4).margin(0.002));
+        const double q0 = mean(exact[t].heat_flux_w_m2[3]), q1 = mean(biased[t].heat_flux_w_m2[3]);
+        CHECK(q1 == Approx(1.02 * q0 + 0.5).margin(0.02));
+    }
+    g.flux_calibration_gain = 0.7;
+    CHECK_THROWS_WITH(sim::generate_campaign({table_s3_case(9)}, zones, g), Catch::Contains("gain"));
+}
+
 TEST_CASE("generator: negative or absurd spreads are refused by name", "[devices][scatter]") {
     sim::GeneratorOptions g;
     g.scatter.probe_rh_sd_pct = -0.1;
