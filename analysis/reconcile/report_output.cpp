@@ -150,10 +150,10 @@ std::string power_to_text(const PowerReport& plan) {
     o << "  * this campaign's replicates. Units: gamma K m3/kg, h0 W/m2K, delta_c and bias_c degC, r_m2k_w m2K/W;\n"
          "    fraction: the wet fraction below which a region's dryness is found.\n";
     if (campaigns > 0)
-        o << fmt::format("    At n = {0}: each value tried was checked by running reconcile itself on up to {1} campaigns of this\n"
+        o << fmt::format("    At n = {0}: each value tried was checked by running reconcile itself on {1} campaigns of this\n"
                          "    design drawn anew with the effect concealed (conditions landing anew, probes and the manikin's\n"
                          "    calibration off within their specifications, trials scattering as this campaign's do); the value\n"
-                         "    printed is where a power curve through every value tried reaches 80 %. Other n: a fast model,\n"
+                         "    printed is where the share named crosses 80 % between two values tried. Other n: a fast model,\n"
                          "    scaled per term by how far the whole decision moved it at n = {0} (docs/reconcile.md).\n",
                          plan.campaign_replicates, campaigns);
     else
