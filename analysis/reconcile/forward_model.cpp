@@ -349,11 +349,13 @@ public:
     // air, humidity, wall, each zone's skin), the fitted scatter model (sigma0, kappa, the tau of
     // the per-trial shared errors) and the instruments' Type B. A new campaign's case mean lands
     // about this one's with the planning mean's own error (sd s/sqrt(n_here)) plus the new
-    // replicates' (s/sqrt(n)); the recorded conditions differ from the true ones by the probes'
-    // errors (calibration part common to every case, `shared_fraction`) and each trial's own
-    // reading errors; the flux is the twin with `truth` at the true conditions, through the
-    // manikin's calibration gain and offset. The twin is evaluated, not linearised: near the
-    // isothermal cases' kink where the conditions land is what decides detectability.
+    // replicates' (s/sqrt(n)); with one replicate per case (scatter carried) that spread is
+    // unknown and taken as 0. The recorded conditions differ from the true ones by the probes'
+    // calibration errors (the part common to every case: `shared_fraction`); the flux is the twin
+    // with `truth` at the true conditions, through the manikin's calibration gain and offset,
+    // plus each trial's shared errors acting linearly through the case's sensitivities (as the
+    // scatter model fitted them) and each zone's own scatter. The twin is evaluated, not
+    // linearised: near the isothermal cases' kink where the conditions land decides detectability.
     std::unique_ptr<ForwardModel> simulated(const std::vector<tw::Term>& truth, int replicates, std::uint64_t seed,
                                             const Instruments& instruments, double shared_fraction) const override {
         if (replicates < 1 || cases_.empty()) return nullptr;
