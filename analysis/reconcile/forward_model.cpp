@@ -344,7 +344,7 @@ public:
         return nullptr;
     }
 
-    // A campaign of this design drawn anew (for `--power`). Everything comes from this campaign:
+    // Campaigns of this design drawn anew (for `--power`). Everything comes from this campaign:
     // the spread of the replicates' recorded conditions about their case mean (pooled over cases:
     // air, humidity, wall, each zone's skin), the fitted scatter model (sigma0, kappa, the tau of
     // the per-trial shared errors) and the instruments' Type B. A new campaign's case mean lands
@@ -356,113 +356,144 @@ public:
     // plus each trial's shared errors acting linearly through the case's sensitivities (as the
     // scatter model fitted them) and each zone's own scatter. The twin is evaluated, not
     // linearised: near the isothermal cases' kink where the conditions land decides detectability.
-    std::unique_ptr<ForwardModel> simulated(const std::vector<tw::Term>& truth, int replicates, std::uint64_t seed,
-                                            const Instruments& instruments, double shared_fraction) const override {
-        if (replicates < 1 || cases_.empty()) return nullptr;
-        const NoiseParts parts = noise_parts(instruments, shared_fraction, {});
-        const ScatterModel scatter = scatter_of(estimate_scatter(parts.data));
-        if (!scatter.estimable) return nullptr;
-        const std::size_t z_count = first_zones().size();
-        // Pooled within-case spread of the recorded conditions.
-        double ss_air = 0.0, ss_rh = 0.0, ss_wall = 0.0;
-        std::vector<double> ss_skin(z_count, 0.0);
-        int dof = 0;
-        for (const auto& in : cases_) {
-            if (in.trials.size() < 2 || in.conditions.zones.size() != z_count) continue;
-            for (const auto& t : in.trials) {
-                if (t.conditions.zones.size() != z_count) continue;
-                ss_air += std::pow(t.conditions.air_temp_c - in.conditions.air_temp_c, 2);
-                ss_rh += std::pow(t.conditions.air_rh_pct - in.conditions.air_rh_pct, 2);
-                if (t.conditions.wall_temp_c && in.conditions.wall_temp_c)
-                    ss_wall += std::pow(*t.conditions.wall_temp_c - *in.conditions.wall_temp_c, 2);
-                for (std::size_t z = 0; z < z_count; ++z)
-                    ss_skin[z] += std::pow(t.conditions.zones[z].skin_temp_c - in.conditions.zones[z].skin_temp_c, 2);
-            }
-            dof += static_cast<int>(in.trials.size()) - 1;
-        }
-        const double d = std::max(1, dof);
-        const double s_air = std::sqrt(ss_air / d), s_rh = std::sqrt(ss_rh / d), s_wall = std::sqrt(ss_wall / d);
-        std::vector<double> s_skin(z_count);
-        for (std::size_t z = 0; z < z_count; ++z) s_skin[z] = std::sqrt(ss_skin[z] / d);
-
-        std::mt19937_64 rng(seed);
-        std::normal_distribution<double> unit(0.0, 1.0);
-        auto tau = [&](std::size_t k) { return k < scatter.factor_sd.size() ? scatter.factor_sd[k] : 0.0; };
-        const double phi = std::clamp(shared_fraction, 0.0, 1.0);
-        const double probe_air = unit(rng), probe_rh = unit(rng), probe_wall = unit(rng);
-        const auto flux = instruments.count("heat_flux_w_m2") ? instruments.at("heat_flux_w_m2") : InstrumentSpec{};
-        const double u_offset = flux.standard_uncertainty(0.0), u_gain = flux.standard_uncertainty(1.0) - u_offset;
-        const double campaign_gain = u_gain * unit(rng), campaign_offset = u_offset * unit(rng);
-        tw::TwinVersion world = base_;
-        world.terms.insert(world.terms.end(), truth.begin(), truth.end());
-
-        std::vector<CaseInput> out;
-        out.reserve(cases_.size());
-        for (std::size_t ci = 0; ci < cases_.size(); ++ci) {
-            const CaseInput& in = cases_[ci];
-            if (in.conditions.zones.size() != z_count) continue;
-            const Eigen::MatrixXd& loadings = parts.data.loadings[ci];
-            const double here = std::sqrt(1.0 / std::max<double>(1.0, static_cast<double>(in.trials.size())));
-            const auto& mean = in.conditions;
-            tw::TrialConditions centre = mean;
-            centre.air_temp_c += s_air * here * unit(rng);
-            centre.air_rh_pct += s_rh * here * unit(rng);
-            if (centre.wall_temp_c) *centre.wall_temp_c += s_wall * here * unit(rng);
-            for (std::size_t z = 0; z < z_count; ++z) centre.zones[z].skin_temp_c += s_skin[z] * here * unit(rng);
-            // This case's probe errors: the calibration part common to every case, the rest its own.
-            auto probe = [&](const char* channel, double reading, double common) {
-                const double u = spec_u(instruments, channel, reading);
-                return u * (std::sqrt(phi) * common + std::sqrt(1.0 - phi) * unit(rng));
-            };
-            const double e_air = probe("air_temp_c", mean.air_temp_c, probe_air);
-            const double e_rh = probe("air_rh_pct", mean.air_rh_pct, probe_rh);
-            const double e_wall = mean.wall_temp_c ? probe("wall_temp_c", *mean.wall_temp_c, probe_wall) : 0.0;
-
-            CaseInput c = in;
-            c.trials.clear();
-            c.q_exp_w_m2.assign(z_count, 0.0);
-            tw::TrialConditions sum = mean;
-            sum.air_temp_c = sum.air_rh_pct = 0.0;
-            if (sum.wall_temp_c) *sum.wall_temp_c = 0.0;
-            for (auto& z : sum.zones) z.skin_temp_c = 0.0;
-            for (int r = 0; r < replicates; ++r) {
-                TrialInput t;
-                t.conditions = centre;
-                t.conditions.air_temp_c += s_air * unit(rng);
-                t.conditions.air_rh_pct += s_rh * unit(rng);
-                if (t.conditions.wall_temp_c) *t.conditions.wall_temp_c += s_wall * unit(rng);
-                for (std::size_t z = 0; z < z_count; ++z) t.conditions.zones[z].skin_temp_c += s_skin[z] * unit(rng);
-                tw::TrialConditions real = t.conditions;  // what the chamber really was
-                real.air_temp_c -= e_air;
-                real.air_rh_pct = std::clamp(real.air_rh_pct - e_rh, 0.5, 99.5);
-                if (real.wall_temp_c) *real.wall_temp_c -= e_wall;
-                // Each trial's own shared errors act as the scatter model fitted them: linearly,
-                // through the case's sensitivities (their estimate is rough, and pushed through
-                // the twin's kink it would scatter the isothermal cases more than the data did).
-                const double eta_air = tau(0) * unit(rng), eta_rh = tau(1) * unit(rng), eta_wall = tau(2) * unit(rng);
-                const double gain = campaign_gain + tau(3) * unit(rng), offset = campaign_offset + tau(4) * unit(rng);
-                const auto q = tw::predict(world, real);
-                t.q_w_m2.resize(z_count);
-                for (std::size_t z = 0; z < z_count; ++z) {
-                    const auto zi = static_cast<Eigen::Index>(z);
-                    const double sd = std::sqrt(scatter.variance(z, std::abs(q[z].q_total_w_m2)));
-                    const double shared = loadings(zi, 0) * eta_air + loadings(zi, 1) * eta_rh + loadings(zi, 2) * eta_wall;
-                    t.q_w_m2[z] = q[z].q_total_w_m2 * (1.0 + gain) + offset + shared + sd * unit(rng);
-                    c.q_exp_w_m2[z] += t.q_w_m2[z] / replicates;
+    class Simulator final : public CampaignSimulator {
+    public:
+        Simulator(const TwinModel& model, NoiseParts parts, ScatterModel scatter, const Instruments& instruments,
+                  double shared_fraction)
+            : model_(model), parts_(std::move(parts)), scatter_(std::move(scatter)), instruments_(instruments),
+              phi_(std::clamp(shared_fraction, 0.0, 1.0)) {
+            const std::size_t z_count = model_.first_zones().size();
+            // Pooled within-case spread of the recorded conditions.
+            double ss_air = 0.0, ss_rh = 0.0, ss_wall = 0.0;
+            std::vector<double> ss_skin(z_count, 0.0);
+            int dof = 0;
+            for (const auto& in : model_.cases_) {
+                if (in.trials.size() < 2 || in.conditions.zones.size() != z_count) continue;
+                for (const auto& t : in.trials) {
+                    if (t.conditions.zones.size() != z_count) continue;
+                    ss_air += std::pow(t.conditions.air_temp_c - in.conditions.air_temp_c, 2);
+                    ss_rh += std::pow(t.conditions.air_rh_pct - in.conditions.air_rh_pct, 2);
+                    if (t.conditions.wall_temp_c && in.conditions.wall_temp_c)
+                        ss_wall += std::pow(*t.conditions.wall_temp_c - *in.conditions.wall_temp_c, 2);
+                    for (std::size_t z = 0; z < z_count; ++z)
+                        ss_skin[z] += std::pow(t.conditions.zones[z].skin_temp_c - in.conditions.zones[z].skin_temp_c, 2);
                 }
-                sum.air_temp_c += t.conditions.air_temp_c / replicates;
-                sum.air_rh_pct += t.conditions.air_rh_pct / replicates;
-                if (sum.wall_temp_c) *sum.wall_temp_c += *t.conditions.wall_temp_c / replicates;
-                for (std::size_t z = 0; z < z_count; ++z) sum.zones[z].skin_temp_c += t.conditions.zones[z].skin_temp_c / replicates;
-                c.trials.push_back(std::move(t));
+                dof += static_cast<int>(in.trials.size()) - 1;
             }
-            c.conditions = std::move(sum);
-            // The analysis's U shrinks with the replicates as its Type A part does (used for
-            // locating and the points outside their CI, not for the claims).
-            for (double& u : c.expanded_u_w_m2) u *= 1.0 / (here * std::sqrt(static_cast<double>(replicates)));
-            out.push_back(std::move(c));
+            const double d = std::max(1, dof);
+            s_air_ = std::sqrt(ss_air / d);
+            s_rh_ = std::sqrt(ss_rh / d);
+            s_wall_ = std::sqrt(ss_wall / d);
+            s_skin_.resize(z_count);
+            for (std::size_t z = 0; z < z_count; ++z) s_skin_[z] = std::sqrt(ss_skin[z] / d);
+
+            const auto flux = instruments_.count("heat_flux_w_m2") ? instruments_.at("heat_flux_w_m2") : InstrumentSpec{};
+            u_offset_ = flux.standard_uncertainty(0.0);
+            u_gain_ = flux.standard_uncertainty(1.0) - u_offset_;
         }
-        return make_twin_model(std::move(out), base_, carried_);
+
+        std::unique_ptr<ForwardModel> draw(const std::vector<tw::Term>& truth, int replicates, std::uint64_t seed) const override {
+            if (replicates < 1) return nullptr;
+            const std::size_t z_count = model_.first_zones().size();
+            const ScatterModel& scatter = scatter_;
+            const Instruments& instruments = instruments_;
+            const NoiseParts& parts = parts_;
+            const double phi = phi_, s_air = s_air_, s_rh = s_rh_, s_wall = s_wall_, u_offset = u_offset_, u_gain = u_gain_;
+            const std::vector<double>& s_skin = s_skin_;
+            std::mt19937_64 rng(seed);
+            std::normal_distribution<double> unit(0.0, 1.0);
+            auto tau = [&](std::size_t k) { return k < scatter.factor_sd.size() ? scatter.factor_sd[k] : 0.0; };
+            const double probe_air = unit(rng), probe_rh = unit(rng), probe_wall = unit(rng);
+            const double campaign_gain = u_gain * unit(rng), campaign_offset = u_offset * unit(rng);
+            tw::TwinVersion world = model_.base_;
+            world.terms.insert(world.terms.end(), truth.begin(), truth.end());
+
+            std::vector<CaseInput> out;
+            out.reserve(model_.cases_.size());
+            for (std::size_t ci = 0; ci < model_.cases_.size(); ++ci) {
+                const CaseInput& in = model_.cases_[ci];
+                if (in.conditions.zones.size() != z_count) continue;
+                const Eigen::MatrixXd& loadings = parts.data.loadings[ci];
+                const double here = std::sqrt(1.0 / std::max<double>(1.0, static_cast<double>(in.trials.size())));
+                const auto& mean = in.conditions;
+                tw::TrialConditions centre = mean;
+                centre.air_temp_c += s_air * here * unit(rng);
+                centre.air_rh_pct += s_rh * here * unit(rng);
+                if (centre.wall_temp_c) *centre.wall_temp_c += s_wall * here * unit(rng);
+                for (std::size_t z = 0; z < z_count; ++z) centre.zones[z].skin_temp_c += s_skin[z] * here * unit(rng);
+                // This case's probe errors: the calibration part common to every case, the rest its own.
+                auto probe = [&](const char* channel, double reading, double common) {
+                    const double u = spec_u(instruments, channel, reading);
+                    return u * (std::sqrt(phi) * common + std::sqrt(1.0 - phi) * unit(rng));
+                };
+                const double e_air = probe("air_temp_c", mean.air_temp_c, probe_air);
+                const double e_rh = probe("air_rh_pct", mean.air_rh_pct, probe_rh);
+                const double e_wall = mean.wall_temp_c ? probe("wall_temp_c", *mean.wall_temp_c, probe_wall) : 0.0;
+
+                CaseInput c = in;
+                c.trials.clear();
+                c.q_exp_w_m2.assign(z_count, 0.0);
+                tw::TrialConditions sum = mean;
+                sum.air_temp_c = sum.air_rh_pct = 0.0;
+                if (sum.wall_temp_c) *sum.wall_temp_c = 0.0;
+                for (auto& z : sum.zones) z.skin_temp_c = 0.0;
+                for (int r = 0; r < replicates; ++r) {
+                    TrialInput t;
+                    t.conditions = centre;
+                    t.conditions.air_temp_c += s_air * unit(rng);
+                    t.conditions.air_rh_pct += s_rh * unit(rng);
+                    if (t.conditions.wall_temp_c) *t.conditions.wall_temp_c += s_wall * unit(rng);
+                    for (std::size_t z = 0; z < z_count; ++z) t.conditions.zones[z].skin_temp_c += s_skin[z] * unit(rng);
+                    tw::TrialConditions real = t.conditions;  // what the chamber really was
+                    real.air_temp_c -= e_air;
+                    real.air_rh_pct = std::clamp(real.air_rh_pct - e_rh, 0.5, 99.5);
+                    if (real.wall_temp_c) *real.wall_temp_c -= e_wall;
+                    // Each trial's own shared errors act as the scatter model fitted them: linearly,
+                    // through the case's sensitivities (their estimate is rough, and pushed through
+                    // the twin's kink it would scatter the isothermal cases more than the data did).
+                    const double eta_air = tau(0) * unit(rng), eta_rh = tau(1) * unit(rng), eta_wall = tau(2) * unit(rng);
+                    const double gain = campaign_gain + tau(3) * unit(rng), offset = campaign_offset + tau(4) * unit(rng);
+                    const auto q = tw::predict(world, real);
+                    t.q_w_m2.resize(z_count);
+                    for (std::size_t z = 0; z < z_count; ++z) {
+                        const auto zi = static_cast<Eigen::Index>(z);
+                        const double sd = std::sqrt(scatter.variance(z, std::abs(q[z].q_total_w_m2)));
+                        const double shared = loadings(zi, 0) * eta_air + loadings(zi, 1) * eta_rh + loadings(zi, 2) * eta_wall;
+                        t.q_w_m2[z] = q[z].q_total_w_m2 * (1.0 + gain) + offset + shared + sd * unit(rng);
+                        c.q_exp_w_m2[z] += t.q_w_m2[z] / replicates;
+                    }
+                    sum.air_temp_c += t.conditions.air_temp_c / replicates;
+                    sum.air_rh_pct += t.conditions.air_rh_pct / replicates;
+                    if (sum.wall_temp_c) *sum.wall_temp_c += *t.conditions.wall_temp_c / replicates;
+                    for (std::size_t z = 0; z < z_count; ++z) sum.zones[z].skin_temp_c += t.conditions.zones[z].skin_temp_c / replicates;
+                    c.trials.push_back(std::move(t));
+                }
+                c.conditions = std::move(sum);
+                // The analysis's U shrinks with the replicates as its Type A part does (used for
+                // locating and the points outside their CI, not for the claims).
+                for (double& u : c.expanded_u_w_m2) u *= 1.0 / (here * std::sqrt(static_cast<double>(replicates)));
+                out.push_back(std::move(c));
+            }
+            return make_twin_model(std::move(out), model_.base_, model_.carried_);
+        }
+
+    private:
+        const TwinModel& model_;
+        NoiseParts parts_;
+        ScatterModel scatter_;
+        Instruments instruments_;
+        double phi_ = 1.0;
+        double s_air_ = 0.0, s_rh_ = 0.0, s_wall_ = 0.0;
+        std::vector<double> s_skin_;
+        double u_offset_ = 0.0, u_gain_ = 0.0;
+    };
+
+    std::unique_ptr<CampaignSimulator> campaign_simulator(const Instruments& instruments, double shared_fraction) const override {
+        if (cases_.empty()) return nullptr;
+        NoiseParts parts = noise_parts(instruments, shared_fraction, {});
+        ScatterModel scatter = scatter_of(estimate_scatter(parts.data));
+        if (!scatter.estimable) return nullptr;
+        return std::make_unique<Simulator>(*this, std::move(parts), std::move(scatter), instruments, shared_fraction);
     }
 
     // For `--noise-from`: this campaign's own scatter and how its estimate scatters.

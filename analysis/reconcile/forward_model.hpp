@@ -65,6 +65,20 @@ public:
     virtual Eigen::MatrixXd draw(std::uint64_t seed, int replicates = 0) const = 0;
 };
 
+class ForwardModel;
+
+// A campaign of a recorded design as it could come out again, with `truth` concealed and
+// `replicates` trials per case, drawn only from what the recorded campaign's own estimates say
+// (docs/reconcile.md, "Detection limits"): each case's conditions land anew (the replicates'
+// spread), the probes err within their Type B, the manikin's calibration errs, and each trial
+// scatters as the fitted scatter model. The estimates are made once, when the simulator is made.
+class CampaignSimulator {
+public:
+    virtual ~CampaignSimulator() = default;
+    virtual std::unique_ptr<ForwardModel> draw(const std::vector<physics::twin::Term>& truth, int replicates,
+                                               std::uint64_t seed) const = 0;
+};
+
 // Predicts every point with a set of extra terms on top of its base physics.
 class ForwardModel {
 public:
@@ -84,15 +98,9 @@ public:
                                                             const std::vector<physics::twin::Term>& /*with*/ = {}) const {
         return nullptr;
     }
-    // For planning (`--power`): a campaign of this design as it could come out again, with
-    // `truth` concealed and `replicates` trials per case, drawn only from what this campaign's
-    // own estimates say (docs/reconcile.md, "Detection limits"): each case's conditions land
-    // anew (the replicates' spread), the probes err within their Type B, the manikin's
-    // calibration errs, and each trial scatters as the fitted scatter model. None where the
-    // scatter cannot be estimated (one replicate, or not a model of recorded trials).
-    virtual std::unique_ptr<ForwardModel> simulated(const std::vector<physics::twin::Term>& /*truth*/, int /*replicates*/,
-                                                    std::uint64_t /*seed*/, const Instruments&,
-                                                    double /*probe_shared_fraction*/) const {
+    // For planning (`--power`): draws campaigns of this design (CampaignSimulator). None where
+    // the scatter cannot be estimated (one replicate, or not a model of recorded trials).
+    virtual std::unique_ptr<CampaignSimulator> campaign_simulator(const Instruments&, double /*probe_shared_fraction*/) const {
         return nullptr;
     }
 };

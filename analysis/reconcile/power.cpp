@@ -66,8 +66,12 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
     const int campaigns = po.campaigns;
     const auto& progress = po.progress;
     int checks_done = 0;
-    // Can this model draw campaigns of its design (replicate scatter known)?
-    const bool whole = campaigns > 0 && model.simulated({}, 2, 1, opt.instruments, opt.probe_shared_fraction) != nullptr;
+    // Campaigns of this design drawn anew (none without replicate scatter). A lab's probes: each
+    // off by one calibration error, the same in every case (shared fraction 1). The noise model's
+    // 0.5 is a cautious covariance for the claims; drawn per case, errors at the isothermal cases'
+    // kink sank gamma and the air bias, and a half-shared wall error hid a wall offset's dilution.
+    const std::unique_ptr<CampaignSimulator> simulator = campaigns > 0 ? model.campaign_simulator(opt.instruments, 1.0) : nullptr;
+    const bool whole = simulator != nullptr;
     const auto& pts = model.points();
     PowerReport rep;
     rep.alpha = opt.alpha;
@@ -191,12 +195,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     PowerPoint pt;
                     pt.value = theta;
                     for (int i = 0; i < campaigns; ++i) {
-                        // A lab's probes: each off by one calibration error, the same in every case
-                        // (shared fraction 1). The noise model's 0.5 is a cautious covariance for the
-                        // claims; drawn per case, errors at the isothermal cases' kink sank gamma and
-                        // the air bias, and a half-shared wall error hid a wall offset's dilution.
-                        const auto sim = model.simulated(truth, n, opt.seed + 7919u * static_cast<std::uint64_t>(i + 1),
-                                                         opt.instruments, 1.0);
+                        const auto sim = simulator->draw(truth, n, opt.seed + 7919u * static_cast<std::uint64_t>(i + 1));
                         const Report r = reconcile(*sim, o);
                         pt.named += r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == d.label ? 1 : 0;
                         ++pt.campaigns;

@@ -132,7 +132,7 @@ CandidateResult fit_candidate(const ForwardModel& model, const std::vector<Candi
 // Detection limits for planning (`manikin reconcile --power`): per candidate, the smallest
 // effect named with 80 % power for this campaign's design and noise, at several replicate counts.
 // Each limit is checked through the whole decision (reconcile itself) on campaigns of this
-// design drawn anew with the effect concealed (ForwardModel::simulated), starting from a fast
+// design drawn anew with the effect concealed (ForwardModel::campaign_simulator), starting from a fast
 // noncentral-chi2 model of the evidence; where the model cannot draw campaigns (no replicate
 // scatter), the fast model's own simulation checks it (`method`).
 struct PowerPoint {

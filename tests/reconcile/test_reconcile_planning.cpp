@@ -34,7 +34,9 @@ TEST_CASE("planning: a simulated campaign has the recorded design, the asked-for
           "and its seed reproduces it", "[reconcile][power]") {
     const auto model = recorded(11);
     const rc::Options opt;
-    const auto a = model->simulated({}, 5, 42, opt.instruments, opt.probe_shared_fraction);
+    const auto simulator = model->campaign_simulator(opt.instruments, opt.probe_shared_fraction);
+    REQUIRE(simulator);
+    const auto a = simulator->draw({}, 5, 42);
     REQUIRE(a);
     REQUIRE(a->points().size() == model->points().size());
     for (std::size_t i = 0; i < a->points().size(); ++i) {
@@ -48,8 +50,8 @@ TEST_CASE("planning: a simulated campaign has the recorded design, the asked-for
     const auto nm = model->noise_model(opt.instruments, opt.probe_shared_fraction);
     CHECK(mean_zone_sd(na) == Approx(mean_zone_sd(nm)).epsilon(0.35));
     // Reproducible from the seed, different with another.
-    const auto again = model->simulated({}, 5, 42, opt.instruments, opt.probe_shared_fraction);
-    const auto other = model->simulated({}, 5, 43, opt.instruments, opt.probe_shared_fraction);
+    const auto again = simulator->draw({}, 5, 42);
+    const auto other = simulator->draw({}, 5, 43);
     CHECK(again->points()[7].q_exp == a->points()[7].q_exp);
     CHECK(other->points()[7].q_exp != a->points()[7].q_exp);
 }
@@ -60,13 +62,14 @@ TEST_CASE("planning: an effect concealed in simulated campaigns shows in them (a
     rc::Options opt;
     opt.null_simulations = 400;
     const tw::Term gamma{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}};
-    const auto with = model->simulated({gamma}, 3, 7, opt.instruments, opt.probe_shared_fraction);
+    const auto simulator = model->campaign_simulator(opt.instruments, opt.probe_shared_fraction);
+    const auto with = simulator->draw({gamma}, 3, 7);
     const auto r = rc::reconcile(*with, opt);
     INFO(r.statement);
     REQUIRE(r.explanation);
     CHECK(r.explanation->label == "humidity_buoyancy");
     CHECK(std::abs(r.explanation->values[0] - 146.0) <= 3.0 * r.explanation->uncertainties[0] + 5.0);
-    const auto without = model->simulated({}, 3, 7, opt.instruments, opt.probe_shared_fraction);
+    const auto without = simulator->draw({}, 3, 7);
     CHECK_FALSE(rc::reconcile(*without, opt).explanation);
 }
 
@@ -74,7 +77,7 @@ TEST_CASE("planning: a campaign with one replicate per case and no carried scatt
           "the scatter from), and --power falls back to the fast model", "[reconcile][power]") {
     const auto model = recorded(13, 1);
     const rc::Options opt;
-    CHECK_FALSE(model->simulated({}, 3, 1, opt.instruments, opt.probe_shared_fraction));
+    CHECK_FALSE(model->campaign_simulator(opt.instruments, opt.probe_shared_fraction));
     rc::PowerOptions po;
     po.terms = {"wall_offset"};
     const auto plan = rc::detection_limits(*model, opt, {3}, po);
@@ -92,9 +95,10 @@ TEST_CASE("planning: where evidence is beyond the null but no term passes and to
     rc::Options opt;
     opt.null_simulations = 400;
     const tw::Term gamma{"humidity_buoyancy", {{"gamma", 30.0}}, "", {}};
+    const auto simulator = model->campaign_simulator(opt.instruments, 1.0);
     int unexplained = 0;
     for (std::uint64_t seed = 1; seed <= 12; ++seed) {
-        const auto r = rc::reconcile(*model->simulated({gamma}, 3, seed, opt.instruments, 1.0), opt);
+        const auto r = rc::reconcile(*simulator->draw({gamma}, 3, seed), opt);
         INFO(r.statement);
         if (r.consistent_before) CHECK(r.family_evidence <= r.null_threshold);
         if (r.family_evidence > r.null_threshold) CHECK_THAT(r.statement, !Catch::Contains("agrees"));
