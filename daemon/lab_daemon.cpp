@@ -1385,6 +1385,7 @@ nlohmann::json LabDaemon::status_json() {
     j["speed"] = o_.virtual_clock ? nlohmann::json(nullptr) : nlohmann::json(o_.speed);
     j["database"] = db_path_.string();
     j["time_s"] = static_cast<double>(clock_->mono_ns()) * 1e-9;
+    j["lab_utc_ms"] = clock_->utc_ns() / 1'000'000;  // the clock records are stamped with (a simulated lab's runs on its own)
     j["campaign"] = plan_ ? nlohmann::json(plan_->name) : nlohmann::json(nullptr);
     j["last_campaign"] = last_campaign_ ? nlohmann::json(*last_campaign_) : nlohmann::json(nullptr);
     j["queued_campaigns"] = nlohmann::json::array();

@@ -123,6 +123,8 @@ public:
     std::uint64_t committed_rows() const { return recorder_->stats().committed; }
     std::uint64_t accepted_rows() const { return recorder_->stats().accepted; }
     double virtual_time_s() const { return static_cast<double>(clock_->mono_ns()) * 1e-9; }
+    // The lab's own clock (the system clock, or a simulated lab's): what its records are stamped with.
+    std::int64_t lab_utc_ns() const { return clock_->utc_ns(); }
 
     // The daemon's read-only connection (tests read through it; every write goes to the recorder).
     // Flushed first, so that it sees every write the daemon has made.

@@ -197,11 +197,11 @@ struct WebServer::Impl {
         return s;
     }
 
-    static std::int64_t wall_ms() {
-        return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
-    }
+    // The charts run on the lab's clock, the one its records are stamped with: a simulated lab at
+    // --speed 10 charts ten minutes of its own per wall minute, and the database's history (seeded
+    // below) lines up with the live points. Its monotonic reading orders the points.
     void record_history(const nlohmann::json& live, const nlohmann::json& s) {
-        history.add(std::chrono::duration<double>(steady::now().time_since_epoch()).count(), wall_ms(), live, s);
+        history.add(daemon.virtual_time_s(), daemon.lab_utc_ns() / 1'000'000, live, s);
     }
 
     nlohmann::json update_message() {
@@ -646,14 +646,13 @@ void WebServer::start() {
         std::vector<console::ChamberHistory::Point> points;
         std::map<std::string, std::int64_t> starts;
         try {
-            const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+            const auto now_ns = s.daemon.lab_utc_ns();
             points = history_from_database(s.daemon.database_path(), now_ns - static_cast<std::int64_t>(s.o.history_s * 1e9), 5.0, starts);
         } catch (const std::exception& e) {
             spdlog::warn("console: the chamber history before this start could not be read from the database: {}", e.what());
         }
         asio::post(*s.io, [&s, points = std::move(points), starts = std::move(starts)]() mutable {
-            s.history.seed(std::move(points), std::chrono::duration<double>(steady::now().time_since_epoch()).count(),
-                           static_cast<std::int64_t>(utc_ms()), std::move(starts));
+            s.history.seed(std::move(points), s.daemon.virtual_time_s(), s.daemon.lab_utc_ns() / 1'000'000, std::move(starts));
             std::lock_guard lk(s.seed_lock);
             s.seeded = true;
             s.seed_done.notify_all();

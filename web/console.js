@@ -97,6 +97,9 @@ function zoneReading(z, quantity) {
 function zoneValue(z, quantity) {
   if (!latest) return null;
   if (quantity === "residual") {  // measured minus the baseline twin at the live conditions
+    // The twin predicts a heated manikin in steady exchange: before the trial acquires (an idle or
+    // starting manikin) the difference is no mismatch, so it is not shown.
+    if (!latest.status || latest.status.stage !== "acquiring") return null;
     const measured = zoneValue(z, "heat_flux_w_m2");
     const twin = latest.twin_q_w_m2 ? latest.twin_q_w_m2[String(z.zone)] : undefined;
     return measured === null || twin === undefined || twin === null ? null : measured - twin;
@@ -122,7 +125,9 @@ function zoneMark(z) {
 function showZone(z) {
   const q = $("zone-quantity").value;
   const mark = zoneMark(z);
-  $("zone-hover").textContent = `zone ${z.zone} ${z.name.replaceAll("_", " ")}: ${fmt(zoneValue(z, q))} ${ZONE_SCALES[q].unit}` +
+  const v = zoneValue(z, q);
+  const why = v === null && q === "residual" ? " (shown while a trial is acquiring)" : "";
+  $("zone-hover").textContent = `zone ${z.zone} ${z.name.replaceAll("_", " ")}: ${fmt(v)} ${ZONE_SCALES[q].unit}${why}` +
     (mark ? ` · ${mark}` : "");
 }
 
@@ -305,7 +310,7 @@ function chart(id, points, series, unit, minSpan) {
     svg.appendChild(el("svg:text", { x: X0 - 3, y: Number(y(v)) + 3, "text-anchor": "end" }, fmt(v, hi - lo < 2 ? 2 : 1)));
     const t = new Date(t0 + f * tspan);
     svg.appendChild(el("svg:text", { x: X0 + f * (X1 - X0), y: 114, "text-anchor": f === 0 ? "start" : f === 1 ? "end" : "middle" },
-      t.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" })));
+      t.toLocaleTimeString([], tspan < 10 * 60000 ? { hour: "2-digit", minute: "2-digit", second: "2-digit" } : { hour: "2-digit", minute: "2-digit" })));
   }
   for (const s of series) {
     const pts = have(s.key);
@@ -332,7 +337,9 @@ async function renderHistory() {
     { key: "air_rh_pv_pct", cls: "pv", label: "PV" }, { key: "air_rh_setpoint_pct", cls: "setpoint", label: "setpoint" }], "RH %", 2);
   chart("chart-speed", points, [{ key: "air_speed_m_s", cls: "measured", label: "WindSonic" }], "air speed m/s", 0.5);
   const from = h.covers_from_utc_ms ? new Date(h.covers_from_utc_ms).toLocaleString() : "—";
-  $("history-note").textContent = `span: ${h.span === "1h" ? "last hour" : h.span}, from ${from}` +
+  // The charts run on the lab's clock (a simulated lab's own, sped up or not), as its records do.
+  const clock = latest && latest.status && latest.status.clock !== "real" ? " on the simulated lab's clock" : "";
+  $("history-note").textContent = `span: ${h.span === "1h" ? "last hour" : h.span}${clock}, from ${from}` +
     (h.span !== "1h" && !(h.span === "trial" ? h.trial_start_utc_ms : h.campaign_start_utc_ms) ? " (none seen since the console's daemon started)" : "");
 }
 
@@ -506,7 +513,8 @@ function onUpdate(msg) {
   $("hdr-alarms").textContent = `alarms: ${active} active, ${unacked} to acknowledge`;
   $("hdr-alarms").className = "badge " + (active ? "MAJOR" : unacked ? "MINOR" : "NO_ALARM");
   const clock = s.clock === "paced" ? `simulated time at ${s.speed}× the wall clock` : `${s.clock} clock`;
-  $("lab").textContent = `${s.mode} lab · ${clock} · t = ${fmt(s.time_s, 0)} s`;
+  const labClock = s.lab_utc_ms ? `lab clock ${new Date(s.lab_utc_ms).toLocaleTimeString()} · ` : "";
+  $("lab").textContent = `${s.mode} lab · ${clock} · ${labClock}t = ${fmt(s.time_s, 0)} s`;
   renderTrial(s);
   renderMeasured(s);
   renderDevices(s);
@@ -523,6 +531,7 @@ function connect() {
     $("connection").className = "badge NO_ALARM";
     document.body.classList.remove("disconnected");
     $("disconnected-banner").hidden = true;
+    for (const b of document.querySelectorAll("header button")) b.disabled = false;
   };
   ws.onmessage = (e) => onUpdate(JSON.parse(e.data));
   ws.onclose = () => {
@@ -531,6 +540,8 @@ function connect() {
     $("connection").className = "badge MAJOR";
     document.body.classList.add("disconnected");
     $("disconnected-banner").hidden = false;
+    // Nothing in the header may look live: the buttons could not reach the daemon anyway.
+    for (const b of document.querySelectorAll("header button")) b.disabled = true;
     setTimeout(connect, 2000);
   };
 }

@@ -85,12 +85,11 @@ def main():
         first = wait_for("every zone shows a value", lambda: (lambda v: v if all(v) else None)(values()), 60)
         if first:
             wait_for("zone values change as the manikin reports", lambda: values() != first, 60)
-        # Coloured by the residual against the twin (measured heat flux minus the baseline twin at
-        # the live conditions), then back to skin temperature.
+        # The residual against the twin (measured heat flux minus the baseline twin at the live
+        # conditions) means nothing for an idle manikin: no zone shows one before a trial acquires.
         choose = "const s = document.getElementById('zone-quantity'); s.value = arguments[0]; s.dispatchEvent(new Event('change'));"
         driver.execute_script(choose, "residual")
-        check(bool(wait_for("every zone shows its residual against the twin", lambda: all(values()), 30)),
-              "every zone shows its residual against the twin")
+        check(not any(values()), "idle, no zone shows a residual against the twin")
         driver.execute_script(choose, "skin_temp_c")
 
         stage = lambda: driver.execute_script("return document.getElementById('stage').textContent;")
@@ -111,6 +110,10 @@ def main():
                   f"settling names the air's distance from target and an ETA: {' '.join(shown.split())[:200]}")
         wait_for("the stage advances to acquiring", lambda: (seen.append(stage()) or seen[-1] == "acquiring"), 90)
         check(len(set(seen)) >= 2, f"the page showed the stage advance: {' -> '.join(dict.fromkeys(seen))}")
+        driver.execute_script(choose, "residual")
+        check(bool(wait_for("every zone shows its residual against the twin", lambda: all(values()), 30)),
+              "acquiring, every zone shows its residual against the twin")
+        driver.execute_script(choose, "skin_temp_c")
 
         # The verdict follows the daemon's rule (not time in stage): compare with the daemon's own status.
         def verdict_matches():
@@ -227,6 +230,8 @@ def main():
         gone = wait_for("the page shows the daemon is gone", lambda: driver.execute_script(
             "return document.body.classList.contains('disconnected') && !document.getElementById('disconnected-banner').hidden;"), 15)
         check(bool(gone), "with the daemon gone the page greys out under a DISCONNECTED banner")
+        check(driver.execute_script("return Array.from(document.querySelectorAll('header button')).every((b) => b.disabled);"),
+              "with the daemon gone the header's Pause, Resume and Abort are disabled")
     finally:
         if driver:
             driver.quit()
