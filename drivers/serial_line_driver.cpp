@@ -1,6 +1,10 @@
 #include "drivers/serial_line_driver.hpp"
 
+#include <boost/asio/serial_port.hpp>
 #include <boost/asio/write.hpp>
+#include <unistd.h>
+
+#include <cerrno>
 #include <fmt/core.h>
 
 namespace manikind::drivers {
@@ -44,13 +48,25 @@ bool SerialLineDriver::open_port() {
     if (!ec) port->set_option(boost::asio::serial_port_base::character_size(8), ec);
     if (!ec) port->set_option(boost::asio::serial_port_base::parity(boost::asio::serial_port_base::parity::none), ec);
     if (!ec) port->set_option(boost::asio::serial_port_base::stop_bits(boost::asio::serial_port_base::stop_bits::one), ec);
+    // Set up, the port is read as a plain descriptor (the header says why).
+    std::unique_ptr<boost::asio::posix::stream_descriptor> line;
+    if (!ec) {
+        const int fd = ::dup(port->native_handle());
+        if (fd < 0) ec.assign(errno, boost::system::system_category());
+        boost::system::error_code ignored;
+        port->close(ignored);
+        if (!ec) {
+            line = std::make_unique<boost::asio::posix::stream_descriptor>(io_, fd);
+            line->non_blocking(true, ec);
+        }
+    }
     std::lock_guard lk(lock_);
     if (ec) {
         ++status_.comm_errors;
         status_.last_error = "open " + options_.path + ": " + ec.message();
         return false;
     }
-    port_ = std::move(port);
+    port_ = std::move(line);
     if (ever_connected_) ++status_.reconnects;
     ever_connected_ = true;
     status_.connected = true;
@@ -61,18 +77,32 @@ bool SerialLineDriver::open_port() {
 }
 
 void SerialLineDriver::start_read() {
-    port_->async_read_some(boost::asio::buffer(buffer_), [this, alive = alive_](const boost::system::error_code& ec,
-                                                                              std::size_t n) {
+    port_->async_wait(boost::asio::posix::stream_descriptor::wait_read, [this, alive = alive_](const boost::system::error_code& ec) {
         if (!*alive) return;
         if (ec) {
             if (ec == boost::asio::error::operation_aborted) return;
             close_port(ec.message());
             return;
         }
-        bytes_received_ += n;
-        on_bytes(buffer_.data(), n);
-        if (port_) start_read();
+        if (read_waiting() && port_) start_read();
     });
+}
+
+bool SerialLineDriver::read_waiting() {
+    // What arrived, in reads of the buffer's size; a read that fills it may have left more.
+    for (;;) {
+        if (!port_) return false;  // the parser's sink stopped the driver
+        const ssize_t n = ::read(port_->native_handle(), buffer_.data(), buffer_.size());
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return true;  // a wake with nothing after all
+        if (n <= 0) {  // a hang-up (pty closed, adapter unplugged): as asio's read said it
+            close_port(n == 0 ? boost::system::error_code(boost::asio::error::eof).message()
+                              : boost::system::error_code(errno, boost::system::system_category()).message());
+            return false;
+        }
+        bytes_received_ += static_cast<std::uint64_t>(n);
+        on_bytes(buffer_.data(), static_cast<std::size_t>(n));
+        if (static_cast<std::size_t>(n) < buffer_.size()) return true;
+    }
 }
 
 void SerialLineDriver::close_port(const std::string& why) {

@@ -1,11 +1,14 @@
 #pragma once
-// Base for the serial instruments (WindSonic, CSAT3B): a Boost.Asio serial_port on the shared
-// io_context, reading whatever arrives and handing the bytes to a codec's parser. The same code
+// Base for the serial instruments (WindSonic, CSAT3B): the port opened and set up (baud, 8N1) by
+// a Boost.Asio serial_port, then read on the shared io_context as a descriptor: wait for
+// readiness, read whatever arrived, hand the bytes to a codec's parser (serial_port's own read
+// tries the read before waiting, and Boost 1.74's serial_port cannot wait: on a line that had
+// just gone quiet that was a read returning EAGAIN at every burst, 4 per step of the demo). The same code
 // reads a USB/RS-232 adapter on a lab PC and a pseudo-terminal of the simulated lab. A read error
 // (adapter unplugged, pty hung up) closes the port; check() re-opens it with backoff. Silence
 // longer than `stale_after_s` marks the device stale and is counted as a timeout.
 #include <boost/asio/io_context.hpp>
-#include <boost/asio/serial_port.hpp>
+#include <boost/asio/posix/stream_descriptor.hpp>
 
 #include <array>
 #include <atomic>
@@ -56,13 +59,14 @@ protected:
 private:
     bool open_port();
     void start_read();
+    bool read_waiting();  // false when the port was closed
     void close_port(const std::string& why);  // after a read error: counted, degraded, retried
     void release_port();
 
     boost::asio::io_context& io_;
     SerialOptions options_;
     SampleSink sink_;
-    std::unique_ptr<boost::asio::serial_port> port_;
+    std::unique_ptr<boost::asio::posix::stream_descriptor> port_;
     std::array<std::uint8_t, 512> buffer_{};
     Backoff backoff_;
     bool running_ = false;
