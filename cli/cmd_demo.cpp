@@ -78,8 +78,13 @@ void add_demo_command(CLI::App& app) {
         const VirtualRun run = run_virtual_campaign(cfg, plan, [&](const std::string& line) {
             if (!o->json) std::fprintf(stderr, "  %s\n", line.c_str());
         });
-        auto db = recorder::Database::open(run.database);
-        const auto campaign = campaign_from_database(db, plan.name);
+        // The campaign as the daemon read it for its results; read here only if it has none.
+        std::shared_ptr<const analysis::Campaign> read = run.campaign;
+        if (!read) {
+            auto db = recorder::Database::open(run.database);
+            read = std::make_shared<const analysis::Campaign>(campaign_from_database(db, plan.name));
+        }
+        const analysis::Campaign& campaign = *read;
         analysis::write_campaign(out / "campaign", campaign);
         int unsteady = 0;
         const auto t_sim = std::chrono::steady_clock::now();

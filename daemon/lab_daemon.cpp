@@ -849,7 +849,9 @@ void LabDaemon::finish_campaign(const std::string& state) {
     if (state == "done") {
         stage_ = Stage::computing;
         try {
-            const auto campaign = campaign_from_database(db_, plan_->name);
+            const auto read = std::make_shared<const analysis::Campaign>(campaign_from_database(db_, plan_->name));
+            const analysis::Campaign& campaign = *read;
+            if (o_.virtual_clock) computed_campaign_ = read;
             const auto result = analysis::analyze_campaign(campaign);
             auto j = analysis::to_json(result);
             j["interim"] = false;

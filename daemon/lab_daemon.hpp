@@ -16,10 +16,12 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "analysis/recording.hpp"
 #include "analysis/sliding_range.hpp"
 #include "daemon/acquisition.hpp"
 #include "daemon/alarm_book.hpp"
@@ -138,6 +140,13 @@ public:
     Acquisition& acquisition() { return *acq_; }
     const std::filesystem::path& database_path() const { return db_path_; }
     std::optional<std::string> last_campaign() const { return last_campaign_; }
+    // Virtual clock only: the last finished campaign as its results read it from the database, so
+    // `manikin demo` need not read 9 M values back a second time (nullptr on a real clock: a lab's
+    // daemon keeps no campaign in memory).
+    std::shared_ptr<const analysis::Campaign> take_computed_campaign() {
+        std::lock_guard lk(lock_);
+        return std::exchange(computed_campaign_, nullptr);
+    }
     // Seconds since the acquisition tick last ran (real time) or the virtual clock last stepped:
     // the systemd watchdog is fed only while this stays small.
     double seconds_since_tick() const;
@@ -241,6 +250,7 @@ private:
     std::uint64_t storage_busy_waits_ = 0;  // how often a write found the database locked
     std::uint64_t dropped_when_full_ = 0;                  // recorder drops when the disk filled
     std::optional<std::string> last_campaign_;
+    std::shared_ptr<const analysis::Campaign> computed_campaign_;  // take_computed_campaign()
     std::vector<std::string> trial_summaries_;
 
     // Live values and detectors.

@@ -5,8 +5,10 @@
 // the CLI sees nothing else of the daemon's insides.
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 
+#include "analysis/recording.hpp"
 #include "daemon/campaign_plan.hpp"
 #include "daemon/config.hpp"
 
@@ -15,6 +17,9 @@ namespace manikind {
 struct VirtualRun {
     std::filesystem::path database;  // where the daemon recorded (config.database)
     double lab_time_s = 0.0;         // virtual time the campaign took
+    // The campaign as the daemon's results read it back from the database when it finished (so it
+    // is not read twice); nullptr when it did not finish "done" (its results were not computed).
+    std::shared_ptr<const analysis::Campaign> campaign;
 };
 
 // Starts `plan` on a daemon built from `config` on the simulated lab (virtual clock) and runs it

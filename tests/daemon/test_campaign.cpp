@@ -2,6 +2,7 @@
 // results; a device dropping out for 60 s mid-trial; the daemon's own safety stops.
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <map>
 
 #include "daemon/campaign_plan.hpp"
@@ -429,4 +430,39 @@ TEST_CASE("a restarted simulated lab never stamps a time already used: nothing r
         CHECK(db.idle_sample_count() == run_count);
     }
     std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("a virtual run hands over the campaign its results read, equal to what the database holds, so the demo reads it once",
+          "[daemon]") {
+    DaemonFixture f;
+    REQUIRE(f.daemon().start_campaign(quick_plan("handed")).empty());
+    f.daemon().run_virtual();
+    const auto handed = f.daemon().take_computed_campaign();
+    REQUIRE(handed);
+    CHECK_FALSE(f.daemon().take_computed_campaign());  // handed over once
+    const auto read = manikind::campaign_from_database(f.daemon().db(), "handed");
+    CHECK(handed->name == read.name);
+    REQUIRE(handed->trials.size() == read.trials.size());
+    REQUIRE(handed->trials.size() == 1);
+    const auto& a = handed->trials[0].data;
+    const auto& b = read.trials[0].data;
+    REQUIRE(a.rows() == b.rows());
+    CHECK(a.rows() >= 35 * 60 / 5);
+    // Value for value, a missing one (NaN) where the other is missing too.
+    auto same = [](const std::vector<double>& x, const std::vector<double>& y) {
+        if (x.size() != y.size()) return false;
+        for (std::size_t i = 0; i < x.size(); ++i)
+            if (!(x[i] == y[i] || (std::isnan(x[i]) && std::isnan(y[i])))) return false;
+        return true;
+    };
+    CHECK(same(a.t_s, b.t_s));
+    CHECK(same(a.air_temp_c, b.air_temp_c));
+    CHECK(same(a.air_rh_pct, b.air_rh_pct));
+    REQUIRE(a.heat_flux_w_m2.size() == b.heat_flux_w_m2.size());
+    for (std::size_t z = 0; z < a.heat_flux_w_m2.size(); ++z) {
+        CHECK(same(a.heat_flux_w_m2[z], b.heat_flux_w_m2[z]));
+        CHECK(same(a.skin_temp_c[z], b.skin_temp_c[z]));
+    }
+    REQUIRE(a.channel_values.size() == b.channel_values.size());
+    for (std::size_t k = 0; k < a.channel_values.size(); ++k) CHECK(same(a.channel_values[k], b.channel_values[k]));
 }
