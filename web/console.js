@@ -345,7 +345,9 @@ async function renderHistory() {
 
 function renderDevices(s) {
   const table = $("devices");
-  table.innerHTML = "<tr><th>device</th><th>severity</th><th>samples</th><th>errors</th><th>reconnects</th><th>last error</th></tr>";
+  table.innerHTML = "<tr><th>device</th><th>severity</th><th>samples</th><th>errors</th><th>reconnects</th></tr>";
+  // The last error on a line of its own under its device: it is a sentence, and in a column of its
+  // own it pushed the table past its panel.
   for (const d of s.devices) {
     const tr = el("tr", { id: "device-" + d.name, "data-severity": d.severity });
     tr.appendChild(el("td", {}, d.name));
@@ -353,10 +355,16 @@ function renderDevices(s) {
     sev.appendChild(el("span", { class: "badge " + d.severity, title: d.severity_reason }, d.severity));
     tr.appendChild(sev);
     tr.appendChild(el("td", {}, String(d.samples)));
-    tr.appendChild(el("td", {}, String(d.checksum_errors + d.timeouts + d.exceptions + d.malformed + d.device_faults)));
+    // Every kind the driver counts: failed reads, writes and opens (comm_errors) too.
+    const errors = d.checksum_errors + d.timeouts + d.exceptions + d.malformed + d.device_faults + (d.comm_errors || 0);
+    tr.appendChild(el("td", {}, String(errors)));
     tr.appendChild(el("td", {}, String(d.reconnects)));
-    tr.appendChild(el("td", {}, d.last_error || ""));
     table.appendChild(tr);
+    if (d.last_error) {
+      const why = el("tr", { class: "last-error", id: "device-" + d.name + "-last-error" });
+      why.appendChild(el("td", { colspan: "5" }, `last error: ${d.last_error}`));
+      table.appendChild(why);
+    }
   }
 }
 

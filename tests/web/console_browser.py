@@ -134,6 +134,13 @@ def main():
         got = wait_for("the silenced WindSonic turns MAJOR or INVALID", lambda: severity() in ("MAJOR", "INVALID") and severity(), 60)
         if got:
             check(True, f"the faulted device shows {got}")
+            why = wait_for("the faulted device's last error is shown under it", lambda: driver.execute_script(
+                "const e = document.getElementById('device-windsonic-last-error'); return e ? e.textContent : '';"), 30)
+            check(bool(why) and "last error:" in why, f"the faulted device's last error is said beneath it ({why!r})")
+            # The devices table stays inside its panel (a long last error pushed it past the edge).
+            fits = driver.execute_script(
+                "const p = document.getElementById('devices-panel'); return p.scrollWidth <= p.clientWidth + 1;")
+            check(fits, "the devices table fits its panel")
 
         # The zone map's scale is fixed and says its unit (30-40 degC for skin), not the zones' spread.
         legend = driver.execute_script("return document.getElementById('zone-legend').textContent;")
