@@ -2,6 +2,7 @@
 
 #include <boost/asio/serial_port.hpp>
 #include <boost/asio/write.hpp>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -51,7 +52,7 @@ bool SerialLineDriver::open_port() {
     // Set up, the port is read as a plain descriptor (the header says why).
     std::unique_ptr<boost::asio::posix::stream_descriptor> line;
     if (!ec) {
-        const int fd = ::dup(port->native_handle());
+        const int fd = ::fcntl(port->native_handle(), F_DUPFD_CLOEXEC, 0);  // not inherited, as asio opened it
         if (fd < 0) ec.assign(errno, boost::system::system_category());
         boost::system::error_code ignored;
         port->close(ignored);
