@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -22,6 +23,7 @@ namespace manikind::sim {
 
 namespace mr = protocol::modbus_registers;
 namespace mtcp = protocol::modbus_tcp;
+constexpr std::size_t kMinRequestBytes = 12;  // MBAP (7), function, address (2), count or value (2)
 
 namespace {
 modbus_mapping_t* as_mapping(void* p) { return static_cast<modbus_mapping_t*>(p); }
@@ -222,7 +224,19 @@ void VirtualModbusServer::serve() {
                     keep = false;
                     break;
                 }
-                keep = answer(c, pending.data() + used, static_cast<int>(frame.size));
+                // Every function a device here serves carries an address and a count or value
+                // after its code (12 bytes at least); a shorter request is malformed (libmodbus's
+                // receive read as many bytes as the function needs, whatever the length said).
+                if (frame.size < kMinRequestBytes) {
+                    keep = false;
+                    break;
+                }
+                // Answered from a zeroed buffer of the largest ADU: libmodbus and handle_write read
+                // the fields a function has, and a request whose counts claim more than it holds
+                // reads zeros there, never past its own bytes.
+                std::array<std::uint8_t, mtcp::kMaxAduBytes> query{};
+                std::copy_n(pending.data() + used, frame.size, query.begin());
+                keep = answer(c, query.data(), static_cast<int>(frame.size));
                 used += frame.size;
             }
             pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(std::min(used, pending.size())));
