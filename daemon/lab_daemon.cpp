@@ -303,47 +303,58 @@ constexpr std::size_t kMaxOverflowRows = 2'000'000;
 }  // namespace
 
 void LabDaemon::record_sample_locked(const drivers::Sample& s) {
-    const std::string key = s.device + "/" + s.channel;
-    live_[key] = s;
+    slot_key_.assign(s.device).append(1, '/').append(s.channel);
+    auto [found, fresh] = slots_.try_emplace(slot_key_);
+    ChannelSlot& slot = found->second;
+    if (fresh) {
+        slot.live = &live_[slot_key_];
+        slot.manikin = s.device == "manikin";
+        slot.skin = slot.manikin && s.channel.ends_with(".skin_temp_c");
+        slot.heater = slot.manikin && s.channel.ends_with(".heater_power_w_m2");
+        if (slot.skin) slot.zone = std::atoi(s.channel.c_str() + 1);
+        slot.enclosure_air = s.device == "datalogger" && s.channel == "ee181_1.air_temp_c";
+    }
+    *slot.live = s;
     if (sample_listener_) sample_listener_();
     // Safety: enforced here, whatever a client asked for.
-    if (s.device == "manikin" && s.quality != drivers::Quality::comm_error && acq_ && acq_->manikin().running_command()) {
+    if (slot.manikin && s.quality != drivers::Quality::comm_error && acq_ && acq_->manikin().running_command()) {
         const auto& lim = o_.config.safety;
-        if (s.channel.ends_with(".skin_temp_c") && s.value > lim.max_skin_temp_c)
+        if (slot.skin && s.value > lim.max_skin_temp_c)
             safety_stop(fmt::format("{} = {:.2f} °C is above safety.max_skin_temp_c = {} °C", s.channel, s.value,
                                     lim.max_skin_temp_c));
-        if (s.channel.ends_with(".heater_power_w_m2") && s.value > lim.max_heater_power_w_m2)
+        if (slot.heater && s.value > lim.max_heater_power_w_m2)
             safety_stop(fmt::format("{} = {:.1f} W/m² is above safety.max_heater_power_w_m2 = {} W/m²", s.channel, s.value,
                                     lim.max_heater_power_w_m2));
     }
-    if (s.device == "manikin" && s.channel.ends_with(".skin_temp_c") && s.quality == drivers::Quality::good &&
-        stage_ == Stage::acquiring) {
-        const int zone = std::atoi(s.channel.c_str() + 1);
-        if (zone >= 1 && zone <= static_cast<int>(skin_range_.size())) skin_range_[static_cast<std::size_t>(zone - 1)].push(s.mono_ns, s.value);
+    if (slot.skin && s.quality == drivers::Quality::good && stage_ == Stage::acquiring) {
+        if (slot.zone >= 1 && slot.zone <= static_cast<int>(skin_range_.size()))
+            skin_range_[static_cast<std::size_t>(slot.zone - 1)].push(s.mono_ns, s.value);
     }
-    if (s.device == "datalogger" && s.channel.ends_with("air_temp_c") && s.quality == drivers::Quality::good &&
-        s.channel == "ee181_1.air_temp_c")
-        enclosure_range_.push(s.mono_ns, s.value);
+    if (slot.enclosure_air && s.quality == drivers::Quality::good) enclosure_range_.push(s.mono_ns, s.value);
     if (trial_id_ == 0) {
         // Outside trials: the idle log, one reading per channel per idle_log_period_s.
         const double period_s = o_.config.idle_log_period_s;
         if (period_s <= 0) return;
-        const auto [it, first] = idle_logged_ns_.try_emplace(key, s.mono_ns);
-        if (!first) {
-            if (static_cast<double>(s.mono_ns - it->second) < period_s * 1e9) return;
-            it->second = s.mono_ns;
+        if (slot.idle_logged_ns) {
+            if (static_cast<double>(s.mono_ns - *slot.idle_logged_ns) < period_s * 1e9) return;
         }
+        slot.idle_logged_ns = s.mono_ns;
     }
-    std::int64_t channel_id = 0;
-    if (const auto known = channel_ids_.find(key); known != channel_ids_.end()) {
-        channel_id = known->second;  // the common case: one lookup, no call to the writer
-    } else if (!unnamed_.empty() ||
-               !storage_allows_locked([&] { channel_id = recorded_channel(s.device, s.channel); })) {
-        // A channel not yet in the database while storage waits (locked, full, failing): the
-        // reading waits with its name and is recorded once the channel can be added
-        // (retry_unnamed_locked), after those already waiting.
-        hold_unnamed_locked(s);
-        return;
+    std::int64_t channel_id = slot.channel_id;
+    if (channel_id == 0) {
+        // The key anew: a safety stop above may have recorded readings through slot_key_.
+        const std::string key = s.device + "/" + s.channel;
+        if (const auto known = channel_ids_.find(key); known != channel_ids_.end()) {
+            channel_id = known->second;  // added by retry_unnamed_locked
+        } else if (!unnamed_.empty() ||
+                   !storage_allows_locked([&] { channel_id = recorded_channel(s.device, s.channel); })) {
+            // A channel not yet in the database while storage waits (locked, full, failing): the
+            // reading waits with its name and is recorded once the channel can be added
+            // (retry_unnamed_locked), after those already waiting.
+            hold_unnamed_locked(s);
+            return;
+        }
+        slot.channel_id = channel_id;  // from now on: no lookup, no call to the writer
     }
     recorder::SampleRow row{trial_id_, channel_id, s.mono_ns, s.utc_ns, s.value, static_cast<std::uint8_t>(s.quality)};
     offer_row_locked(row);

@@ -16,6 +16,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -256,7 +257,19 @@ private:
     // Live values and detectors.
     std::map<std::string, drivers::Sample> live_;
     std::map<std::string, std::int64_t> channel_ids_;
-    std::map<std::string, std::int64_t> idle_logged_ns_;  // channel -> last idle-log reading (mono)
+    // What record_sample_locked needs of a channel, found by one hash lookup of "device/channel"
+    // built in a reused buffer (no allocation per reading): its live_ entry (a map node, which
+    // does not move), its database id once known, its idle-log time, and what the safety and
+    // steady-state checks look for in its name, decided once.
+    struct ChannelSlot {
+        drivers::Sample* live = nullptr;
+        std::int64_t channel_id = 0;  // 0: not yet added to the database
+        std::optional<std::int64_t> idle_logged_ns;  // last idle-log reading (mono)
+        bool manikin = false, skin = false, heater = false, enclosure_air = false;
+        int zone = 0;  // manikin zone of a skin channel ("zNN."), else 0
+    };
+    std::unordered_map<std::string, ChannelSlot> slots_;
+    std::string slot_key_;  // reused per reading
     std::map<std::string, std::int64_t> device_ids_;
     std::vector<analysis::SlidingRange> skin_range_;
     analysis::SlidingRange enclosure_range_;
