@@ -297,6 +297,8 @@ void LabDaemon::on_sample(const drivers::Sample& s) {
 }
 
 namespace {
+// The grid the campaign's results read the recordings on (CampaignReader's default: Text S3.2).
+constexpr double kExportPeriod_s = 5.0;
 // Readings held by the daemon while the recorder's queue is full (a lock held elsewhere): 48 bytes
 // each, so at most ~100 MB, about 3 h of the simulated lab's ~200 channels at 1 Hz.
 constexpr std::size_t kMaxOverflowRows = 2'000'000;
@@ -379,6 +381,10 @@ void LabDaemon::retry_unnamed_locked() {
 }
 
 void LabDaemon::offer_row_locked(const recorder::SampleRow& row) {
+    if (row.trial_id != 0 && !recorded_bins_.empty()) {
+        if (current_bins_ && row.trial_id == trial_id_) current_bins_->add(row);
+        else if (const auto it = recorded_bins_.find(row.trial_id); it != recorded_bins_.end()) it->second->add(row);  // sealed: unusable
+    }
     // In order: while readings wait in the overflow, a new one waits behind them (the recorder
     // takes a reading older than one it stored for a re-sent duplicate).
     const bool waiting = !overflow_.empty();
@@ -502,6 +508,9 @@ void LabDaemon::enter(Stage s, const std::string& why) {
     stage_ = s;
     device_retry_logged_ = false;
     stage_start_ns_ = clock_->mono_ns();
+    // The grid's start is the "acquiring" event's time: on the virtual clock the same reading of
+    // it (elsewhere the reader finds the two differ and reads the trial back).
+    if (s == Stage::acquiring && current_bins_) current_bins_->start(stage_start_ns_);
     event("info", "stage", stage_name(s));
     if (!why.empty()) event("info", "stage_reason", why);
     if (trial_id_) {
@@ -708,6 +717,8 @@ void LabDaemon::storage_stop_locked(const std::string& why) {
         write([=](recorder::Database& db) { db.set_trial_state(trial, "interrupted", reason, utc_ns); });
         trial_summaries_.push_back(fmt::format("case {} replicate {}: interrupted (disk full)", current_->c.id,
                                                current_->replicate));
+        if (current_bins_) current_bins_->seal();
+        current_bins_ = nullptr;
         trial_id_ = 0;
         current_.reset();
         ++trials_done_;
@@ -789,8 +800,28 @@ void LabDaemon::retry_storage_locked() {
     storage_error_.clear();
 }
 
+void LabDaemon::begin_trial_bins_locked(std::int64_t trial_id) {
+    current_bins_ = nullptr;
+    if (!o_.virtual_clock) return;  // a trial a day: reading it back costs nothing worth keeping it for
+    if (recorded_bins_.empty()) {
+        const auto rs = recorder_->stats();
+        recorder_losses_at_start_ = rs.duplicates + rs.dropped + rs.lost;
+    }
+    // Sealed, a trial's bins are a value and a quality per channel and 5-s row (1.2 MB for the
+    // simulated lab's 75-min trial); past this budget the later trials are read back instead.
+    constexpr std::size_t kBudgetBytes = std::size_t{256} << 20;
+    std::size_t held = 0;
+    for (const auto& [id, b] : recorded_bins_) held += b->bytes();
+    if (held >= kBudgetBytes) return;
+    auto bins = std::make_shared<recorder::TrialBins>(kExportPeriod_s);
+    current_bins_ = bins.get();
+    recorded_bins_[trial_id] = std::move(bins);
+}
+
 void LabDaemon::finish_trial(const std::string& state, const std::string& reason) {
     flush_all_locked();
+    if (current_bins_) current_bins_->seal();
+    current_bins_ = nullptr;
     {
         const std::int64_t trial = trial_id_, utc_ns = clock_->utc_ns();
         const bool dropped = dropped_samples_ != 0;
@@ -860,7 +891,16 @@ void LabDaemon::finish_campaign(const std::string& state) {
     if (state == "done") {
         stage_ = Stage::computing;
         try {
-            const auto read = std::make_shared<const analysis::Campaign>(campaign_from_database(db_, plan_->name));
+            // The trials binned as recorded, unless the recorder skipped, dropped or lost a reading
+            // since the campaign began (then each trial is read back from the database).
+            CampaignReader::RecordedBins bins;
+            const auto rs = recorder_->stats();
+            if (rs.duplicates + rs.dropped + rs.lost == recorder_losses_at_start_)
+                for (const auto& [id, b] : recorded_bins_) bins.emplace(id, b);
+            CampaignReader reader(db_, plan_->name, kExportPeriod_s);
+            reader.use_recorded_bins(std::move(bins));
+            const auto read = std::make_shared<const analysis::Campaign>(read_whole_campaign(reader));
+            trials_binned_as_recorded_ = reader.trials_from_recording();
             const analysis::Campaign& campaign = *read;
             if (o_.virtual_clock) computed_campaign_ = read;
             const auto result = analysis::analyze_campaign(campaign);
@@ -880,6 +920,8 @@ void LabDaemon::finish_campaign(const std::string& state) {
             event("error", "results", std::string("could not compute results: ") + e.what());
         }
     }
+    recorded_bins_.clear();
+    current_bins_ = nullptr;
     write([=, campaign = campaign_id_](recorder::Database& db) { db.set_campaign_state(campaign, state); });
     event("info", "campaign", fmt::format("'{}' {}", plan_->name, state));
     {
@@ -1054,6 +1096,7 @@ void LabDaemon::advance_locked() {
             queue_.pop_front();
             trial_id_ = trial;
             dropped_samples_ = 0;
+            begin_trial_bins_locked(trial);
             enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
             [[fallthrough]];
         }

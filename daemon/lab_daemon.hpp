@@ -32,6 +32,7 @@
 #include "daemon/instance_lock.hpp"
 #include "store/database.hpp"
 #include "store/recorder.hpp"
+#include "store/trial_bins.hpp"
 
 namespace manikind {
 
@@ -147,6 +148,12 @@ public:
     std::shared_ptr<const analysis::Campaign> take_computed_campaign() {
         std::lock_guard lk(lock_);
         return std::exchange(computed_campaign_, nullptr);
+    }
+    // How many trials of the last campaign's results came from the bins kept while recording
+    // (virtual clock), not read back from the database.
+    std::size_t trials_binned_as_recorded() {
+        std::lock_guard lk(lock_);
+        return trials_binned_as_recorded_;
     }
     // Seconds since the acquisition tick last ran (real time) or the virtual clock last stepped:
     // the systemd watchdog is fed only while this stays small.
@@ -270,6 +277,14 @@ private:
     };
     std::unordered_map<std::string, ChannelSlot> slots_;
     std::string slot_key_;  // reused per reading
+    // On the virtual clock, the running campaign's trials binned as they are recorded (issue 36):
+    // its results then read no reading back (CampaignReader takes a trial's bins only where they
+    // hold exactly what the database does). By trial id; the current trial's also by pointer.
+    std::map<std::int64_t, std::shared_ptr<recorder::TrialBins>> recorded_bins_;
+    recorder::TrialBins* current_bins_ = nullptr;
+    std::uint64_t recorder_losses_at_start_ = 0;  // the recorder's duplicates, drops and losses then
+    std::size_t trials_binned_as_recorded_ = 0;    // of the last campaign's results
+    void begin_trial_bins_locked(std::int64_t trial_id);
     std::map<std::string, std::int64_t> device_ids_;
     std::vector<analysis::SlidingRange> skin_range_;
     analysis::SlidingRange enclosure_range_;

@@ -27,56 +27,8 @@ std::string iso_utc(std::int64_t utc_ns) {
     return buf;
 }
 
-// One channel on the trial's grid: row i covers (t_i - period, t_i] with t_i = i x period
-// after `t0_ns`. The value is the mean of the good samples in it (the recorded value itself
-// when one sample fell in it); when none was good, the last sample's value and quality.
-struct BinnedChannel {
-    std::vector<double> value;
-    std::vector<std::uint8_t> quality;  // analysis::kNoSample where no sample fell in the row
-};
-
-// Accumulates one channel's samples as they come (a trial is read once, in time order, for
-// every channel at once) and gives its BinnedChannel at the end.
-class ChannelBinner {
-public:
-    ChannelBinner(std::int64_t t0_ns, std::size_t n, double period_s)
-        : t0_ns_(t0_ns), period_s_(period_s), sum_(n, 0.0), good_(n, 0),
-          out_{std::vector<double>(n, std::numeric_limits<double>::quiet_NaN()), std::vector<std::uint8_t>(n, analysis::kNoSample)} {}
-
-    void add(const recorder::SampleRow& r) {
-        any_ = true;
-        const double t = static_cast<double>(r.mono_ns - t0_ns_) * 1e-9;
-        if (t < -period_s_) return;
-        const auto i = static_cast<long>(std::ceil(t / period_s_ - 1e-9));
-        if (i < 0 || static_cast<std::size_t>(i) >= sum_.size()) return;
-        const auto k = static_cast<std::size_t>(i);
-        if (r.quality == 0 && std::isfinite(r.value)) {
-            sum_[k] += r.value;
-            ++good_[k];
-        } else if (good_[k] == 0) {
-            out_.value[k] = r.value;
-            out_.quality[k] = r.quality == 0 ? std::uint8_t{3} : r.quality;  // a "good" NaN is a lost reading
-        }
-    }
-    bool any_sample() const { return any_; }
-
-    BinnedChannel finish() {
-        for (std::size_t k = 0; k < sum_.size(); ++k)
-            if (good_[k] > 0) {
-                out_.value[k] = good_[k] == 1 ? sum_[k] : sum_[k] / good_[k];
-                out_.quality[k] = 0;
-            }
-        return std::move(out_);
-    }
-
-private:
-    std::int64_t t0_ns_;
-    double period_s_;
-    std::vector<double> sum_;
-    std::vector<int> good_;
-    BinnedChannel out_;
-    bool any_ = false;
-};
+using recorder::BinnedChannel;
+using recorder::ChannelBinner;
 
 constexpr std::size_t kNoChannel = static_cast<std::size_t>(-1);
 
@@ -230,32 +182,54 @@ CampaignReader::~CampaignReader() = default;
 
 std::size_t CampaignReader::trial_count() const { return spans_.size(); }
 
+const recorder::TrialBins* CampaignReader::usable_bins(std::size_t i) {
+    const auto& sp = spans_.at(i);
+    const auto it = recorded_bins_.find(sp.row.id);
+    if (it == recorded_bins_.end() || !it->second) return nullptr;
+    const recorder::TrialBins& b = *it->second;
+    if (!b.usable() || b.period_s() != period_s_ || b.t0_mono_ns() != sp.start_mono_ns) return nullptr;
+    // Every row offered was stored once: none lost, none skipped as a re-sent duplicate.
+    if (static_cast<std::int64_t>(b.rows()) != db_.sample_count(sp.row.id)) return nullptr;
+    return &b;
+}
+
 analysis::TrialData CampaignReader::read(std::size_t s) {
     const auto& sp = spans_.at(s);
     const double period_s = period_s_;
     const auto n = static_cast<std::size_t>(std::floor(static_cast<double>(sp.end_mono_ns - sp.start_mono_ns) * 1e-9 / period_s)) + 1;
-    std::vector<ChannelBinner> binners(all_channels_.size(), ChannelBinner(sp.start_mono_ns, n, period_s));
-    db_.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {
-        const auto id = static_cast<std::size_t>(r.channel_id);
-        if (r.channel_id >= 0 && id < index_of_id_.size() && index_of_id_[id] != kNoChannel) binners[index_of_id_[id]].add(r);
-    });
+    std::vector<BinnedChannel> bins;
+    bins.reserve(all_channels_.size());
+    std::vector<bool> any(all_channels_.size(), false);
+    if (const auto* live = usable_bins(s)) {
+        // Binned as recorded (TrialBins): the same arithmetic on the same rows, not read back.
+        for (std::size_t k = 0; k < all_channels_.size(); ++k) {
+            any[k] = live->any_sample(all_channels_[k].id);
+            bins.push_back(live->binned(all_channels_[k].id, n));
+        }
+        ++from_recording_;
+    } else {
+        std::vector<ChannelBinner> binners(all_channels_.size(), ChannelBinner(sp.start_mono_ns, period_s, n));
+        db_.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {
+            const auto id = static_cast<std::size_t>(r.channel_id);
+            if (r.channel_id >= 0 && id < index_of_id_.size() && index_of_id_[id] != kNoChannel) binners[index_of_id_[id]].add(r);
+        });
+        for (std::size_t k = 0; k < all_channels_.size(); ++k) {
+            any[k] = binners[k].any_sample();
+            bins.push_back(binners[k].finish(n));
+        }
+    }
     // Every channel with samples in any trial read so far gets a column in every trial (a fixed
     // set once all are read, so a script reads each trial alike); one first seen here is added
     // in the database's order of channels.
     bool grew = false;
     for (std::size_t k = 0; k < all_channels_.size(); ++k)
-        if (binners[k].any_sample() && !recorded_[k]) recorded_[k] = grew = true;
+        if (any[k] && !recorded_[k]) recorded_[k] = grew = true;
     if (grew) {
         ++generation_;
         campaign_.channels.clear();
         for (std::size_t k = 0; k < all_channels_.size(); ++k)
             if (recorded_[k]) campaign_.channels.push_back({all_channels_[k].device_name, all_channels_[k].name, all_channels_[k].unit});
     }
-    std::vector<BinnedChannel> bins;
-    bins.reserve(all_channels_.size());
-    for (auto& b : binners) bins.push_back(b.finish());
-    binners.clear();
-
     const auto find = [&](const std::string& key) -> const BinnedChannel* {
         const auto it = index_of_key_.find(key);
         return it == index_of_key_.end() || !recorded_[it->second] ? nullptr : &bins[it->second];
@@ -313,6 +287,10 @@ ExportCounts stream_trials(CampaignReader& reader, const TrialVisitor& visit, co
 
 analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& name, double period_s, bool include_running) {
     CampaignReader reader(db, name, period_s, include_running);
+    return read_whole_campaign(reader);
+}
+
+analysis::Campaign read_whole_campaign(CampaignReader& reader) {
     std::vector<analysis::TrialData> data(reader.trial_count());
     stream_trials(reader, [&](std::size_t s, analysis::TrialData&& d, bool) { data[s] = std::move(d); });
     analysis::Campaign c = reader.campaign();

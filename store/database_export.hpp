@@ -6,11 +6,13 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "analysis/recording.hpp"
 #include "store/database.hpp"
+#include "store/trial_bins.hpp"
 
 namespace manikind {
 
@@ -40,6 +42,14 @@ public:
     analysis::TrialData read(std::size_t i);
     std::size_t channel_generation() const { return generation_; }
 
+    // Trials binned as they were recorded, by trial id (the daemon on the virtual clock, issue 36):
+    // read() takes a trial's rows from its bins instead of the database when they cover exactly
+    // what is stored (the same start and period, as many rows offered as the trial holds), else
+    // it reads the trial back as usual. trials_from_recording() counts the reads so spared.
+    using RecordedBins = std::map<std::int64_t, std::shared_ptr<const recorder::TrialBins>>;
+    void use_recorded_bins(RecordedBins bins) { recorded_bins_ = std::move(bins); }
+    std::size_t trials_from_recording() const { return from_recording_; }
+
 private:
     struct Span;
     recorder::Database& db_;
@@ -51,6 +61,9 @@ private:
     std::map<std::string, std::size_t> index_of_key_; // "device/name" -> index into all_channels_
     std::vector<bool> recorded_;                     // by index into all_channels_: seen in a trial read
     std::size_t generation_ = 0;
+    RecordedBins recorded_bins_;
+    std::size_t from_recording_ = 0;
+    const recorder::TrialBins* usable_bins(std::size_t i);
 };
 
 // Throws UserError when the campaign is unknown or has no finished trial (with `include_running`:
@@ -58,6 +71,8 @@ private:
 // manikin's start to its last committed reading, marked `partial` (an export taken mid-campaign).
 analysis::Campaign campaign_from_database(recorder::Database& db, const std::string& campaign_name,
                                           double sample_period_s = 5.0, bool include_running = false);
+// Every trial of the reader's campaign read into it (campaign_from_database's work).
+analysis::Campaign read_whole_campaign(CampaignReader& reader);
 
 // A case's number as the export names it: the plan's id, else its position + 1 (also when the
 // stored conditions are not a JSON object).

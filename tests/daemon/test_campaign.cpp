@@ -432,7 +432,7 @@ TEST_CASE("a restarted simulated lab never stamps a time already used: nothing r
     std::filesystem::remove_all(dir);
 }
 
-TEST_CASE("a virtual run hands over the campaign its results read, equal to what the database holds, so the demo reads it once",
+TEST_CASE("a virtual run hands over the campaign its results binned while recording, equal to what the database holds, so the demo reads no reading back",
           "[daemon]") {
     DaemonFixture f;
     REQUIRE(f.daemon().start_campaign(quick_plan("handed")).empty());
@@ -440,6 +440,8 @@ TEST_CASE("a virtual run hands over the campaign its results read, equal to what
     const auto handed = f.daemon().take_computed_campaign();
     REQUIRE(handed);
     CHECK_FALSE(f.daemon().take_computed_campaign());  // handed over once
+    // Its trial came from the bins kept while recording, not from reading the trial back.
+    CHECK(f.daemon().trials_binned_as_recorded() == 1);
     const auto read = manikind::campaign_from_database(f.daemon().db(), "handed");
     CHECK(handed->name == read.name);
     REQUIRE(handed->trials.size() == read.trials.size());
@@ -465,4 +467,6 @@ TEST_CASE("a virtual run hands over the campaign its results read, equal to what
     }
     REQUIRE(a.channel_values.size() == b.channel_values.size());
     for (std::size_t k = 0; k < a.channel_values.size(); ++k) CHECK(same(a.channel_values[k], b.channel_values[k]));
+    CHECK(a.channel_quality == b.channel_quality);
+    CHECK(handed->channels.size() == read.channels.size());
 }
