@@ -37,29 +37,49 @@ double objective(const ZoneData& d, double sigma0_sq, double kappa, double prior
     return neg2_loglik(d, sigma0_sq, kappa) + kPriorDof * (std::log(std::max(sigma0_sq, 1e-300)) + prior_sq / std::max(sigma0_sq, 1e-300));
 }
 
-// The zone's sigma0² that minimises the objective for a given kappa: golden section on
-// log(sigma0²), which is unimodal here.
+// The zone's sigma0² that minimises the objective for a given kappa. On t = ln(sigma0²) the
+// objective is unimodal here; its minimum is where g'(t) = s f'(s) = 0, with (v_c = s + kappa² q_c²)
+//   f'(s)  = sum_c dof_c / v_c - ss_c / v_c² + K (1/s - P/s²)
+//   f''(s) = sum_c -dof_c / v_c² + 2 ss_c / v_c³ + K (-1/s² + 2 P/s³),  g''(t) = s f'(s) + s² f''(s).
+// Newton's method from the kappa = 0 answer (closed form), kept inside a bracket that every
+// step narrows by the sign of g' (a step that would leave it bisects): about 6 steps and no
+// logarithm, where a golden section over the same bracket took 38 evaluations of 15 logarithms
+// each (reconcile estimates the noise model again in every simulated campaign of its null).
 double best_sigma0_sq(const ZoneData& d, double kappa, double scale, double prior_sq) {
     double lo = std::log(1e-8 * scale + 1e-12), hi = std::log(100.0 * scale + 1e-6);
-    const double g = (std::sqrt(5.0) - 1.0) / 2.0;
-    double a = hi - g * (hi - lo), b = lo + g * (hi - lo);
-    double fa = objective(d, std::exp(a), kappa, prior_sq), fb = objective(d, std::exp(b), kappa, prior_sq);
-    for (int i = 0; i < 36; ++i) {
-        if (fa < fb) {
-            hi = b;
-            b = a;
-            fb = fa;
-            a = hi - g * (hi - lo);
-            fa = objective(d, std::exp(a), kappa, prior_sq);
-        } else {
-            lo = a;
-            a = b;
-            fa = fb;
-            b = lo + g * (hi - lo);
-            fb = objective(d, std::exp(b), kappa, prior_sq);
+    const double k2 = kappa * kappa;
+    auto slope = [&](double t, double* curvature) {
+        const double s = std::exp(t);
+        double f1 = kPriorDof * (1.0 / s - prior_sq / (s * s));
+        double f2 = kPriorDof * (-1.0 / (s * s) + 2.0 * prior_sq / (s * s * s));
+        for (std::size_t c = 0; c < d.ss.size(); ++c) {
+            const double v = std::max(s + k2 * d.abs_flux[c] * d.abs_flux[c], 1e-12);
+            const double inv = 1.0 / v;
+            f1 += d.dof[c] * inv - d.ss[c] * inv * inv;
+            f2 += -d.dof[c] * inv * inv + 2.0 * d.ss[c] * inv * inv * inv;
         }
+        if (curvature) *curvature = s * f1 + s * s * f2;
+        return s * f1;
+    };
+    if (slope(lo, nullptr) >= 0.0) return std::exp(lo);  // the minimum is at the bracket's edge
+    if (slope(hi, nullptr) <= 0.0) return std::exp(hi);
+    double ss_sum = kPriorDof * prior_sq, dof_sum = kPriorDof;
+    for (std::size_t c = 0; c < d.ss.size(); ++c) ss_sum += d.ss[c], dof_sum += d.dof[c];
+    double t = std::clamp(std::log(std::max(ss_sum / dof_sum, 1e-300)), lo, hi);
+    for (int i = 0; i < 100 && hi - lo > 1e-12; ++i) {
+        double g2 = 0.0;
+        const double g1 = slope(t, &g2);
+        if (g1 == 0.0) break;
+        (g1 > 0.0 ? hi : lo) = t;
+        double next = g2 > 0.0 ? t - g1 / g2 : 0.5 * (lo + hi);
+        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+        if (std::abs(next - t) < 1e-13) {
+            t = next;
+            break;
+        }
+        t = next;
     }
-    return std::exp(0.5 * (lo + hi));
+    return std::exp(t);
 }
 
 }  // namespace
