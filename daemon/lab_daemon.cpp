@@ -896,7 +896,7 @@ void LabDaemon::finish_campaign(const std::string& state) {
             CampaignReader::RecordedBins bins;
             const auto rs = recorder_->stats();
             if (rs.duplicates + rs.dropped + rs.lost == recorder_losses_at_start_)
-                for (const auto& [id, b] : recorded_bins_) bins.emplace(id, b);
+                for (auto& [id, b] : recorded_bins_) bins.emplace(id, std::move(b));  // freed as the reader goes
             CampaignReader reader(db_, plan_->name, kExportPeriod_s);
             reader.use_recorded_bins(std::move(bins));
             const auto read = std::make_shared<const analysis::Campaign>(read_whole_campaign(reader));

@@ -207,6 +207,9 @@ analysis::TrialData CampaignReader::read(std::size_t s) {
             bins.push_back(live->binned(all_channels_[k].id, n));
         }
         ++from_recording_;
+        // Read once: memory goes down as the campaign is built (a trial read again, because a
+        // later one added a channel, is read from the database).
+        recorded_bins_.erase(sp.row.id);
     } else {
         std::vector<ChannelBinner> binners(all_channels_.size(), ChannelBinner(sp.start_mono_ns, period_s, n));
         db_.for_each_trial_sample(sp.row.id, [&](const recorder::SampleRow& r) {

@@ -45,7 +45,8 @@ public:
     // Trials binned as they were recorded, by trial id (the daemon on the virtual clock, issue 36):
     // read() takes a trial's rows from its bins instead of the database when they cover exactly
     // what is stored (the same start and period, as many rows offered as the trial holds), else
-    // it reads the trial back as usual. trials_from_recording() counts the reads so spared.
+    // it reads the trial back as usual. A trial's bins are let go once read (a trial read again
+    // is read from the database). trials_from_recording() counts the reads so spared.
     using RecordedBins = std::map<std::int64_t, std::shared_ptr<const recorder::TrialBins>>;
     void use_recorded_bins(RecordedBins bins) { recorded_bins_ = std::move(bins); }
     std::size_t trials_from_recording() const { return from_recording_; }
