@@ -310,6 +310,7 @@ void add_probe_command(CLI::App& app) {
         std::string device, path, host = "127.0.0.1", map = "builtin";
         int port = 502;
         int max_gap_registers = static_cast<int>(config::ModbusDeviceConfig{}.max_gap_registers);
+        int requests_in_flight = 1;
         std::size_t count = 10;
         double timeout_s = 5.0;
         std::vector<std::string> writes, reads;
@@ -327,6 +328,10 @@ void add_probe_command(CLI::App& app) {
     cmd->add_option("--max-gap", o->max_gap_registers,
                     "Modbus: read across up to this many unused registers in one request (0: contiguous runs only)")
         ->check(CLI::Range(0, 124))
+        ->capture_default_str();
+    cmd->add_option("--in-flight", o->requests_in_flight,
+                    "Modbus TCP: send up to this many requests of a poll before reading their replies")
+        ->check(CLI::Range(1, 16))
         ->capture_default_str();
     cmd->add_option("--count", o->count, "Serial: stop after this many samples of the speed channel")->capture_default_str();
     cmd->add_option("--timeout", o->timeout_s, "Give up after this many seconds")->capture_default_str();
@@ -377,6 +382,7 @@ void add_probe_command(CLI::App& app) {
             mo.port = o->port;
             mo.response_timeout_s = std::min(o->timeout_s, 2.0);
             mo.max_gap_registers = o->max_gap_registers;
+            mo.requests_in_flight = o->requests_in_flight;
             mo.points = modbus_points(register_map_from_setting(o->map, o->device, {}));
             drivers::ModbusDriver d(mo, clock, [&](const drivers::Sample& s) { out["samples"].push_back(sample_json(s)); });
             d.start();

@@ -47,6 +47,9 @@ void Acquisition::build_drivers(const config::Config& config, const drivers::Clo
         o.response_timeout_s = d.modbus_timeout_s;
         o.poll_period_s = d.poll_period_s;
         o.max_gap_registers = static_cast<int>(m.max_gap_registers);
+        // The simulated devices answer every request of a poll in order (sim/devices/modbus_server):
+        // the poll's requests go out in one send and come back in one wake-up.
+        o.requests_in_flight = lab_ ? 16 : static_cast<int>(m.requests_in_flight);
         o.points = modbus_points(register_map_from_setting(m.register_map, name, config.source_dir));
         return std::make_unique<drivers::ModbusDriver>(std::move(o), clock, sink_);
     };

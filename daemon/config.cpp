@@ -213,6 +213,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
                 r.number(*t, path, "baud", m->baud, 1200, 921600, "baud");
                 r.text(*t, path, "register_map", m->register_map);
                 r.number(*t, path, "max_gap_registers", m->max_gap_registers, 0, 124, "registers");
+                r.number(*t, path, "requests_in_flight", m->requests_in_flight, 1, 16, "requests");
             }
         if (const auto* t = r.table(*d, "devices", "windsonic")) {
             r.text(*t, "devices.windsonic", "path", dc.windsonic_path);

@@ -48,6 +48,10 @@ struct ModbusDeviceConfig {
     // (docs/devices.md, "Modbus block reads"). A device that refuses a range with a hole ("illegal
     // data address") is then read in its contiguous runs; 0 reads contiguous runs only.
     double max_gap_registers = 16;
+    // Modbus TCP: how many requests of one poll go out before their replies are read (the
+    // Messaging on TCP/IP guide allows several; many gateways take one at a time). The simulated
+    // lab's devices take every request of a poll at once, whatever is set here.
+    double requests_in_flight = 1;
 };
 
 struct DeviceConfig {

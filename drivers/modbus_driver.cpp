@@ -59,6 +59,7 @@ void ModbusDriver::stop() {
 }
 
 void ModbusDriver::disconnect() {
+    tcp_.close();
     if (ctx_) {
         modbus_close(ctx_);
         modbus_free(ctx_);
@@ -69,26 +70,32 @@ void ModbusDriver::disconnect() {
 }
 
 bool ModbusDriver::ensure_connected(std::int64_t now_ns) {
-    if (ctx_) return true;
+    if (is_open()) return true;
     if (!backoff_.due(now_ns)) return false;
-    modbus_t* ctx = options_.serial_path.empty()
-                        ? modbus_new_tcp(options_.host.c_str(), options_.port)
-                        : modbus_new_rtu(options_.serial_path.c_str(), options_.baud, 'N', 8, 1);
-    if (!ctx) {
-        record_error(std::string("modbus_new: ") + modbus_strerror(errno));
-        backoff_.failed(now_ns);
-        return false;
+    if (tcp()) {
+        if (const std::string why = tcp_.connect(options_.host, options_.port, options_.response_timeout_s); !why.empty()) {
+            record_error(fmt::format("connect {}: {}", status_.transport, why));
+            backoff_.failed(now_ns);
+            return false;
+        }
+    } else {
+        modbus_t* ctx = modbus_new_rtu(options_.serial_path.c_str(), options_.baud, 'N', 8, 1);
+        if (!ctx) {
+            record_error(std::string("modbus_new_rtu: ") + modbus_strerror(errno));
+            backoff_.failed(now_ns);
+            return false;
+        }
+        const double t = options_.response_timeout_s;
+        const auto sec = static_cast<std::uint32_t>(t);
+        modbus_set_response_timeout(ctx, sec, static_cast<std::uint32_t>((t - sec) * 1e6));
+        if (modbus_connect(ctx) == -1) {
+            record_error(fmt::format("connect {}: {}", status_.transport, modbus_strerror(errno)));
+            modbus_free(ctx);
+            backoff_.failed(now_ns);
+            return false;
+        }
+        ctx_ = ctx;
     }
-    const double t = options_.response_timeout_s;
-    const auto sec = static_cast<std::uint32_t>(t);
-    modbus_set_response_timeout(ctx, sec, static_cast<std::uint32_t>((t - sec) * 1e6));
-    if (modbus_connect(ctx) == -1) {
-        record_error(fmt::format("connect {}: {}", status_.transport, modbus_strerror(errno)));
-        modbus_free(ctx);
-        backoff_.failed(now_ns);
-        return false;
-    }
-    ctx_ = ctx;
     // The backoff is reset by an answer, not by the connect: a silent device (a gateway that
     // accepts TCP, a dead RTU slave) would otherwise cost a full response timeout per register
     // every poll, and on the virtual clock stall the whole lab (issue 17).
@@ -141,29 +148,59 @@ double ModbusDriver::decode_point(const ModbusPoint& p, std::span<const std::uin
     return value;
 }
 
-// Caller holds io_lock_ and ctx_ is open.
+// Caller holds io_lock_ and the connection is open.
 std::optional<double> ModbusDriver::read_point(const ModbusPoint& p, Quality& quality) {
-    const int count = mr::register_count(p.spec.type);
-    std::uint16_t words[2] = {0, 0};
-    modbus_set_slave(ctx_, p.unit_id);
-    const int rc = p.input_register ? modbus_read_input_registers(ctx_, p.spec.address, count, words)
-                                    : modbus_read_registers(ctx_, p.spec.address, count, words);
-    if (rc != count) {
+    const mb::ReadBlock one{p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type), {0}};
+    std::vector<BlockRead> got;
+    read_blocks(std::span<const mb::ReadBlock>(&one, 1), got);
+    if (got[0].err != 0) {
         quality = Quality::comm_error;
-        count_error(errno, fmt::format("{} (unit {}, register {})", p.channel, p.unit_id, p.spec.address));
+        count_error(got[0].err, fmt::format("{} (unit {}, register {}){}", p.channel, p.unit_id, p.spec.address, got[0].why));
         return std::nullopt;
     }
-    return decode_point(p, std::span<const std::uint16_t>(words, static_cast<std::size_t>(count)), quality);
+    return decode_point(p, got[0].words, quality);
 }
 
-// Caller holds io_lock_ and ctx_ is open.
-bool ModbusDriver::read_block(const mb::ReadBlock& b, std::vector<std::uint16_t>& words, int& err) {
-    words.assign(static_cast<std::size_t>(b.count), 0);
-    modbus_set_slave(ctx_, b.unit_id);
-    const int rc = b.input_register ? modbus_read_input_registers(ctx_, b.start, b.count, words.data())
-                                    : modbus_read_registers(ctx_, b.start, b.count, words.data());
-    err = rc == b.count ? 0 : errno;
-    return rc == b.count;
+// Caller holds io_lock_ and the connection is open.
+void ModbusDriver::read_blocks(std::span<const mb::ReadBlock> blocks, std::vector<BlockRead>& out) {
+    out.assign(blocks.size(), BlockRead{});
+    if (tcp()) {
+        namespace mtcp = protocol::modbus_tcp;
+        std::vector<ModbusTcpClient::Call> calls(blocks.size());
+        for (std::size_t i = 0; i < blocks.size(); ++i) {
+            auto& q = calls[i].request;
+            q.unit = static_cast<std::uint8_t>(blocks[i].unit_id);
+            q.function = blocks[i].input_register ? mtcp::kReadInput : mtcp::kReadHolding;
+            q.address = static_cast<std::uint16_t>(blocks[i].start);
+            q.count = static_cast<std::uint16_t>(blocks[i].count);
+        }
+        tcp_.transact(calls);
+        for (std::size_t i = 0; i < blocks.size(); ++i) {
+            out[i].err = calls[i].err;
+            out[i].words = std::move(calls[i].words);
+            if (!calls[i].why.empty()) out[i].why = ": " + calls[i].why;
+        }
+        return;
+    }
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+        const auto& b = blocks[i];
+        if (!ctx_) {  // the link failed on an earlier request of this poll
+            out[i].err = ENOTCONN;
+            continue;
+        }
+        out[i].words.assign(static_cast<std::size_t>(b.count), 0);
+        modbus_set_slave(ctx_, b.unit_id);
+        const int rc = b.input_register ? modbus_read_input_registers(ctx_, b.start, b.count, out[i].words.data())
+                                        : modbus_read_registers(ctx_, b.start, b.count, out[i].words.data());
+        if (rc == b.count) continue;
+        out[i].err = errno;
+        const int err = errno;
+        if (err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EBADF || err == EMBBADDATA || err == EMBBADCRC ||
+            err == EIO) {
+            for (std::size_t k = i + 1; k < blocks.size(); ++k) out[k].err = ENOTCONN;  // count_error drops the link
+            return;
+        }
+    }
 }
 
 void ModbusDriver::poll() {
@@ -181,12 +218,20 @@ std::vector<Sample> ModbusDriver::read_all() {
         // Per point, in the configured order: value and quality (comm_error until read).
         std::vector<std::optional<double>> values(options_.points.size());
         std::vector<Quality> qualities(options_.points.size(), Quality::comm_error);
-        std::vector<std::uint16_t> words;
-        for (std::size_t bi = 0; bi < blocks_.size(); ++bi) {
-            if (!ensure_connected(now)) continue;
-            const mb::ReadBlock& b = blocks_[bi];
-            int err = 0;
-            if (!read_block(b, words, err)) {
+        std::vector<BlockRead> got;
+        const std::size_t in_flight = tcp() ? static_cast<std::size_t>(std::max(1, options_.requests_in_flight)) : 1;
+        for (std::size_t bi = 0; bi < blocks_.size();) {
+            if (!ensure_connected(now)) {
+                ++bi;
+                continue;
+            }
+            const std::size_t n = std::min(in_flight, blocks_.size() - bi);
+            read_blocks(std::span<const mb::ReadBlock>(blocks_).subspan(bi, n), got);
+            std::size_t next = bi + n;
+            for (std::size_t k = 0; k < n; ++k) {
+                const mb::ReadBlock& b = blocks_[bi + k];
+                const int err = got[k].err;
+                if (err == ENOTCONN) continue;  // lost with the link, whose failure is counted once
                 if (err == EMBXILADD && b.points.size() > 1) {
                     // The device refuses this range. A block bridged across unused registers is
                     // split into its contiguous runs (the device may lack the registers between);
@@ -196,8 +241,8 @@ std::vector<Sample> ModbusDriver::read_all() {
                     auto smaller = mb::plan_read_blocks(regs, mb::kMaxReadRegisters, 0);
                     const bool bridged = smaller.size() > 1;
                     if (!bridged) smaller = mb::plan_read_blocks(regs, 0, 0);  // at most 0 registers: one point a request
-                    for (auto& s : smaller)
-                        for (auto& i : s.points) i = b.points[i];  // back to indices into options_.points
+                    for (auto& sb : smaller)
+                        for (auto& i : sb.points) i = b.points[i];  // back to indices into options_.points
                     {
                         std::lock_guard sl(status_lock_);
                         ++status_.exceptions;
@@ -206,36 +251,45 @@ std::vector<Sample> ModbusDriver::read_all() {
                                                          b.start, b.start + b.count - 1, b.unit_id,
                                                          bridged ? "their contiguous runs" : "them one at a time");
                     }
-                    blocks_.erase(blocks_.begin() + static_cast<std::ptrdiff_t>(bi));
-                    blocks_.insert(blocks_.begin() + static_cast<std::ptrdiff_t>(bi), smaller.begin(), smaller.end());
-                    --bi;  // read the first of them now
+                    const auto at = blocks_.begin() + static_cast<std::ptrdiff_t>(bi + k);
+                    blocks_.erase(at);
+                    blocks_.insert(blocks_.begin() + static_cast<std::ptrdiff_t>(bi + k), smaller.begin(), smaller.end());
+                    // Read the smaller blocks now; the replies after this one in the batch are
+                    // dropped and their blocks read again with them.
+                    next = bi + k;
+                    break;
+                }
+                if (err != 0) {
+                    const auto& first = options_.points[b.points.front()];
+                    count_error(err, b.points.size() == 1
+                                         ? fmt::format("{} (unit {}, register {}){}", first.channel, b.unit_id, b.start, got[k].why)
+                                         : fmt::format("{} and {} more (unit {}, registers {}..{}){}", first.channel,
+                                                       b.points.size() - 1, b.unit_id, b.start, b.start + b.count - 1,
+                                                       got[k].why));
+                    if (!is_open()) backoff_.failed(now);  // dropped after a timeout: the next try waits
                     continue;
                 }
-                const auto& first = options_.points[b.points.front()];
-                count_error(err, b.points.size() == 1
-                                     ? fmt::format("{} (unit {}, register {})", first.channel, b.unit_id, b.start)
-                                     : fmt::format("{} and {} more (unit {}, registers {}..{})", first.channel,
-                                                   b.points.size() - 1, b.unit_id, b.start, b.start + b.count - 1));
-                if (!ctx_) backoff_.failed(now);  // dropped after a timeout: the next try waits
-                continue;
-            }
-            {
-                std::lock_guard sl(status_lock_);
-                ++status_.frames;
-            }
-            for (const std::size_t i : b.points) {
-                const auto& p = options_.points[i];
-                const auto offset = static_cast<std::size_t>(p.spec.address - b.start);
-                Quality q = Quality::good;
-                values[i] = decode_point(
-                    p, std::span<const std::uint16_t>(words).subspan(offset, static_cast<std::size_t>(mr::register_count(p.spec.type))), q);
-                qualities[i] = q;
-                any_good = true;
-                if (q == Quality::good) {
+                {
                     std::lock_guard sl(status_lock_);
-                    ++status_.samples;
+                    ++status_.frames;
+                }
+                for (const std::size_t i : b.points) {
+                    const auto& p = options_.points[i];
+                    const auto offset = static_cast<std::size_t>(p.spec.address - b.start);
+                    Quality q = Quality::good;
+                    values[i] = decode_point(p,
+                                             std::span<const std::uint16_t>(got[k].words)
+                                                 .subspan(offset, static_cast<std::size_t>(mr::register_count(p.spec.type))),
+                                             q);
+                    qualities[i] = q;
+                    any_good = true;
+                    if (q == Quality::good) {
+                        std::lock_guard sl(status_lock_);
+                        ++status_.samples;
+                    }
                 }
             }
+            bi = next;
         }
         for (std::size_t i = 0; i < options_.points.size(); ++i) {
             const auto& p = options_.points[i];
@@ -290,14 +344,30 @@ std::string ModbusDriver::write(const std::string& channel, double value) {
     }
     std::lock_guard lk(io_lock_);
     if (!ensure_connected(clock_.mono_ns())) return options_.device_name + " is not connected: " + status().last_error;
-    modbus_set_slave(ctx_, p->unit_id);
-    const int rc = words.size() == 1 ? modbus_write_register(ctx_, p->spec.address, words[0])
-                                     : modbus_write_registers(ctx_, p->spec.address, static_cast<int>(words.size()),
-                                                              words.data());
-    if (rc == -1) {
-        const std::string why = fmt::format("write {} = {}: {}", channel, value, modbus_strerror(errno));
+    int err = 0;
+    std::string detail;
+    if (tcp()) {
+        namespace mtcp = protocol::modbus_tcp;
+        ModbusTcpClient::Call call;
+        call.request.unit = static_cast<std::uint8_t>(p->unit_id);
+        call.request.function = words.size() == 1 ? mtcp::kWriteSingle : mtcp::kWriteMultiple;
+        call.request.address = static_cast<std::uint16_t>(p->spec.address);
+        call.request.count = static_cast<std::uint16_t>(words.size());
+        call.request.values = words;
+        tcp_.transact(std::span<ModbusTcpClient::Call>(&call, 1));
+        err = call.err;
+        if (!call.why.empty()) detail = " (" + call.why + ")";
+    } else {
+        modbus_set_slave(ctx_, p->unit_id);
+        const int rc = words.size() == 1 ? modbus_write_register(ctx_, p->spec.address, words[0])
+                                         : modbus_write_registers(ctx_, p->spec.address, static_cast<int>(words.size()),
+                                                                  words.data());
+        err = rc == -1 ? errno : 0;
+    }
+    if (err != 0) {
+        const std::string why = fmt::format("write {} = {}: {}{}", channel, value, modbus_strerror(err), detail);
         record_error(why);
-        if (errno == ETIMEDOUT || errno == ECONNRESET || errno == EPIPE) disconnect();
+        if (err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EMBBADDATA || !is_open()) disconnect();
         return why;
     }
     return {};

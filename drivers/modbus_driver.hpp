@@ -1,7 +1,8 @@
 #pragma once
-// Modbus devices through libmodbus: the chamber controller (setpoints, process values) and the
-// datalogger that carries the EE181 air T/RH probes and the wall thermocouples. libmodbus calls
-// block, so in real time each Modbus device polls on its own worker thread and cannot stall the
+// Modbus devices: the chamber controller (setpoints, process values) and the datalogger that
+// carries the EE181 air T/RH probes and the wall thermocouples. TCP through our own client
+// (drivers/modbus_tcp_client.hpp: a poll's requests in one send, their replies in one recv), RTU
+// through libmodbus. Both block, so in real time each Modbus device polls on its own worker thread and cannot stall the
 // io_context the serial and CAN drivers share; on the virtual clock the acquisition loop calls
 // poll() itself, once per tick. Errors are classified (timeout, exception, connection lost),
 // counted, and turn the point's sample into comm_error; the connection is re-opened with backoff.
@@ -12,11 +13,13 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "drivers/driver.hpp"
+#include "drivers/modbus_tcp_client.hpp"
 #include "protocol/modbus_blocks.hpp"
 #include "protocol/modbus_registers.hpp"
 #include "protocol/probe_scaling.hpp"
@@ -42,6 +45,7 @@ struct ModbusOptions {
     double response_timeout_s = 0.5;
     double poll_period_s = 1.0;                    // worker thread, real time
     int max_gap_registers = 0;                     // unused registers one request may span (0: contiguous only)
+    int requests_in_flight = 1;                    // TCP: requests of one poll sent before their replies are read
     std::vector<ModbusPoint> points;
 };
 
@@ -78,9 +82,18 @@ private:
     bool ensure_connected(std::int64_t now_ns);
     void disconnect();
     void record_error(const std::string& what);
+    bool is_open() const { return tcp() ? tcp_.is_open() : ctx_ != nullptr; }
+    bool tcp() const { return options_.serial_path.empty(); }
     std::optional<double> read_point(const ModbusPoint& p, Quality& quality);
-    // One request for a block of polled points; false (and the error classified) on failure.
-    bool read_block(const protocol::modbus_blocks::ReadBlock& b, std::vector<std::uint16_t>& words, int& err);
+    // The reply to one block's request: err 0 and its words, or an error (ENOTCONN: not sent or
+    // not answered, the link having failed on an earlier request of the same poll).
+    struct BlockRead {
+        int err = 0;
+        std::vector<std::uint16_t> words;
+        std::string why;  // a malformed reply: what was wrong with it
+    };
+    // Reads blocks[0..n): over TCP their requests go out together; over RTU one after another.
+    void read_blocks(std::span<const protocol::modbus_blocks::ReadBlock> blocks, std::vector<BlockRead>& out);
     void count_error(int err, const std::string& what);  // classify, count, drop a broken link
     double decode_point(const ModbusPoint& p, std::span<const std::uint16_t> words, Quality& quality) const;
     const ModbusPoint* find(const std::string& channel) const;
@@ -91,8 +104,9 @@ private:
     std::vector<protocol::modbus_blocks::ReadBlock> blocks_;
     const Clock& clock_;
     SampleSink sink_;
-    std::mutex io_lock_;                 // one request at a time on the context
-    modbus_t* ctx_ = nullptr;
+    std::mutex io_lock_;                 // one poll or write at a time on the connection
+    ModbusTcpClient tcp_;                // TCP
+    modbus_t* ctx_ = nullptr;            // RTU (libmodbus)
     Backoff backoff_;
     bool ever_connected_ = false;
     mutable std::mutex status_lock_;
