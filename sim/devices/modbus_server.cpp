@@ -222,8 +222,16 @@ void VirtualModbusServer::serve() {
                 if (got > 0) pending.insert(pending.end(), chunk, chunk + got);
             }
             // Every whole request in what arrived, in order; a malformed one drops the connection
-            // as a device would (libmodbus's receive did the same).
+            // as a device would (libmodbus's receive did the same). Requests that came together
+            // (a client's pipelined poll) are answered in one segment: corked while libmodbus sends
+            // each reply, so the loopback transmits once and the client wakes once.
             std::size_t used = 0;
+            const bool several = keep && [&] {
+                const auto f = mtcp::first_frame(pending.data(), pending.size());
+                return f.state == mtcp::FrameState::complete && pending.size() > f.size;
+            }();
+            const int cork_on = 1, cork_off = 0;
+            if (several) ::setsockopt(c, IPPROTO_TCP, TCP_CORK, &cork_on, sizeof cork_on);
             while (keep) {
                 const auto frame = mtcp::first_frame(pending.data() + used, pending.size() - used);
                 if (frame.state == mtcp::FrameState::need_more) break;
@@ -246,6 +254,7 @@ void VirtualModbusServer::serve() {
                 keep = answer(c, query.data(), static_cast<int>(frame.size));
                 used += frame.size;
             }
+            if (several) ::setsockopt(c, IPPROTO_TCP, TCP_CORK, &cork_off, sizeof cork_off);
             pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(std::min(used, pending.size())));
             if (!keep) {
                 ::close(c);
