@@ -16,6 +16,7 @@
 #include <numeric>
 #include <optional>
 #include <random>
+#include <string>
 
 #include <boost/math/special_functions/beta.hpp>
 #include <vector>
@@ -195,9 +196,14 @@ int main(int argc, char** argv) {
         rc::PowerOptions po;
         po.terms = {"humidity_buoyancy", "diffusion_floor", "mixed_convection", "wall_offset", "air_temp_bias",
                     "textile_resistance", "partial_wettedness:head"};
+        // BENCH_POWER_TERMS=diffusion_floor,humidity_buoyancy: plan and check only these.
+        std::string only;
+        if (const char* e = std::getenv("BENCH_POWER_TERMS")) only = std::string(",") + e + ",";
+        if (!only.empty())
+            std::erase_if(po.terms, [&](const std::string& t) { return only.find("," + t + ",") == std::string::npos; });
         t0 = clock::now();
         const auto plan = rc::detection_limits(*planning, opt, {3}, po);
-        std::printf("power plan (--power, %d campaigns per value tried, 7 candidates, 3 replicates): %.0f s\n", po.campaigns,
+        std::printf("power plan (--power, %d campaigns per value tried, %zu candidates, 3 replicates): %.0f s\n", po.campaigns, po.terms.size(),
                     std::chrono::duration<double>(clock::now() - t0).count());
         for (const auto& d : plan.limits) {
             std::printf("  plan %s: %s", d.label.c_str(), d.value ? std::to_string(*d.value).c_str() : "not reached");
@@ -214,6 +220,7 @@ int main(int argc, char** argv) {
                              Term{"wall_offset", ""}, Term{"air_temp_bias", ""}, Term{"textile_resistance", ""},
                              Term{"partial_wettedness", "head"}}) {
             const std::string label = std::string(t.term) + (*t.region ? std::string(":") + t.region : std::string());
+            if (!only.empty() && only.find("," + label + ",") == std::string::npos) continue;
             const auto it = std::find_if(plan.limits.begin(), plan.limits.end(),
                                          [&](const auto& d) { return d.label == label && d.replicates == 3; });
             if (it == plan.limits.end() || !it->value) {
