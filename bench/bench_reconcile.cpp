@@ -95,6 +95,58 @@ int main(int argc, char** argv) {
     const int coverage_runs = argc > 2 ? std::atoi(argv[2]) : 30;
     const int power_runs = argc > 3 ? std::atoi(argv[3]) : 0;
 
+    // BENCH_DIAG=h0: for the diffusion floor at that h0, the generator's campaigns (seeds 7000..)
+    // beside the planner's draws from the planning campaign (seed 77), each through its own noise
+    // model: the linearised evidence of the term, lambda = d' C^-1 d (d: the term's prediction
+    // minus the baseline's), the projection of the residual on it, and the noise model's parts.
+    if (const char* diag = std::getenv("BENCH_DIAG")) {
+        const double h0 = std::atof(diag);
+        const rc::Options o;
+        const physics::twin::Term term{"diffusion_floor", {{"h0", h0}}, "", {}};
+        const auto planning = campaign_model({"world", {}}, 77, 3, std::nullopt, true);
+        const auto simulator = planning->campaign_simulator(o.instruments, 1.0);
+        const double plan_threshold = rc::reconcile(*planning, o).null_threshold;
+        std::printf("planning campaign's threshold %.2f\n", plan_threshold);
+        auto show = [&](const char* who, int i, const rc::ForwardModel& m) {
+            const auto nm = m.noise_model(o.instruments, o.probe_shared_fraction);
+            const auto base = m.predict({});
+            const auto with = m.predict({term});
+            const auto n = static_cast<Eigen::Index>(base.size());
+            Eigen::VectorXd d(n), r(n);
+            for (Eigen::Index k = 0; k < n; ++k) {
+                d(k) = with[static_cast<std::size_t>(k)] - base[static_cast<std::size_t>(k)];
+                r(k) = m.points()[static_cast<std::size_t>(k)].q_exp - base[static_cast<std::size_t>(k)];
+            }
+            const Eigen::LDLT<Eigen::MatrixXd> c(nm.covariance);
+            const double lambda = d.dot(c.solve(d));
+            const double proj = d.dot(c.solve(r)) / std::sqrt(lambda);
+            const double chi2 = r.dot(c.solve(r));
+            double zsd = 0.0;
+            for (const auto& [z, sd] : nm.zone_sd_w_m2) zsd += sd / static_cast<double>(nm.zone_sd_w_m2.size());
+            std::printf("%s %2d lambda %7.2f proj %6.2f chi2 %7.1f kappa %.4f zone_sd %.3f trace_rand %.1f trace %.1f taus", who, i,
+                        lambda, proj, chi2, nm.relative_sd, zsd, nm.random_covariance.trace(), nm.covariance.trace());
+            for (const auto& [name, sd] : nm.trial_factor_sd) std::printf(" %s=%.3g", name.c_str(), sd);
+            // The whole decision: the family's threshold, the floor's evidence and what was named.
+            rc::Options ro = o;
+            if (std::string(who) == "plan") ro.null_threshold = plan_threshold;
+            const auto r2 = rc::reconcile(m, ro);
+            double e_h0 = -1.0;
+            std::string why;
+            for (const auto& cand : r2.candidates)
+                if (cand.label == "diffusion_floor") e_h0 = cand.evidence, why = cand.reason;
+            std::printf("\n     threshold %.2f family %.2f E_h0 %.2f named %s gof_p %.3g | %s\n", r2.null_threshold,
+                        r2.family_evidence, e_h0, r2.explanation ? r2.explanation->label.c_str() : "-", r2.gof_p_before,
+                        why.c_str());
+        };
+        const int runs = argc > 1 ? std::atoi(argv[1]) : 12;
+        for (int i = 0; i < runs; ++i) {
+            show("gen ", i, *campaign_model({"world", {term}}, 7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true));
+            if (simulator) show("plan", i, *simulator->draw({term}, 3, 1000 + static_cast<std::uint64_t>(i)));
+            std::fflush(stdout);
+        }
+        return 0;
+    }
+
     // 1. Time.
     const auto model = campaign_model({"world", {{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}}}}, 42);
     std::vector<std::size_t> idx(model->points().size());

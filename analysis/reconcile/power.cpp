@@ -85,20 +85,20 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
     rep.replicates.erase(std::unique(rep.replicates.begin(), rep.replicates.end()), rep.replicates.end());
     const std::unique_ptr<NoiseResampler> resampler = model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
     const auto base = model.predict({});
-    std::vector<CandidateTerm> library = ev::single_library(model);
-    if (!po.terms.empty()) {
-        std::vector<CandidateTerm> chosen;
-        for (const auto& name : po.terms) {
-            const auto before = chosen.size();
-            for (const auto& c : library)
-                if (c.label() == name || c.term == name) chosen.push_back(c);
-            if (chosen.size() == before) {
-                std::string known;
-                for (const auto& c : library) known += (known.empty() ? "" : ", ") + c.label();
-                throw std::invalid_argument("no candidate '" + name + "' for this campaign (candidates: " + known + ")");
-            }
+    // Every candidate stays in the family: the claim threshold and the rivals are reconcile's own
+    // whichever candidates are planned (a family of only those planned had a lower threshold, so
+    // `--power-terms` printed limits reconcile would not reach). `planned` picks the limits computed.
+    const std::vector<CandidateTerm> library = ev::single_library(model);
+    std::vector<bool> planned(library.size(), po.terms.empty());
+    for (const auto& name : po.terms) {
+        bool found = false;
+        for (std::size_t k = 0; k < library.size(); ++k)
+            if (library[k].label() == name || library[k].term == name) planned[k] = found = true;
+        if (!found) {
+            std::string known;
+            for (const auto& c : library) known += (known.empty() ? "" : ", ") + c.label();
+            throw std::invalid_argument("no candidate '" + name + "' for this campaign (candidates: " + known + ")");
         }
-        library = std::move(chosen);
     }
     const std::vector<ev::Grid> grids = ev::make_grids(model, library, kGridSteps);
     std::vector<std::size_t> idx(pts.size());
@@ -128,8 +128,10 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
         if (resampler) draw = [&](std::uint64_t seed) { return resampler->draw(seed, n); };
         const double threshold =
             ev::upper_quantile(ev::family_null(s, wg, local, draw, opt.null_simulations, opt.seed).max_evidence, opt.alpha);
+        rep.claim_threshold[n] = threshold;
 
         for (std::size_t k = 0; k < library.size(); ++k) {
+            if (!planned[k]) continue;
             const auto& p = library[k].parameters[0];
             DetectionLimit d;
             d.label = library[k].label();

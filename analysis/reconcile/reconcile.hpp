@@ -155,6 +155,9 @@ struct PowerReport {
     double alpha = 0.01;
     std::vector<int> replicates;
     std::vector<DetectionLimit> limits;
+    // The evidence a claim must exceed at each replicate count: the whole family's (every
+    // candidate and each zone's offset and gain) bootstrap null, as reconcile computes it.
+    std::map<int, double> claim_threshold;
 };
 struct PowerOptions {
     double power = 0.8;

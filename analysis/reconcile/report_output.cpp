@@ -109,6 +109,8 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
 nlohmann::json power_to_json(const PowerReport& plan) {
     nlohmann::json j = {{"alpha", plan.alpha}, {"power", 0.8}, {"campaign_replicates", plan.campaign_replicates},
                         {"replicates", plan.replicates}};
+    j["claim_threshold"] = nlohmann::json::object();
+    for (const auto& [n, t] : plan.claim_threshold) j["claim_threshold"][std::to_string(n)] = t;
     j["limits"] = nlohmann::json::array();
     for (const auto& d : plan.limits)
         j["limits"].push_back({{"term", d.label}, {"parameter", d.parameter}, {"unit", d.unit}, {"null", d.null_value},

@@ -86,6 +86,26 @@ TEST_CASE("planning: a campaign with one replicate per case and no carried scatt
     CHECK_THROWS_AS(rc::detection_limits(*model, opt, {3}, po), std::invalid_argument);
 }
 
+TEST_CASE("planning: a candidate planned alone is judged against the whole family, with reconcile's own claim threshold",
+          "[reconcile][power]") {
+    // `--power-terms` once built the family's null from the planned candidates only: a lower
+    // threshold than reconcile's, so limits reconcile would not reach.
+    const auto model = recorded(14);
+    rc::Options opt;
+    opt.null_simulations = 400;
+    rc::PowerOptions po;
+    po.campaigns = 0;  // the fast model: the threshold is what is compared
+    po.terms = {"wall_offset"};
+    const auto one = rc::detection_limits(*model, opt, {3}, po);
+    po.terms = {};
+    const auto all = rc::detection_limits(*model, opt, {3}, po);
+    REQUIRE(one.claim_threshold.count(3));
+    CHECK(one.claim_threshold.at(3) == all.claim_threshold.at(3));
+    for (const auto& d : one.limits) CHECK(d.label == "wall_offset");
+    CHECK(all.limits.size() > one.limits.size());
+    CHECK(one.claim_threshold.at(3) == Approx(rc::reconcile(*model, opt).null_threshold).epsilon(1e-9));
+}
+
 TEST_CASE("planning: where evidence is beyond the null but no term passes and too many zones stand out, the report says "
           "unexplained, never that the twin agrees", "[reconcile][power]") {
     // Found by the planner: a small humidity buoyancy shows at the isothermal cases' kink as many
