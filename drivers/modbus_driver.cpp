@@ -15,6 +15,13 @@ namespace mb = protocol::modbus_blocks;
 
 namespace {
 
+// A timeout, a broken link or a garbled answer leaves unknown bytes in flight: the connection is
+// dropped and opened again from clean.
+bool link_lost(int err) {
+    return err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EBADF || err == ECONNREFUSED || err == EMBBADDATA ||
+           err == EMBBADEXC || err == EMBBADCRC || err == EIO;
+}
+
 mb::PointRegisters point_registers(const ModbusPoint& p) {
     return {p.unit_id, p.input_register, p.spec.address, mr::register_count(p.spec.type)};
 }
@@ -119,8 +126,7 @@ const ModbusPoint* ModbusDriver::find(const std::string& channel) const {
     return nullptr;
 }
 
-// Caller holds io_lock_. Counts the error by kind; a timeout or broken link leaves unknown
-// bytes in flight, so the connection is dropped and opened again from clean.
+// Caller holds io_lock_. Counts the error by kind, and drops the connection where link_lost says.
 void ModbusDriver::count_error(int err, const std::string& what) {
     {
         std::lock_guard lk(status_lock_);
@@ -135,9 +141,7 @@ void ModbusDriver::count_error(int err, const std::string& what) {
             ++status_.comm_errors;
         }
     }
-    if (err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EBADF || err == ECONNREFUSED || err == EMBBADDATA ||
-        err == EMBBADEXC || err == EMBBADCRC || err == EIO)
-        disconnect();
+    if (link_lost(err)) disconnect();
 }
 
 double ModbusDriver::decode_point(const ModbusPoint& p, std::span<const std::uint16_t> words, Quality& quality) const {
@@ -194,9 +198,7 @@ void ModbusDriver::read_blocks(std::span<const mb::ReadBlock> blocks, std::vecto
                                         : modbus_read_registers(ctx_, b.start, b.count, out[i].words.data());
         if (rc == b.count) continue;
         out[i].err = errno;
-        const int err = errno;
-        if (err == ETIMEDOUT || err == ECONNRESET || err == EPIPE || err == EBADF || err == EMBBADDATA || err == EMBBADCRC ||
-            err == EIO) {
+        if (link_lost(out[i].err)) {
             for (std::size_t k = i + 1; k < blocks.size(); ++k) out[k].err = ENOTCONN;  // count_error drops the link
             return;
         }
