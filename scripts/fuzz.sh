@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Builds the fuzz preset (clang, libFuzzer, ASan + UBSan) and runs every fuzz target for a
-# bounded time from its seed corpus in fuzz/corpus/<target>/.
+# Builds the fuzz targets (the asan preset's clang build: libFuzzer, ASan + UBSan, in build-asan/)
+# and runs every one for a bounded time from its seed corpus in fuzz/corpus/<target>/.
 #   scripts/fuzz.sh [seconds_per_target]      default 30
 # New corpus entries and any crash-* / leak-* / timeout-* reproducer go to a temporary folder,
 # never into the repository; on a finding it is kept and named. Exit status 1 on any finding.
@@ -9,7 +9,9 @@ cd "$(dirname "$0")/.."
 seconds="${1:-30}"
 case "$seconds" in ''|*[!0-9]*) echo "fuzz: seconds_per_target must be a whole number, not '$seconds'" >&2; exit 2 ;; esac
 
-cmake --preset fuzz >/dev/null
+# The fuzz build preset is the asan configuration's `fuzzers` target: after `scripts/setup.sh
+# --tests asan` (which builds them with the tests) this only checks they are current.
+cmake --preset asan >/dev/null
 # Two cores, as scripts/setup.sh builds; MANIKIND_FUZZ_JOBS=1 on a shared machine.
 cmake --build --preset fuzz -j "${MANIKIND_FUZZ_JOBS:-2}"
 
@@ -17,7 +19,7 @@ work="$(mktemp -d "${TMPDIR:-/tmp}/manikind-fuzz.XXXXXX")"
 findings=0
 for corpus in fuzz/corpus/*/; do
   target="$(basename "$corpus")"
-  binary="build-fuzz/bin/$target"
+  binary="build-asan/bin/$target"
   [ -x "$binary" ] || { echo "fuzz: $target: no binary $binary (a corpus without a target?)" >&2; findings=1; continue; }
   mkdir -p "$work/$target/new" "$work/$target/tmp"
   # The first directory receives what the fuzzer finds new; the seeds are only read.

@@ -3,8 +3,8 @@
 #   scripts/setup.sh                  release build in build/: the two programs, manikin and manikind
 #   scripts/setup.sh --tests          the same, plus what the test suite drives (peers, tools), and
 #                                     every target: tests and benchmarks
-#   scripts/setup.sh [--tests] asan   AddressSanitizer + UBSan build in build-asan/
-# (--tests also installs clang for the fuzz preset; scripts/fuzz.sh builds and runs that one.)
+#   scripts/setup.sh [--tests] asan   AddressSanitizer + UBSan build in build-asan/ (clang), the
+#                                     libFuzzer targets in the same build (scripts/fuzz.sh runs them)
 # Safe to run again: it installs nothing that is already there and rebuilds incrementally.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -46,13 +46,18 @@ if [ "$with_tests" = yes ]; then
     python3-matplotlib
     # A real SMTP server to receive the daemon's e-mail (tests/daemon/notify_peers.py).
     python3-aiosmtpd
-    # scripts/fuzz.sh: clang with libFuzzer and the sanitizer runtimes (libclang-rt-14-dev is
-    # only recommended by clang, and recommends are not installed); llvm-symbolizer for traces.
-    clang libclang-rt-14-dev llvm
     # A real PostgreSQL 15 server, started per test by tests/archive/ (initdb, pg_ctl).
     postgresql
     # The load generator of the daemon's soak under load (tests/soak/).
     stress-ng
+  )
+fi
+if [ "$with_tests" = yes ] || [ "$preset" = asan ]; then
+  packages+=(
+    # The asan preset and scripts/fuzz.sh: clang with libFuzzer and the sanitizer runtimes
+    # (libclang-rt-14-dev is only recommended by clang, and recommends are not installed);
+    # llvm-symbolizer for traces.
+    clang libclang-rt-14-dev llvm
   )
 fi
 missing=()
