@@ -95,6 +95,56 @@ int main(int argc, char** argv) {
     const int coverage_runs = argc > 2 ? std::atoi(argv[2]) : 30;
     const int power_runs = argc > 3 ? std::atoi(argv[3]) : 0;
 
+    // BENCH_SIGNAL=term:parameter:value: how much of the twin's predicted effect of a concealed
+    // term reaches the recordings, in the generator's campaigns and in the planner's draws. Each
+    // pair (the same seed with and without the term: common random numbers) isolates the
+    // effect; its size against the twin's prediction d at that campaign's recorded conditions,
+    // in the noise model's metric: beta = delta' C^-1 d / d' C^-1 d (1: all of it).
+    if (const char* sig = std::getenv("BENCH_SIGNAL")) {
+        const std::string spec = sig;
+        const auto c1 = spec.find(':'), c2 = spec.rfind(':');
+        const physics::twin::Term term{spec.substr(0, c1), {{spec.substr(c1 + 1, c2 - c1 - 1), std::atof(spec.c_str() + c2 + 1)}}, "", {}};
+        const rc::Options o;
+        // BENCH_SIGNAL_EXACT=1: every probe and the flux calibration exact, in the planning
+        // campaign and the generator's alike.
+        const bool within_spec = std::getenv("BENCH_SIGNAL_EXACT") == nullptr;
+        const auto planning = campaign_model({"world", {}}, 77, 3, std::nullopt, within_spec);
+        // BENCH_SIGNAL_SHARED=f: the planner's probe errors shared across cases by f (1: one error).
+        const char* shared = std::getenv("BENCH_SIGNAL_SHARED");
+        const auto simulator = planning->campaign_simulator(o.instruments, shared ? std::atof(shared) : 1.0);
+        auto beta = [&](const rc::ForwardModel& m0, const rc::ForwardModel& m1) {
+            const auto nm = m1.noise_model(o.instruments, o.probe_shared_fraction);
+            const auto base = m1.predict({});
+            const auto with = m1.predict({term});
+            const auto n = static_cast<Eigen::Index>(base.size());
+            Eigen::VectorXd d(n), delta(n), r0(n);
+            const auto base0 = m0.predict({});
+            for (Eigen::Index k = 0; k < n; ++k) {
+                const auto i = static_cast<std::size_t>(k);
+                d(k) = with[i] - base[i];
+                delta(k) = m1.points()[i].q_exp - m0.points()[i].q_exp;
+                r0(k) = m0.points()[i].q_exp - base0[i];
+            }
+            const Eigen::LDLT<Eigen::MatrixXd> c(nm.covariance);
+            const Eigen::VectorXd cd = c.solve(d);
+            // The null campaign's residual along d, in standard units: N(0, 1) if the noise
+            // model is right and the baseline has no systematic part along the term.
+            return std::tuple{delta.dot(cd) / d.dot(cd), d.dot(cd), r0.dot(cd) / std::sqrt(d.dot(cd))};
+        };
+        const int runs = argc > 1 ? std::atoi(argv[1]) : 10;
+        for (int i = 0; i < runs; ++i) {
+            const auto seed = 7000 + static_cast<std::uint64_t>(i);
+            const auto [bg, lg, pg] = beta(*campaign_model({"world", {}}, seed, 3, std::nullopt, within_spec),
+                                           *campaign_model({"world", {term}}, seed, 3, std::nullopt, within_spec));
+            const auto [bp, lp, pp] = beta(*simulator->draw({}, 3, 1000 + static_cast<std::uint64_t>(i)),
+                                           *simulator->draw({term}, 3, 1000 + static_cast<std::uint64_t>(i)));
+            std::printf("%2d generator beta %.3f lambda %6.2f null_proj %6.2f | planner beta %.3f lambda %6.2f null_proj %6.2f\n",
+                        i, bg, lg, pg, bp, lp, pp);
+            std::fflush(stdout);
+        }
+        return 0;
+    }
+
     // BENCH_DIAG=h0: for the diffusion floor at that h0, the generator's campaigns (seeds 7000..)
     // beside the planner's draws from the planning campaign (seed 77), each through its own noise
     // model: the linearised evidence of the term, lambda = d' C^-1 d (d: the term's prediction
