@@ -129,6 +129,10 @@ int main(int argc, char** argv) {
             const Eigen::VectorXd cd = c.solve(d);
             // The null campaign's residual along d, in standard units: N(0, 1) if the noise
             // model is right and the baseline has no systematic part along the term.
+            if (std::getenv("BENCH_SIGNAL_PARTS")) {
+                // The share of the model's variance along d that is the random (replicate) part.
+                std::printf("   random share along d %.3f\n", cd.dot(nm.random_covariance * cd) / d.dot(cd));
+            }
             return std::tuple{delta.dot(cd) / d.dot(cd), d.dot(cd), r0.dot(cd) / std::sqrt(d.dot(cd))};
         };
         const int runs = argc > 1 ? std::atoi(argv[1]) : 10;
