@@ -112,6 +112,14 @@ int main(int argc, char** argv) {
         // BENCH_SIGNAL_SHARED=f: the planner's probe errors shared across cases by f (1: one error).
         const char* shared = std::getenv("BENCH_SIGNAL_SHARED");
         const auto simulator = planning->campaign_simulator(o.instruments, shared ? std::atof(shared) : 1.0);
+        {
+            const auto pn = planning->noise_model(o.instruments, o.probe_shared_fraction);
+            double zsd = 0.0;
+            for (const auto& [z, sd] : pn.zone_sd_w_m2) zsd += sd / static_cast<double>(pn.zone_sd_w_m2.size());
+            std::printf("planning campaign: kappa %.4f zone_sd %.3f taus", pn.relative_sd, zsd);
+            for (const auto& [name, sd] : pn.trial_factor_sd) std::printf(" %.3g", sd);
+            std::printf("\n");
+        }
         auto beta = [&](const rc::ForwardModel& m0, const rc::ForwardModel& m1) {
             const auto nm = m1.noise_model(o.instruments, o.probe_shared_fraction);
             const auto base = m1.predict({});
@@ -130,8 +138,14 @@ int main(int argc, char** argv) {
             // The null campaign's residual along d, in standard units: N(0, 1) if the noise
             // model is right and the baseline has no systematic part along the term.
             if (std::getenv("BENCH_SIGNAL_PARTS")) {
-                // The share of the model's variance along d that is the random (replicate) part.
-                std::printf("   random share along d %.3f\n", cd.dot(nm.random_covariance * cd) / d.dot(cd));
+                // The share of the model's variance along d that is the random (replicate) part,
+                // and the scatter fitted to this campaign (to hold against the planning campaign's).
+                double zsd = 0.0;
+                for (const auto& [z, sd] : nm.zone_sd_w_m2) zsd += sd / static_cast<double>(nm.zone_sd_w_m2.size());
+                std::printf("   random share along d %.3f kappa %.4f zone_sd %.3f taus", cd.dot(nm.random_covariance * cd) / d.dot(cd),
+                            nm.relative_sd, zsd);
+                for (const auto& [name, sd] : nm.trial_factor_sd) std::printf(" %.3g", sd);
+                std::printf("\n");
             }
             return std::tuple{delta.dot(cd) / d.dot(cd), d.dot(cd), r0.dot(cd) / std::sqrt(d.dot(cd))};
         };
