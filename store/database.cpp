@@ -564,6 +564,9 @@ void configure_sqlite_once() {
     static std::once_flag once;
     std::call_once(once, [] { sqlite3_config(SQLITE_CONFIG_MEMSTATUS, 0); });
 }
+// Before main, too: a program that touches SQLite directly before its first Database::open (the
+// archive's pull reads a source file raw) would otherwise initialise it with the counters on.
+const bool sqlite_configured_at_start = (configure_sqlite_once(), true);
 }  // namespace
 
 Database Database::open(const std::filesystem::path& path, Durability durability, std::optional<Journal> journal) {

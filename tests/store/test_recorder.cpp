@@ -159,6 +159,24 @@ TEST_CASE("database: a fresh file is at the latest schema, in WAL mode and sound
     CHECK(again.schema_version() == Database::latest_schema_version());
 }
 
+TEST_CASE("database: SQLite keeps no allocation counters (their process-wide lock was 6 % of the demo), set before main",
+          "[recorder]") {
+    // With SQLITE_CONFIG_MEMSTATUS on (SQLite's default) every allocation takes a global mutex to
+    // keep sqlite3_memory_used(); off, that count stays 0 however much is allocated. The store
+    // sets it before main, so no order of tests (or a raw sqlite3_open first) can undo it.
+    TempDir dir("memstatus");
+    auto db = Database::open(dir.path / "trials.db");
+    const auto f = make_fixture(db);
+    std::vector<SampleRow> rows;
+    for (std::int64_t i = 0; i < 2000; ++i) rows.push_back({f.trial, f.channel_a, i, i, static_cast<double>(i), 0});
+    CHECK(db.insert_samples(rows) == 0);
+    sqlite3* raw = nullptr;
+    REQUIRE(sqlite3_open_v2((dir.path / "trials.db").c_str(), &raw, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK);
+    CHECK(sqlite3_exec(raw, "SELECT count(*) FROM samples", nullptr, nullptr, nullptr) == SQLITE_OK);
+    sqlite3_close(raw);
+    CHECK(sqlite3_memory_used() == 0);
+}
+
 TEST_CASE("database: the lab notebook is append-only: notes are stored by time, and the file refuses an edit or a deletion",
           "[recorder][notes]") {
     TempDir dir("notes");
