@@ -82,6 +82,16 @@ std::pair<double, double> ks_uniform(std::vector<double> p) {
     return {d, std::clamp(q, 0.0, 1.0)};
 }
 
+// The fitted scatter of a noise model in one line: kappa, the mean zone sd and the per-trial
+// shared errors (air, RH, wall, gain, offset), to hold one fit against another.
+void print_scatter(const rc::NoiseModel& nm) {
+    double zsd = 0.0;
+    for (const auto& [z, sd] : nm.zone_sd_w_m2) zsd += sd / static_cast<double>(nm.zone_sd_w_m2.size());
+    std::printf("kappa %.4f zone_sd %.3f taus", nm.relative_sd, zsd);
+    for (const auto& [name, sd] : nm.trial_factor_sd) std::printf(" %.3g", sd);
+    std::printf("\n");
+}
+
 double median(std::vector<double> v) {
     std::sort(v.begin(), v.end());
     return v[v.size() / 2];
@@ -112,14 +122,8 @@ int main(int argc, char** argv) {
         // BENCH_SIGNAL_SHARED=f: the planner's probe errors shared across cases by f (1: one error).
         const char* shared = std::getenv("BENCH_SIGNAL_SHARED");
         const auto simulator = planning->campaign_simulator(o.instruments, shared ? std::atof(shared) : 1.0);
-        {
-            const auto pn = planning->noise_model(o.instruments, o.probe_shared_fraction);
-            double zsd = 0.0;
-            for (const auto& [z, sd] : pn.zone_sd_w_m2) zsd += sd / static_cast<double>(pn.zone_sd_w_m2.size());
-            std::printf("planning campaign: kappa %.4f zone_sd %.3f taus", pn.relative_sd, zsd);
-            for (const auto& [name, sd] : pn.trial_factor_sd) std::printf(" %.3g", sd);
-            std::printf("\n");
-        }
+        std::printf("planning campaign: ");
+        print_scatter(planning->noise_model(o.instruments, o.probe_shared_fraction));
         auto beta = [&](const rc::ForwardModel& m0, const rc::ForwardModel& m1) {
             const auto nm = m1.noise_model(o.instruments, o.probe_shared_fraction);
             const auto base = m1.predict({});
@@ -135,18 +139,14 @@ int main(int argc, char** argv) {
             }
             const Eigen::LDLT<Eigen::MatrixXd> c(nm.covariance);
             const Eigen::VectorXd cd = c.solve(d);
-            // The null campaign's residual along d, in standard units: N(0, 1) if the noise
-            // model is right and the baseline has no systematic part along the term.
             if (std::getenv("BENCH_SIGNAL_PARTS")) {
                 // The share of the model's variance along d that is the random (replicate) part,
                 // and the scatter fitted to this campaign (to hold against the planning campaign's).
-                double zsd = 0.0;
-                for (const auto& [z, sd] : nm.zone_sd_w_m2) zsd += sd / static_cast<double>(nm.zone_sd_w_m2.size());
-                std::printf("   random share along d %.3f kappa %.4f zone_sd %.3f taus", cd.dot(nm.random_covariance * cd) / d.dot(cd),
-                            nm.relative_sd, zsd);
-                for (const auto& [name, sd] : nm.trial_factor_sd) std::printf(" %.3g", sd);
-                std::printf("\n");
+                std::printf("   random share along d %.3f ", cd.dot(nm.random_covariance * cd) / d.dot(cd));
+                print_scatter(nm);
             }
+            // Last, the null campaign's residual along d, in standard units: N(0, 1) if the noise
+            // model is right and the baseline has no systematic part along the term.
             return std::tuple{delta.dot(cd) / d.dot(cd), d.dot(cd), r0.dot(cd) / std::sqrt(d.dot(cd))};
         };
         const int runs = argc > 1 ? std::atoi(argv[1]) : 10;

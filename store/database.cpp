@@ -14,7 +14,6 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
-#include <mutex>
 #include <unordered_map>
 #include <unordered_set>
 #include <utility>
@@ -558,15 +557,10 @@ namespace {
 // SQLite counts every allocation for sqlite3_memory_used() under a process-wide mutex unless told
 // not to (SQLITE_CONFIG_MEMSTATUS, on by default). Nothing here reads those counts, and the
 // recorder allocates per statement step: the lock and unlock were 6 % of the demo's CPU (perf).
-// sqlite3_config must come before SQLite initialises, so before the first open; a later call
-// returns SQLITE_MISUSE and changes nothing, which is harmless.
-void configure_sqlite_once() {
-    static std::once_flag once;
-    std::call_once(once, [] { sqlite3_config(SQLITE_CONFIG_MEMSTATUS, 0); });
-}
-// Before main, too: a program that touches SQLite directly before its first Database::open (the
-// archive's pull reads a source file raw) would otherwise initialise it with the counters on.
-const bool sqlite_configured_at_start = (configure_sqlite_once(), true);
+// sqlite3_config must come before SQLite initialises, so it is set before main, in every program
+// that links the store: a program that touches SQLite raw before its first Database::open (the
+// archive's pull reads a source file so) would otherwise initialise it with the counters on.
+const bool sqlite_counters_off = sqlite3_config(SQLITE_CONFIG_MEMSTATUS, 0) == SQLITE_OK;
 }  // namespace
 
 Database Database::open(const std::filesystem::path& path, Durability durability, std::optional<Journal> journal) {
@@ -582,7 +576,6 @@ Database Database::open(const std::filesystem::path& path, Durability durability
         std::error_code ec;
         new_file = std::filesystem::file_size(path, ec) == 0 && !ec;
     }
-    configure_sqlite_once();
     if (sqlite3_open_v2(path.c_str(), &impl->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX,
                         nullptr) != SQLITE_OK)
         impl->fail("cannot open the database");
@@ -637,7 +630,6 @@ Database Database::open(const std::filesystem::path& path, Durability durability
 }
 
 int open_sqlite_read_only(const std::filesystem::path& path, sqlite3** db) {
-    configure_sqlite_once();
     int rc = sqlite3_open_v2(path.c_str(), db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX, nullptr);
     if (rc != SQLITE_OK) return rc;
     // The open is lazy: the first read finds out whether the WAL index can be had.
