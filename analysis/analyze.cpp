@@ -15,8 +15,6 @@ namespace manikind::analysis {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 // Time-mean of the finite samples from index `first` on ("zonal-time average", Text S3).
 // Samples are equally spaced in a recording, so the sample mean is the time mean.
 double window_mean(const std::vector<double>& values, std::size_t first) {

@@ -17,8 +17,6 @@
 namespace manikind::analysis::clothing {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 // One trial of a clothing test, as the steady window left it.
 struct TestTrial {
     std::string ensemble, test, id;

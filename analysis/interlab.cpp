@@ -1,4 +1,5 @@
 #include "analysis/interlab.hpp"
+#include "analysis/recording.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -11,8 +12,6 @@
 namespace manikind::analysis {
 
 namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 void validate(const std::vector<LabCell>& cells) {
     if (cells.size() < 2)

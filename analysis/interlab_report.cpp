@@ -9,8 +9,6 @@
 namespace manikind::analysis {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 double condition_value(const CaseResult& c, const char* channel) {
     for (const auto& cond : c.conditions)
         if (cond.channel == channel) return cond.e.value;
@@ -22,7 +20,7 @@ bool same_setting(const std::optional<double>& a, const std::optional<double>& b
     return std::abs(*a - *b) < 1e-9;
 }
 
-nlohmann::json number_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+nlohmann::json finite_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
 }  // namespace
 
@@ -92,13 +90,13 @@ nlohmann::json interlab_to_json(const InterlabReport& report) {
         for (const auto& l : c.labs)
             jc["labs"].push_back({{"lab", l.lab_id},
                                   {"n", l.n},
-                                  {"q_w_m2", number_or_null(l.q_w_m2)},
-                                  {"expanded_u_w_m2", number_or_null(l.expanded_u_w_m2)},
-                                  {"air_temp_c", number_or_null(l.air_temp_c)},
-                                  {"air_rh_pct", number_or_null(l.air_rh_pct)},
+                                  {"q_w_m2", finite_or_null(l.q_w_m2)},
+                                  {"expanded_u_w_m2", finite_or_null(l.expanded_u_w_m2)},
+                                  {"air_temp_c", finite_or_null(l.air_temp_c)},
+                                  {"air_rh_pct", finite_or_null(l.air_rh_pct)},
                                   {"replicates_w_m2", l.replicates_w_m2},
-                                  {"mandel_h", number_or_null(l.mandel_h)},
-                                  {"mandel_k", number_or_null(l.mandel_k)}});
+                                  {"mandel_h", finite_or_null(l.mandel_h)},
+                                  {"mandel_k", finite_or_null(l.mandel_k)}});
         if (c.precision) {
             const auto& p = *c.precision;
             jc["precision"] = {{"labs", p.labs},
@@ -108,7 +106,7 @@ nlohmann::json interlab_to_json(const InterlabReport& report) {
                                {"reproducibility_sd_w_m2", p.reproducibility_sd},
                                {"repeatability_limit_w_m2", p.repeatability_limit},
                                {"reproducibility_limit_w_m2", p.reproducibility_limit},
-                               {"cochran_c", number_or_null(p.cochran_c)},
+                               {"cochran_c", finite_or_null(p.cochran_c)},
                                {"cochran_outcome", p.cochran_outcome}};
         } else {
             jc["precision"] = nullptr;

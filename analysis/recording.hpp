@@ -7,6 +7,7 @@
 // (steady state, window means) walks one channel over time. Empty CSV cells are NaN.
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
 #include <random>
@@ -20,6 +21,9 @@
 #include "physics/sign_convention.hpp"
 
 namespace manikind::analysis {
+
+// A missing value (no reading, no estimate) in the analysis' tables and reports.
+inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 inline constexpr const char* kRecordingFormat = "manikin-recording/2";
 inline constexpr const char* kRecordingFormatV1 = "manikin-recording/1";

@@ -31,8 +31,6 @@ namespace manikind::analysis {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 struct FileCloser {
     void operator()(std::FILE* f) const { std::fclose(f); }
 };

@@ -73,7 +73,7 @@ std::map<std::string, InstrumentSpec> default_instrument_specs() {
 
 namespace {
 
-struct FileCloser {
+struct WrittenFileCloser {
     void operator()(std::FILE* f) const { std::fclose(f); }
 };
 
@@ -116,7 +116,7 @@ void write_trial_csv(const std::filesystem::path& path, const ZoneMap& map, cons
                                                         channels[k].column(), d.channel_values[k].size(), n));
     }
 
-    std::unique_ptr<std::FILE, FileCloser> f(std::fopen(path.c_str(), "wb"));
+    std::unique_ptr<std::FILE, WrittenFileCloser> f(std::fopen(path.c_str(), "wb"));
     if (!f) throw InputError(path.string(), 0, 0, "", fmt::format("cannot write: {}", std::strerror(errno)));
     std::string out = "t_s";
     if (with_utc) out += ",utc";

@@ -10,8 +10,6 @@ namespace manikind::analysis {
 
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 struct WindowStats {
     std::size_t count = 0;
     double min = std::numeric_limits<double>::infinity();

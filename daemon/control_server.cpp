@@ -49,7 +49,7 @@ namespace manikind {
 namespace asio = boost::asio;
 using stream = asio::generic::stream_protocol;
 using acceptor_t = asio::basic_socket_acceptor<stream>;
-using steady = std::chrono::steady_clock;
+using SteadyClock = std::chrono::steady_clock;
 
 namespace {
 
@@ -115,20 +115,20 @@ static std::string peer_of(stream::socket& socket) {
 struct ControlServer::Impl {
     struct Session : std::enable_shared_from_this<Session> {
         Session(Impl& server, stream::socket s, std::uint64_t session_id)
-            : owner(server), socket(std::move(s)), id(session_id), who(peer_of(socket)), last_activity(steady::now()) {}
+            : owner(server), socket(std::move(s)), id(session_id), who(peer_of(socket)), last_activity(SteadyClock::now()) {}
         Impl& owner;
         stream::socket socket;
         std::uint64_t id;
         std::string who;  // the peer, as an abort records it
         std::array<char, 4096> read_buffer{};
         std::string pending_input;                  // bytes of a request line not yet complete
-        std::optional<steady::time_point> partial_since;
+        std::optional<SteadyClock::time_point> partial_since;
         std::deque<std::string> replies;            // queued, unwritten (front: being written)
         std::size_t reply_bytes = 0;
         bool writing = false, close_after_write = false, closed = false;
-        steady::time_point last_activity;           // last byte in, or last reply fully written
-        steady::time_point write_started;
-        std::optional<steady::time_point> last_request;  // none yet: the first to go when room is needed
+        SteadyClock::time_point last_activity;           // last byte in, or last reply fully written
+        SteadyClock::time_point write_started;
+        std::optional<SteadyClock::time_point> last_request;  // none yet: the first to go when room is needed
 
         void read() {
             socket.async_read_some(asio::buffer(read_buffer), [self = shared_from_this()](const boost::system::error_code& ec,
@@ -140,7 +140,7 @@ struct ControlServer::Impl {
         void on_read(const boost::system::error_code& ec, std::size_t n) {
             if (closed) return;
             if (ec) return owner.close(*this, {});
-            const auto now = steady::now();
+            const auto now = SteadyClock::now();
             last_activity = now;
             pending_input.append(read_buffer.data(), n);
             if (!partial_since) partial_since = now;
@@ -180,14 +180,14 @@ struct ControlServer::Impl {
                 return;
             }
             writing = true;
-            write_started = steady::now();
+            write_started = SteadyClock::now();
             asio::async_write(socket, asio::buffer(replies.front()),
                               [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
                                   if (self->closed) return;
                                   if (ec) return self->owner.close(*self, {});
                                   self->reply_bytes -= self->replies.front().size();
                                   self->replies.pop_front();
-                                  self->last_activity = steady::now();
+                                  self->last_activity = SteadyClock::now();
                                   self->write_front();
                               });
         }
@@ -213,7 +213,7 @@ struct ControlServer::Impl {
     int bound_tcp_port = 0;
     mutable std::mutex counters_lock;  // counters are written on the server thread, read by status
     ControlServerCounters counters;
-    steady::time_point last_accept_error_log{};
+    SteadyClock::time_point last_accept_error_log{};
 
     std::string answer(const std::string& line, const std::string& who = "a control-socket client") {
         bool shutdown_now = false;
@@ -302,7 +302,7 @@ struct ControlServer::Impl {
                 std::lock_guard lk(counters_lock);
                 ++counters.accept_errors;
             }
-            const auto now = steady::now();
+            const auto now = SteadyClock::now();
             if (now - last_accept_error_log > std::chrono::seconds(10)) {
                 spdlog::warn("control API: accept failed ({}); {} clients connected; retrying", ec.message(), sessions.size());
                 last_accept_error_log = now;
@@ -321,7 +321,7 @@ struct ControlServer::Impl {
     }
 
     void sweep() {
-        const auto now = steady::now();
+        const auto now = SteadyClock::now();
         heartbeat_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()).count();
         std::vector<std::pair<Session*, std::string>> expired;
         for (auto& [id, s] : sessions) {
@@ -356,7 +356,7 @@ bool ControlServer::shutdown_requested() const { return impl_->shutdown.load(); 
 int ControlServer::tcp_port() const { return impl_->bound_tcp_port; }
 
 double ControlServer::seconds_since_heartbeat() const {
-    const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(steady::now().time_since_epoch()).count();
+    const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(SteadyClock::now().time_since_epoch()).count();
     return static_cast<double>(now - impl_->heartbeat_ns.load()) * 1e-9;
 }
 

@@ -17,7 +17,7 @@ namespace manikind {
 
 namespace {
 
-using steady = std::chrono::steady_clock;
+using SteadyClock = std::chrono::steady_clock;
 
 // libcurl, loaded when notifications are configured, not at every program's start
 // (base/lazy_library.hpp). Each member is the curl_ function of the same name without "curl_".
@@ -181,12 +181,12 @@ nlohmann::json Notifier::status_json() const {
 }
 
 bool Notifier::drain(std::chrono::milliseconds within) {
-    const auto until = steady::now() + within;
+    const auto until = SteadyClock::now() + within;
     std::unique_lock lk(lock_);
     for (;;) {
         const bool empty = std::all_of(dest_.begin(), dest_.end(), [](const Destination& d) { return d.waiting.empty(); });
         if (empty && !busy_) return true;
-        if (steady::now() >= until) return false;
+        if (SteadyClock::now() >= until) return false;
         lk.unlock();
         wake_.notify_all();
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -198,7 +198,7 @@ void Notifier::run() {
     std::unique_lock lk(lock_);
     for (;;) {
         // The next destination with something to send whose interval has passed.
-        const auto now = steady::now();
+        const auto now = SteadyClock::now();
         Destination* ready = nullptr;
         auto next_wake = now + std::chrono::hours(1);
         for (auto& d : dest_) {
@@ -238,7 +238,7 @@ void Notifier::run() {
             ready->failed += batch.size();
             ready->last_error = error;
         }
-        ready->next_allowed = steady::now() + std::chrono::milliseconds(static_cast<long long>(o_.min_interval_s * 1000));
+        ready->next_allowed = SteadyClock::now() + std::chrono::milliseconds(static_cast<long long>(o_.min_interval_s * 1000));
     }
 }
 

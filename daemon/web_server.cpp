@@ -37,7 +37,7 @@ namespace beast = boost::beast;
 namespace http = beast::http;
 namespace websocket = beast::websocket;
 using tcp = asio::ip::tcp;
-using steady = std::chrono::steady_clock;
+using SteadyClock = std::chrono::steady_clock;
 
 namespace {
 
@@ -172,7 +172,7 @@ struct WebServer::Impl {
     std::atomic<double> pending_since_utc_ms{0};  // wall time the oldest unsent sample reached the daemon
     std::size_t clients = 0;  // HTTP and WebSocket sessions (server thread only)
     std::list<std::weak_ptr<WsSession>> sockets;
-    steady::time_point last_push{};
+    SteadyClock::time_point last_push{};
     bool push_scheduled = false;
     console::DeviceSeverity severity;
     console::ChamberHistory history;
@@ -193,7 +193,7 @@ struct WebServer::Impl {
     // --- what the page reads ------------------------------------------------------------
     nlohmann::json status() {
         auto s = daemon.status_json();
-        if (s.contains("devices")) severity.annotate(s["devices"], std::chrono::duration<double>(steady::now().time_since_epoch()).count());
+        if (s.contains("devices")) severity.annotate(s["devices"], std::chrono::duration<double>(SteadyClock::now().time_since_epoch()).count());
         return s;
     }
 
@@ -355,7 +355,7 @@ struct WebServer::Impl {
     // that has gone longest without progress (a slow header writer, an idle keep-alive, a
     // WebSocket that never reads) makes room for the newcomer, as on the control socket.
     struct Client {
-        steady::time_point last_progress = steady::now();
+        SteadyClock::time_point last_progress = SteadyClock::now();
         virtual ~Client() = default;
         virtual void drop() = 0;
     };
@@ -404,7 +404,7 @@ struct WebServer::Impl {
             ws.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
                 if (ec) return;
                 self->open = true;
-                self->last_progress = steady::now();
+                self->last_progress = SteadyClock::now();
                 self->owner.admit(self);
                 self->owner.sockets.push_back(self);
                 self->send(std::make_shared<const std::string>(dump_json(self->owner.update_message())));
@@ -442,7 +442,7 @@ struct WebServer::Impl {
                 }
                 self->outgoing_bytes -= self->outgoing.front()->size();
                 self->outgoing.pop_front();
-                self->last_progress = steady::now();
+                self->last_progress = SteadyClock::now();
                 if (!self->outgoing.empty()) self->write();
             });
         }
@@ -506,7 +506,7 @@ struct WebServer::Impl {
                     self->stream.socket().shutdown(tcp::socket::shutdown_send, ignored);
                     return;
                 }
-                self->last_progress = steady::now();
+                self->last_progress = SteadyClock::now();
                 self->read();
             });
         }
@@ -542,7 +542,7 @@ struct WebServer::Impl {
 
     // Updates go out when a sample arrives (a burst coalesced over 20 ms: the issue asks under 50 ms from sample to screen) and at least once a second.
     void broadcast() {
-        last_push = steady::now();
+        last_push = SteadyClock::now();
         // The oldest sample in this update reached the daemon then: the page (and bench_console)
         // measures sample-to-screen latency from it.
         const double oldest_sample_utc_ms = sample_pending.exchange(false) ? pending_since_utc_ms.load() : 0.0;
@@ -560,7 +560,7 @@ struct WebServer::Impl {
     void on_sample_posted() {
         if (push_scheduled) return;
         const auto due = last_push + std::chrono::milliseconds(20);
-        if (steady::now() >= due) return broadcast();
+        if (SteadyClock::now() >= due) return broadcast();
         push_scheduled = true;
         push_timer->expires_at(due);
         push_timer->async_wait([this](beast::error_code ec) {
@@ -569,7 +569,7 @@ struct WebServer::Impl {
         });
     }
     void tick() {
-        if (steady::now() - last_push >= std::chrono::milliseconds(900)) broadcast();
+        if (SteadyClock::now() - last_push >= std::chrono::milliseconds(900)) broadcast();
         else record_history(daemon.live_json(), daemon.status_json());
         tick_timer->expires_after(std::chrono::seconds(1));
         tick_timer->async_wait([this](beast::error_code ec) {

@@ -29,7 +29,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-fs::path fresh_dir(const std::string& name) {
+fs::path contract_dir(const std::string& name) {
     const auto dir = fs::temp_directory_path() / ("manikind-contract-" + name + "-" + std::to_string(::getpid()));
     fs::remove_all(dir);
     fs::create_directories(dir);
@@ -110,7 +110,7 @@ TEST_CASE("cli contract: each command group adds exactly the commands its table 
 }
 
 TEST_CASE("cli contract: input and usage errors under --json are one error object, exit 2", "[cli][contract]") {
-    const auto dir = fresh_dir("input");
+    const auto dir = contract_dir("input");
     SECTION("a campaign folder that does not exist") {
         const auto r = run_manikin("analyze " + (dir / "none").string() + " --json");
         CHECK(r.exit_code == 2);
@@ -153,7 +153,7 @@ TEST_CASE("cli contract: input and usage errors under --json are one error objec
 }
 
 TEST_CASE("cli contract: a daemon socket that does not exist is exit 3", "[cli][contract]") {
-    const auto dir = fresh_dir("nodaemon");
+    const auto dir = contract_dir("nodaemon");
     for (const std::string cmd : {"status", "live", "results", "trial watch", "setpoint --chamber-temp 30 --chamber-rh 40"}) {
         INFO(cmd);
         const auto r = run_manikin(cmd + " --json --socket " + (dir / "none.sock").string());
@@ -164,7 +164,7 @@ TEST_CASE("cli contract: a daemon socket that does not exist is exit 3", "[cli][
 }
 
 TEST_CASE("cli contract: checks with a negative verdict exit 5", "[cli][contract]") {
-    const auto dir = fresh_dir("verdict");
+    const auto dir = contract_dir("verdict");
     const auto config = (dir / "lab.toml").string();
     std::ofstream(config) << "[lab]\nname = \"x\"\n[devices.chamber]\nregister_map = \"/dev/zero\"\n";
     auto r = run_manikin("config check " + config + " --json");
@@ -188,7 +188,7 @@ TEST_CASE("cli contract: checks with a negative verdict exit 5", "[cli][contract
 }
 
 TEST_CASE("cli contract: the daemon's refusals exit 4, no results yet is an answer", "[cli][contract]") {
-    const auto dir = fresh_dir("refused");
+    const auto dir = contract_dir("refused");
     const std::string socket = (dir / "d.sock").string();
     auto d = DaemonProcess::spawn({std::string(MANIKIND_BIN_DIR) + "/manikind", "--virtual", "--socket", socket, "--database",
                                    (dir / "d.db").string(), "--campaign", std::string(MANIKIND_CONFIG_DIR) + "/campaign-example.toml"});
@@ -226,7 +226,7 @@ TEST_CASE("cli contract: the daemon's refusals exit 4, no results yet is an answ
 
 TEST_CASE("cli contract: probe --write beyond the register map's limits is refused, exit 4, with the readings",
           "[cli][contract]") {
-    const auto dir = fresh_dir("probe");
+    const auto dir = contract_dir("probe");
     auto lab = DaemonProcess::spawn({std::string(MANIKIND_BIN_DIR) + "/manikin", "sim", "serve", "--json", "--speed", "10",
                                      "--runtime-dir", (dir / "rt").string()});
     REQUIRE(lab.read_until("\"chamber\""));
@@ -256,7 +256,7 @@ TEST_CASE("cli contract: probe --write beyond the register map's limits is refus
 }
 
 TEST_CASE("cli contract: reconcile reads a campaign from the daemon's database as analyze does", "[cli][contract][reconcile]") {
-    const auto dir = fresh_dir("db");
+    const auto dir = contract_dir("db");
     REQUIRE(run_manikin("demo --cases 2 --replicates 2 --json --out " + dir.string() + " 2>/dev/null").exit_code == 0);
     const std::string db = (dir / "manikind.db").string();
     const auto campaigns = nlohmann::json::parse(run_manikin("campaigns --json --db " + db).out);

@@ -19,7 +19,7 @@ using manikind::test::run_manikin;
 namespace fs = std::filesystem;
 
 namespace {
-fs::path fresh_dir(const std::string& name) {
+fs::path operator_dir(const std::string& name) {
     const auto dir = fs::temp_directory_path() / ("manikind-cli-" + name + "-" + std::to_string(::getpid()));
     fs::remove_all(dir);
     fs::create_directories(dir);
@@ -32,7 +32,7 @@ TEST_CASE("manikin campaign check: the example passes, a misspelt key fails with
     const auto ok = run_manikin(std::string("campaign check ") + MANIKIND_CONFIG_DIR "/campaign-example.toml");
     CHECK(ok.exit_code == 0);
     CHECK(ok.out.find("ok: campaign 'humid-series-2026-11', 2 case(s) x 3 replicate(s)") != std::string::npos);
-    const auto dir = fresh_dir("check");
+    const auto dir = operator_dir("check");
     {
         std::ofstream bad(dir / "typo.toml");
         bad << "name = \"typo\"\nreplicate = 1\nbuiltin_cases = \"table-s3\"\n";
@@ -46,7 +46,7 @@ TEST_CASE("manikin campaign check: the example passes, a misspelt key fails with
 
 TEST_CASE("manikin campaigns lists a database's campaigns, status, trial watch and live talk to a running daemon",
           "[cli][campaign]") {
-    const auto dir = fresh_dir("console");
+    const auto dir = operator_dir("console");
     const std::string socket = (dir / "d.sock").string(), db = (dir / "d.db").string();
     {
         auto d = DaemonProcess::spawn({std::string(MANIKIND_BIN_DIR) + "/manikind", "--virtual", "--socket", socket, "--database",

@@ -13,7 +13,7 @@ using manikind::test::run_manikin;
 
 namespace {
 
-std::filesystem::path fresh_dir(const std::string& name) {
+std::filesystem::path scatter_dir(const std::string& name) {
     const auto dir = std::filesystem::temp_directory_path() / ("manikind-test-" + name);
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
@@ -61,7 +61,7 @@ TEST_CASE("cli: simulate-campaign --help names every scatter option with its def
 }
 
 TEST_CASE("cli: --no-scatter writes replicates identical up to sensor noise, the default scatters them", "[cli][scatter]") {
-    const auto dir = fresh_dir("scatter");
+    const auto dir = scatter_dir("scatter");
     {
         std::ofstream cases(dir / "cases.csv");
         cases << "case,t_chamber_set_c,rh_chamber_set_pct,t_air_c,rh_air_pct,t_skin_c,skin_wettedness\n"

@@ -24,10 +24,10 @@ namespace an = manikind::analysis;
 
 namespace {
 
-struct TempDir {
+struct BinsDir {
     fs::path path = fs::temp_directory_path() / ("manikind-trial-bins-" + std::to_string(::getpid()));
-    TempDir() { fs::remove_all(path); fs::create_directories(path); }
-    ~TempDir() { fs::remove_all(path); }
+    BinsDir() { fs::remove_all(path); fs::create_directories(path); }
+    ~BinsDir() { fs::remove_all(path); }
 };
 
 constexpr std::int64_t kSecond = 1'000'000'000LL;
@@ -42,7 +42,7 @@ struct Built {
 // ~1.3 s, the air probe at ~2.1 s with runs of flagged and of lost (NaN) readings, a channel recorded
 // only while settling (it gets a column, all empty), readings in the last period before the start
 // (they fall in row 0) and older ones (they do not), and readings after the stop (beyond the grid).
-Built build(const fs::path& path) {
+Built build_trial(const fs::path& path) {
     auto db = rec::Database::open(path);
     const auto campaign = db.create_campaign("bins", "{}");
     const auto manikin = db.device_id("manikin", "can", "vcan0");
@@ -156,8 +156,8 @@ void require_same(const an::Campaign& x, const an::Campaign& y) {
 }  // namespace
 
 TEST_CASE("trial bins: binned while recording reads bit for bit as the trial read back from the database", "[store][export]") {
-    TempDir dir;
-    const auto b = build(dir.path / "m.db");
+    BinsDir dir;
+    const auto b = build_trial(dir.path / "m.db");
     auto db = rec::Database::open(dir.path / "m.db");
     const auto from_db = read(db, b, nullptr);
     REQUIRE(from_db.from_recording == 0);
@@ -181,8 +181,8 @@ TEST_CASE("trial bins: binned while recording reads bit for bit as the trial rea
 }
 
 TEST_CASE("trial bins: refused wherever they could differ from the database, which is then read", "[store][export]") {
-    TempDir dir;
-    const auto b = build(dir.path / "m.db");
+    BinsDir dir;
+    const auto b = build_trial(dir.path / "m.db");
     auto db = rec::Database::open(dir.path / "m.db");
     const auto from_db = read(db, b, nullptr);
 
