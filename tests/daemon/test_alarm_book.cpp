@@ -94,7 +94,7 @@ TEST_CASE("alarm book: a shelf is bounded, hides the alarm, and ends by itself",
     b.clear("gap", "csat3b", "csat3b back", 100 * kSecondNs);
     CHECK(b.acknowledge(id, "ana", 101 * kSecondNs).empty());
     CHECK(state_of(b, id) == "SHELVED");
-    CHECK(b.expire_shelves(600 * kSecondNs).empty());           // not yet: shelved at 1 kSecondNs for 600 kSecondNs
+    CHECK(b.expire_shelves(600 * kSecondNs).empty());           // not yet: shelved at 1 s for 600 s
     CHECK(b.expire_shelves(601 * kSecondNs) == std::vector<std::int64_t>{id});
     CHECK(state_of(b, id) == "NORMAL");                  // returned and acknowledged: closed
     const auto other = b.raise("warn", "gap", "chamber", "chamber lost", 700 * kSecondNs);
