@@ -19,6 +19,7 @@
 #include <string>
 
 #include <boost/math/special_functions/beta.hpp>
+#include <fmt/format.h>
 #include <vector>
 
 #include "analysis/analyze.hpp"
@@ -314,6 +315,8 @@ int main(int argc, char** argv) {
         // as a real lab's are (the generator's default probes are exact).
         const auto planning = campaign_model({"world", {}}, 77, 3, std::nullopt, true);
         rc::PowerOptions po;
+        // BENCH_POWER_CAMPAIGNS=n: the planner's campaigns per value tried (--power-campaigns).
+        if (const char* e = std::getenv("BENCH_POWER_CAMPAIGNS")) po.campaigns = std::max(1, std::atoi(e));
         po.terms = {"humidity_buoyancy", "diffusion_floor", "mixed_convection", "wall_offset", "air_temp_bias",
                     "textile_resistance", "partial_wettedness:head"};
         // BENCH_POWER_TERMS=diffusion_floor,humidity_buoyancy: plan and check only these.
@@ -352,7 +355,16 @@ int main(int argc, char** argv) {
                 const auto m = campaign_model({"world", {{t.term, {{it->parameter, *it->value}}, t.region, {}}}},
                                               7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true);
                 const auto r = rc::reconcile(*m);
-                named += r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label ? 1 : 0;
+                const bool hit = r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label;
+                named += hit ? 1 : 0;
+                // BENCH_VERBOSE=1: what each miss said instead (the whole decision, not only the null).
+                if (!hit && std::getenv("BENCH_VERBOSE")) {
+                    std::string said = r.explanation ? r.explanation->label : "nothing";
+                    for (const auto& c : r.candidates)
+                        if (c.label == label) said += fmt::format("; {}: evidence {:.1f}, {}", label, c.evidence, c.reason);
+                    std::printf("    seed %d: %s (family evidence %.1f, threshold %.1f, %zu anomalies)\n", 7000 + i, said.c_str(),
+                                r.family_evidence, r.null_threshold, r.anomalies.size());
+                }
             }
             const auto [lo, hi] = binomial_interval(named, power_runs);
             std::printf("power check %s %s = %.4g (printed 80 %% limit, 3 replicates): named in %d of %d campaigns "

@@ -82,6 +82,94 @@ double best_sigma0_sq(const ZoneData& d, double kappa, double scale, double prio
     return std::exp(t);
 }
 
+// The shared factors' variances T = diag(t) given the zones' variances D. Per case, with
+// A = D^-1/2 J, M = A'A, b = A' D^-1/2 h per contrast h, S = sum_h b b' and n contrasts, the part
+// of -2 ln L that depends on T is (Woodbury, the determinant lemma)
+//   f(T) = sum_c n_c ln det(I + T^1/2 M_c T^1/2) - tr(W_c S_c),   W_c = (T^-1 + M_c)^-1,
+// written with T^1/2 so that a variance of exactly zero is an ordinary point. Its derivatives,
+// with G_c = (M_c^-1 + T)^-1 = M_c - M_c W_c M_c (Sigma^-1 seen through J: J' Sigma^-1 J):
+//   df/dt_k = sum_c n_c G_kk - [(I - G T) S (I - G T)']_kk,   E[d²f/dt_k dt_l] = sum_c n_c G_kl²
+// (the expected information of a variance component, Searle, Casella & McCulloch 6.3).
+struct FactorStats {
+    Eigen::MatrixXd m, s;
+    double n = 0.0;
+};
+
+struct FactorTerms {
+    double value = 0.0;
+    Eigen::VectorXd grad;
+    Eigen::MatrixXd fisher;
+};
+
+FactorTerms factor_terms(const std::vector<FactorStats>& cases, const Eigen::VectorXd& t, bool derivatives) {
+    const Eigen::Index k = t.size();
+    FactorTerms out;
+    out.grad = Eigen::VectorXd::Zero(k);
+    out.fisher = Eigen::MatrixXd::Zero(k, k);
+    const Eigen::VectorXd root = t.cwiseMax(0.0).cwiseSqrt();
+    const Eigen::MatrixXd identity = Eigen::MatrixXd::Identity(k, k);
+    for (const auto& c : cases) {
+        const Eigen::MatrixXd b = identity + root.asDiagonal() * c.m * root.asDiagonal();
+        const Eigen::LLT<Eigen::MatrixXd> llt(b);
+        double logdet = 0.0;
+        for (Eigen::Index i = 0; i < k; ++i) logdet += 2.0 * std::log(llt.matrixL()(i, i));
+        const Eigen::MatrixXd w = root.asDiagonal() * llt.solve(Eigen::MatrixXd(root.asDiagonal()));
+        out.value += c.n * logdet - w.cwiseProduct(c.s).sum();
+        if (!derivatives) continue;
+        const Eigen::MatrixXd g = c.m - c.m * w * c.m;
+        const Eigen::MatrixXd u = identity - g * t.asDiagonal();
+        out.grad += c.n * g.diagonal() - (u * c.s * u.transpose()).diagonal();
+        out.fisher += c.n * g.cwiseAbs2();
+    }
+    return out;
+}
+
+// Minimises f over t >= 0 by Fisher scoring projected on the bound (Bertsekas' projected Newton:
+// a variance at zero whose gradient pushes outward stays there, the others take the Newton step,
+// halved until f decreases). Where the likelihood's maximum is at zero this reaches it exactly;
+// EM only creeps toward it (docs/reconcile.md, "Noise model").
+void maximise_factors(const std::vector<FactorStats>& cases, Eigen::VectorXd& t) {
+    const Eigen::Index k = t.size();
+    if (k == 0 || cases.empty()) return;
+    FactorTerms cur = factor_terms(cases, t, true);
+    for (int step = 0; step < 100; ++step) {
+        std::vector<Eigen::Index> free;
+        for (Eigen::Index i = 0; i < k; ++i)
+            if (cur.fisher(i, i) > 0.0 && (t(i) > 0.0 || cur.grad(i) < 0.0)) free.push_back(i);
+        if (free.empty()) return;
+        const auto nf = static_cast<Eigen::Index>(free.size());
+        Eigen::MatrixXd h(nf, nf);
+        Eigen::VectorXd g(nf);
+        for (Eigen::Index a = 0; a < nf; ++a) {
+            g(a) = cur.grad(free[static_cast<std::size_t>(a)]);
+            for (Eigen::Index b = 0; b < nf; ++b) h(a, b) = cur.fisher(free[static_cast<std::size_t>(a)], free[static_cast<std::size_t>(b)]);
+        }
+        // A ridge of 1e-10 of the largest curvature keeps a near-singular direction (two collinear
+        // factors) from a step to infinity; the line search does the rest.
+        h.diagonal().array() += 1e-10 * h.diagonal().maxCoeff();
+        Eigen::VectorXd d = -h.ldlt().solve(g);
+        if (!d.allFinite()) d = -g.cwiseQuotient(h.diagonal());
+        bool moved = false;
+        for (int half = 0; half < 40 && !moved; ++half) {
+            const double alpha = std::ldexp(1.0, -half);
+            Eigen::VectorXd trial = t;
+            for (Eigen::Index a = 0; a < nf; ++a) {
+                const Eigen::Index i = free[static_cast<std::size_t>(a)];
+                trial(i) = std::max(0.0, t(i) + alpha * d(a));
+            }
+            const double value = factor_terms(cases, trial, false).value;
+            if (value < cur.value) {
+                const double gain = cur.value - value;
+                t = trial;
+                cur = factor_terms(cases, t, true);
+                moved = true;
+                if (gain <= 1e-12 * (1.0 + std::abs(value))) return;
+            }
+        }
+        if (!moved) return;  // no decrease along the step: stationary to rounding
+    }
+}
+
 }  // namespace
 
 Eigen::MatrixXd ScatterModel::trial_covariance(const std::vector<double>& abs_flux, const Eigen::MatrixXd& j) const {
@@ -96,7 +184,7 @@ Eigen::MatrixXd ScatterModel::trial_covariance(const std::vector<double>& abs_fl
     return v;
 }
 
-ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations) {
+ScatterModel estimate_scatter(const ReplicateResiduals& data, int max_iterations) {
     ScatterModel out;
     const std::size_t n_cases = data.residual_w_m2.size();
     if (data.abs_flux_w_m2.size() != n_cases || data.loadings.size() != n_cases)
@@ -142,40 +230,69 @@ ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations) {
     const double scale = std::max(pooled_ss / pooled_dof, 1e-12);
     std::vector<double> sigma_sq(n_zones, 0.5 * scale);
     double kappa = 0.0;
+    Eigen::VectorXd tau_sq(k_count);
+    for (Eigen::Index k = 0; k < k_count; ++k) tau_sq(k) = out.factor_sd[static_cast<std::size_t>(k)] * out.factor_sd[static_cast<std::size_t>(k)];
 
-    for (int it = 0; it < iterations; ++it) {
+    // The zones' variances v_cz = sigma0_z² + (kappa q_cz)² of each case, floored.
+    auto zone_inverse = [&](std::size_t c) {
+        Eigen::VectorXd d_inv(z_count);
+        for (Eigen::Index z = 0; z < z_count; ++z) {
+            const double q = data.abs_flux_w_m2[c][static_cast<std::size_t>(z)];
+            d_inv(z) = 1.0 / std::max(sigma_sq[static_cast<std::size_t>(z)] + kappa * kappa * q * q, 1e-9 * scale);
+        }
+        return d_inv;
+    };
+    // -2 ln L of the contrasts (plus the zones' prior), the quantity every step lowers; and the
+    // shared factors' statistics under the current zone variances.
+    std::vector<FactorStats> factor_cases;
+    auto refresh_factor_stats = [&]() {
+        factor_cases.clear();
+        double zone_part = 0.0;
+        for (std::size_t c = 0; c < n_cases; ++c) {
+            if (contrasts[c].empty()) continue;
+            const Eigen::VectorXd d_inv = zone_inverse(c);
+            const Eigen::MatrixXd& j = data.loadings[c];
+            FactorStats f;
+            f.n = static_cast<double>(contrasts[c].size());
+            f.m = j.transpose() * d_inv.asDiagonal() * j;
+            f.s = Eigen::MatrixXd::Zero(k_count, k_count);
+            zone_part -= f.n * d_inv.array().log().sum();
+            for (const auto& h : contrasts[c]) {
+                const Eigen::VectorXd bv = j.transpose() * d_inv.cwiseProduct(h);
+                f.s += bv * bv.transpose();
+                zone_part += h.cwiseAbs2().dot(d_inv);
+            }
+            factor_cases.push_back(std::move(f));
+        }
+        return zone_part;
+    };
+
+    // Expectation-conditional maximisation (ECME, Liu & Rubin 1994): an EM step for the zones'
+    // sigma0 and kappa with the factors latent, then the factors' variances maximised on the
+    // likelihood itself given those, until nothing moves. Every step lowers -2 ln L.
+    double last_objective = std::numeric_limits<double>::infinity();
+    for (int it = 0; it < max_iterations; ++it) {
         // E-step: the shared factors of each contrast given the current variances.
         std::vector<ZoneData> zones(n_zones);
-        Eigen::VectorXd tau_sum = Eigen::VectorXd::Zero(k_count);
-        double count = 0.0;
         for (std::size_t c = 0; c < n_cases; ++c) {
             if (contrasts[c].empty()) continue;
             const Eigen::MatrixXd& j = data.loadings[c];
-            Eigen::VectorXd d_inv(z_count);
-            for (Eigen::Index z = 0; z < z_count; ++z) {
-                const double q = data.abs_flux_w_m2[c][static_cast<std::size_t>(z)];
-                d_inv(z) = 1.0 / std::max(sigma_sq[static_cast<std::size_t>(z)] + kappa * kappa * q * q, 1e-9 * scale);
-            }
+            const Eigen::VectorXd d_inv = zone_inverse(c);
             Eigen::MatrixXd post_cov = Eigen::MatrixXd::Zero(k_count, k_count);
             Eigen::VectorXd explained_var = Eigen::VectorXd::Zero(z_count);
             if (k_count > 0) {
-                Eigen::MatrixXd m = j.transpose() * d_inv.asDiagonal() * j;
-                for (Eigen::Index k = 0; k < k_count; ++k) {
-                    const double tau = out.factor_sd[static_cast<std::size_t>(k)];
-                    m(k, k) += 1.0 / std::max(tau * tau, 1e-12);
-                }
-                post_cov = m.inverse();
+                // Posterior covariance of eta, T - T J'(D + J T J')^-1 J T, in the form that
+                // holds at a variance of zero: T^1/2 (I + T^1/2 M T^1/2)^-1 T^1/2.
+                const Eigen::VectorXd root = tau_sq.cwiseSqrt();
+                Eigen::MatrixXd b = root.asDiagonal() * (j.transpose() * d_inv.asDiagonal() * j) * root.asDiagonal();
+                b.diagonal().array() += 1.0;
+                post_cov = root.asDiagonal() * b.llt().solve(Eigen::MatrixXd(root.asDiagonal()));
                 explained_var = (j * post_cov * j.transpose()).diagonal();
             }
             std::vector<double> ss(n_zones, 0.0);
             for (const auto& h : contrasts[c]) {
                 Eigen::VectorXd resid = h;
-                if (k_count > 0) {
-                    const Eigen::VectorXd mean = post_cov * (j.transpose() * d_inv.cwiseProduct(h));
-                    tau_sum += mean.cwiseAbs2() + post_cov.diagonal();
-                    resid -= j * mean;
-                }
-                count += 1.0;
+                if (k_count > 0) resid -= j * (post_cov * (j.transpose() * d_inv.cwiseProduct(h)));
                 for (Eigen::Index z = 0; z < z_count; ++z)
                     ss[static_cast<std::size_t>(z)] += resid(z) * resid(z) + explained_var(z);
             }
@@ -185,8 +302,7 @@ ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations) {
                 zones[z].abs_flux.push_back(data.abs_flux_w_m2[c][z]);
             }
         }
-        // M-step: factor variances, then sigma0 per zone and the shared kappa.
-        for (Eigen::Index k = 0; k < k_count; ++k) out.factor_sd[static_cast<std::size_t>(k)] = std::sqrt(tau_sum(k) / count);
+        // M-step for the zones: sigma0 per zone and the shared kappa.
         double prior_sq = 0.0;
         for (double v : sigma_sq) prior_sq += v / static_cast<double>(n_zones);
         auto total = [&](double kap, std::vector<double>* s2) {
@@ -209,9 +325,23 @@ ScatterModel estimate_scatter(const ReplicateResiduals& data, int iterations) {
                     }
                 }
         total(kappa, &sigma_sq);
+        // The factors' variances, maximised given the zones (not an EM step: see maximise_factors).
+        const double zone_part = refresh_factor_stats();
+        maximise_factors(factor_cases, tau_sq);
+        double objective_now = zone_part + factor_terms(factor_cases, tau_sq, false).value;
+        for (double v : sigma_sq) objective_now += kPriorDof * (std::log(v) + prior_sq / v);
+        out.iterations = it + 1;
+        // Converged when a step changes -2 ln L by less than 1e-7 (a likelihood ratio of 1 to
+        // 1e-7: no estimate downstream can tell the difference).
+        if (std::abs(last_objective - objective_now) < 1e-7) {
+            out.converged = true;
+            break;
+        }
+        last_objective = objective_now;
     }
     out.relative_sd = kappa;
     for (std::size_t z = 0; z < n_zones; ++z) out.zone_sd_w_m2[z] = std::sqrt(sigma_sq[z]);
+    for (Eigen::Index k = 0; k < k_count; ++k) out.factor_sd[static_cast<std::size_t>(k)] = std::sqrt(std::max(tau_sq(k), 0.0));
     return out;
 }
 

@@ -1,0 +1,148 @@
+// The scatter model's estimator (analysis/reconcile/noise_model.*): a converged maximum of the
+// likelihood, checked against that likelihood computed here independently (dense covariance,
+// Cholesky), not against the estimator's own Woodbury algebra.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <random>
+
+#include <Eigen/Dense>
+
+#include "analysis/reconcile/noise_model.hpp"
+
+namespace rc = manikind::analysis::reconcile;
+
+namespace {
+
+// A design like reconcile's: loadings with an air-like and a wall-like column, a gain column
+// (the flux) and an offset column (ones), the last two nearly collinear with the first two, as
+// the twin's sensitivities are in the isothermal cases.
+rc::ReplicateResiduals design(int cases, int trials, int zones, std::uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    rc::ReplicateResiduals d;
+    for (int c = 0; c < cases; ++c) {
+        Eigen::MatrixXd j(zones, 5);
+        std::vector<double> flux(static_cast<std::size_t>(zones));
+        const double level = 20.0 + 60.0 * u(rng);
+        for (int z = 0; z < zones; ++z) {
+            const double q = level * (0.8 + 0.4 * u(rng));
+            flux[static_cast<std::size_t>(z)] = q;
+            j(z, 0) = -0.12 * q * (0.3 + 1.4 * u(rng));  // air, W/m² per °C
+            j(z, 1) = 1.5 * u(rng);                      // humidity, W/m² per % RH
+            j(z, 2) = -0.05 * q * (0.3 + 1.4 * u(rng));  // wall
+            j(z, 3) = q;                                 // gain
+            j(z, 4) = 1.0;                               // offset
+        }
+        d.loadings.push_back(j);
+        d.abs_flux_w_m2.push_back(flux);
+        d.residual_w_m2.emplace_back(static_cast<std::size_t>(trials), std::vector<double>(static_cast<std::size_t>(zones), 0.0));
+    }
+    d.factor_start_sd = {0.1, 0.5, 0.2, 0.01, 0.3};
+    return d;
+}
+
+rc::ScatterModel truth_model(int zones, std::vector<double> tau) {
+    rc::ScatterModel t;
+    t.zone_sd_w_m2.assign(static_cast<std::size_t>(zones), 1.2);
+    t.relative_sd = 0.01;
+    t.factor_sd = std::move(tau);
+    return t;
+}
+
+// -2 ln L of the data's Helmert contrasts under diag(v) + J T J', computed densely.
+double neg2_loglik(const rc::ReplicateResiduals& d, const rc::ScatterModel& m) {
+    double out = 0.0;
+    for (std::size_t c = 0; c < d.residual_w_m2.size(); ++c) {
+        const Eigen::MatrixXd sigma = m.trial_covariance(d.abs_flux_w_m2[c], d.loadings[c]);
+        const Eigen::LLT<Eigen::MatrixXd> llt(sigma);
+        const double logdet = 2.0 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
+        const auto& trials = d.residual_w_m2[c];
+        const auto zones = static_cast<Eigen::Index>(trials.front().size());
+        Eigen::VectorXd sum = Eigen::Map<const Eigen::VectorXd>(trials[0].data(), zones);
+        for (std::size_t k = 1; k < trials.size(); ++k) {
+            const Eigen::VectorXd x = Eigen::Map<const Eigen::VectorXd>(trials[k].data(), zones);
+            const double kk = static_cast<double>(k);
+            const Eigen::VectorXd h = (sum - kk * x) / std::sqrt(kk * (kk + 1.0));
+            sum += x;
+            out += logdet + h.dot(llt.solve(h));
+        }
+    }
+    return out;
+}
+
+}  // namespace
+
+TEST_CASE("scatter model: the factors' variances are the likelihood's maximum, zero admitted, and it converges") {
+    const int zones = 35;
+    const auto shape = design(30, 3, zones, 11);
+    // Air and wall scatter per trial, none in humidity, gain or offset: the boundary case where
+    // 30 EM iterations left gain and offset near their starting values.
+    const auto truth = truth_model(zones, {0.15, 0.0, 0.1, 0.0, 0.0});
+    for (std::uint64_t seed : {1u, 2u, 3u}) {
+        const auto data = rc::simulate_residuals(shape, truth, seed);
+        const rc::ScatterModel fit = rc::estimate_scatter(data);
+        INFO("seed " << seed << ", " << fit.iterations << " iterations; tau = " << fit.factor_sd[0] << ", " << fit.factor_sd[1]
+                     << ", " << fit.factor_sd[2] << ", " << fit.factor_sd[3] << ", " << fit.factor_sd[4]);
+        REQUIRE(fit.estimable);
+        CHECK(fit.converged);
+        CHECK(fit.iterations < 400);
+        const double best = neg2_loglik(data, fit);
+        // ... and beats the truth it was drawn from (as a maximum must: here by ~40, about the
+        // number of parameters, as chi² says it should).
+        CHECK(best < neg2_loglik(data, truth));
+        // Given the zones' variances the factors' are maximised exactly: moving any tau² by 2 % of
+        // the air's (or away from zero) lowers the likelihood. A variance at zero may only go up.
+        for (std::size_t k = 0; k < 5; ++k) {
+            const double tau_sq = fit.factor_sd[k] * fit.factor_sd[k];
+            const double step = 0.02 * std::max(tau_sq, 1e-4 * std::pow(shape.factor_start_sd[k], 2.0));
+            for (double sign : {+1.0, -1.0}) {
+                if (tau_sq + sign * step < 0.0) continue;
+                rc::ScatterModel moved = fit;
+                moved.factor_sd[k] = std::sqrt(tau_sq + sign * step);
+                INFO("factor " << k << ", sign " << sign);
+                CHECK(neg2_loglik(data, moved) >= best - 1e-6);
+            }
+        }
+        // Capped at 3 steps it has not converged, and says so.
+        CHECK_FALSE(rc::estimate_scatter(data, 3).converged);
+    }
+}
+
+TEST_CASE("scatter model: with enough cases each factor is recovered, off the collinear ridge and at zero") {
+    // 30 cases leave the offset, the humidity and the gain columns nearly interchangeable (the
+    // fit above beats the truth by trading them); 300 cases separate them.
+    const int zones = 35;
+    const auto shape = design(300, 3, zones, 12);
+    SECTION("air and wall scatter, none in humidity, gain or offset") {
+        const auto data = rc::simulate_residuals(shape, truth_model(zones, {0.15, 0.0, 0.1, 0.0, 0.0}), 5);
+        const rc::ScatterModel fit = rc::estimate_scatter(data);
+        INFO(fit.iterations << " iterations; tau = " << fit.factor_sd[0] << ", " << fit.factor_sd[1] << ", " << fit.factor_sd[2]
+                            << ", " << fit.factor_sd[3] << ", " << fit.factor_sd[4]);
+        CHECK(fit.converged);
+        CHECK(fit.factor_sd[0] == Approx(0.15).margin(0.02));
+        CHECK(fit.factor_sd[1] < 0.1);
+        CHECK(fit.factor_sd[2] == Approx(0.10).margin(0.02));
+        CHECK(fit.factor_sd[3] < 0.005);  // the start is 0.01; 30 EM steps left 0.0065
+        CHECK(fit.factor_sd[4] < 0.1);    // the start is 0.3
+        CHECK(fit.relative_sd == Approx(0.01).margin(0.003));
+    }
+    SECTION("only an offset per trial, twice its start") {
+        const auto data = rc::simulate_residuals(shape, truth_model(zones, {0.0, 0.0, 0.0, 0.0, 0.6}), 6);
+        const rc::ScatterModel fit = rc::estimate_scatter(data);
+        INFO(fit.iterations << " iterations; tau = " << fit.factor_sd[0] << ", " << fit.factor_sd[1] << ", " << fit.factor_sd[2]
+                            << ", " << fit.factor_sd[3] << ", " << fit.factor_sd[4]);
+        CHECK(fit.converged);
+        CHECK(fit.factor_sd[4] == Approx(0.6).margin(0.08));
+        CHECK(fit.factor_sd[0] < 0.03);
+        CHECK(fit.factor_sd[3] < 0.002);
+    }
+}
+
+TEST_CASE("scatter model: without replicates nothing is estimable, and shapes that disagree are refused") {
+    auto one = design(5, 1, 6, 3);
+    CHECK_FALSE(rc::estimate_scatter(one).estimable);
+    auto bad = design(5, 3, 6, 3);
+    bad.loadings.pop_back();
+    CHECK_THROWS_AS(rc::estimate_scatter(bad), std::invalid_argument);
+}
