@@ -24,6 +24,8 @@ public:
     std::size_t write(const std::string& bytes);
     // Whatever the host sent (polled mode commands), without blocking.
     std::string read_available();
+    // The master side, for a caller that polls several lines at once before reading.
+    int fd() const { return master_; }
     // Hangs the line up (the driver's reads fail) and opens a fresh pty behind the same link.
     void hang_up_and_reopen();
 

@@ -2,10 +2,12 @@
 #include "sim/world/wardrobe.hpp"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <stdexcept>
@@ -304,7 +306,12 @@ void SimLab::apply_schedule() {
 
 void SimLab::step(double dt_s) {
     std::unique_lock lk(world_lock_);
-    manikin_io();  // commands the host sent since the last step act from now on
+    // What the host sent since the last step, on the bus and on the two serial lines: one poll
+    // instead of a read on each that mostly answers EAGAIN (3 system calls a step, 1 now).
+    std::array<pollfd, 3> ready{{{manikin_fd_, POLLIN, 0}, {windsonic_->pty->fd(), POLLIN, 0}, {csat3b_->pty->fd(), POLLIN, 0}}};
+    if (::poll(ready.data(), ready.size(), 0) < 0)
+        for (auto& r : ready) r.revents = POLLIN;  // EINTR or the like: read each as before
+    if (ready[0].revents != 0) manikin_io();  // commands the host sent act from now on
     world_.step(dt_s);
     apply_schedule();
     can_frames_last_step_ = 0;
@@ -355,8 +362,8 @@ void SimLab::step(double dt_s) {
         // A full socket buffer (the host not reading) drops the rest, as a bus would for a dead node.
         if (sent > 0) can_frames_last_step_ += sent;
     }
-    serial_output(*windsonic_, dt_s);
-    serial_output(*csat3b_, dt_s);
+    serial_output(*windsonic_, ready[1].revents != 0);
+    serial_output(*csat3b_, ready[2].revents != 0);
 }
 
 void SimLab::manikin_io() {
@@ -374,9 +381,10 @@ void SimLab::manikin_io() {
 }
 
 // Called under the world lock.
-void SimLab::serial_output(SerialDevice& d, double) {
+void SimLab::serial_output(SerialDevice& d, bool host_sent) {
     d.bytes_last_step = 0;
-    const std::string host = d.pty->read_available();  // polled mode: a node letter asks for a frame
+    // Polled mode: a node letter asks for a frame (read only when the poll says it came).
+    const std::string host = host_sent ? d.pty->read_available() : std::string();
     const bool polled_request = !host.empty();
     const double now = world_.time_s();
     if (!(now + 1e-9 >= d.due_s) && !polled_request) return;

@@ -102,7 +102,7 @@ private:
     bool fault_active(const std::string& device, const std::string& fault) const;
     double fault_value(const std::string& device, const std::string& fault) const;
     void manikin_io();
-    void serial_output(SerialDevice& d, double dt_s);
+    void serial_output(SerialDevice& d, bool host_sent);
     std::vector<ServedRegister> bind_chamber(const std::vector<RegisterDef>& defs);
     std::vector<ServedRegister> bind_datalogger(const std::vector<RegisterDef>& defs);
     void update_modbus_faults();
