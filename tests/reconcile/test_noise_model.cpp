@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <random>
+#include <string>
 
 #include <Eigen/Dense>
 
@@ -71,6 +72,22 @@ double neg2_loglik(const rc::ReplicateResiduals& d, const rc::ScatterModel& m) {
     return out;
 }
 
+// What a failed check prints: the steps taken and the five tau.
+std::string describe(const rc::ScatterModel& fit) {
+    std::string out = std::to_string(fit.iterations) + " iterations; tau =";
+    for (double t : fit.factor_sd) out += " " + std::to_string(t);
+    return out;
+}
+
+// The estimate of residuals drawn from a truth with these tau (zone sd 1.2, kappa 0.01); it
+// must have converged.
+rc::ScatterModel converged_fit(const rc::ReplicateResiduals& shape, std::vector<double> tau, std::uint64_t seed) {
+    const auto zones = static_cast<int>(shape.residual_w_m2.front().front().size());
+    const rc::ScatterModel fit = rc::estimate_scatter(rc::simulate_residuals(shape, truth_model(zones, std::move(tau)), seed));
+    CHECK(fit.converged);
+    return fit;
+}
+
 }  // namespace
 
 TEST_CASE("scatter model: the factors' variances are the likelihood's maximum, zero admitted, and it converges") {
@@ -82,8 +99,7 @@ TEST_CASE("scatter model: the factors' variances are the likelihood's maximum, z
     for (std::uint64_t seed : {1u, 2u, 3u}) {
         const auto data = rc::simulate_residuals(shape, truth, seed);
         const rc::ScatterModel fit = rc::estimate_scatter(data);
-        INFO("seed " << seed << ", " << fit.iterations << " iterations; tau = " << fit.factor_sd[0] << ", " << fit.factor_sd[1]
-                     << ", " << fit.factor_sd[2] << ", " << fit.factor_sd[3] << ", " << fit.factor_sd[4]);
+        INFO("seed " << seed << ", " << describe(fit));
         REQUIRE(fit.estimable);
         CHECK(fit.converged);
         CHECK(fit.iterations < 400);
@@ -115,11 +131,8 @@ TEST_CASE("scatter model: with enough cases each factor is recovered, off the co
     const int zones = 35;
     const auto shape = design(300, 3, zones, 12);
     SECTION("air and wall scatter, none in humidity, gain or offset") {
-        const auto data = rc::simulate_residuals(shape, truth_model(zones, {0.15, 0.0, 0.1, 0.0, 0.0}), 5);
-        const rc::ScatterModel fit = rc::estimate_scatter(data);
-        INFO(fit.iterations << " iterations; tau = " << fit.factor_sd[0] << ", " << fit.factor_sd[1] << ", " << fit.factor_sd[2]
-                            << ", " << fit.factor_sd[3] << ", " << fit.factor_sd[4]);
-        CHECK(fit.converged);
+        const rc::ScatterModel fit = converged_fit(shape, {0.15, 0.0, 0.1, 0.0, 0.0}, 5);
+        INFO(describe(fit));
         CHECK(fit.factor_sd[0] == Approx(0.15).margin(0.02));
         CHECK(fit.factor_sd[1] < 0.1);
         CHECK(fit.factor_sd[2] == Approx(0.10).margin(0.02));
@@ -128,11 +141,8 @@ TEST_CASE("scatter model: with enough cases each factor is recovered, off the co
         CHECK(fit.relative_sd == Approx(0.01).margin(0.003));
     }
     SECTION("only an offset per trial, twice its start") {
-        const auto data = rc::simulate_residuals(shape, truth_model(zones, {0.0, 0.0, 0.0, 0.0, 0.6}), 6);
-        const rc::ScatterModel fit = rc::estimate_scatter(data);
-        INFO(fit.iterations << " iterations; tau = " << fit.factor_sd[0] << ", " << fit.factor_sd[1] << ", " << fit.factor_sd[2]
-                            << ", " << fit.factor_sd[3] << ", " << fit.factor_sd[4]);
-        CHECK(fit.converged);
+        const rc::ScatterModel fit = converged_fit(shape, {0.0, 0.0, 0.0, 0.0, 0.6}, 6);
+        INFO(describe(fit));
         CHECK(fit.factor_sd[4] == Approx(0.6).margin(0.08));
         CHECK(fit.factor_sd[0] < 0.03);
         CHECK(fit.factor_sd[3] < 0.002);
