@@ -287,6 +287,14 @@ public:
         const ScatterModel scatter = scatter_of(own);
         out.from_replicates = own.estimable;
         out.carried_from = !own.estimable && carried_ ? carried_->source : "";
+        if (own.estimable) {
+            out.scatter_steps = own.iterations;
+            out.scatter_converged = own.converged;
+            if (!own.converged)
+                out.notes.push_back(fmt::format("the replicate scatter's estimate stopped at its cap of {} steps before the "
+                                                "likelihood settled: its per-trial shared errors may be off",
+                                                own.iterations));
+        }
         out.random_dof = scatter.dof;
         out.relative_sd = scatter.relative_sd;
         if (scatter.estimable) {

@@ -42,6 +42,10 @@ struct NoiseModel {
     bool from_replicates = false;             // random part estimated from replicate scatter
     std::string carried_from;                 // else carried from this earlier campaign (--noise-from)
     int random_dof = 0;                       // pooled degrees of freedom of that estimate
+    // The replicate scatter's own estimate (this campaign's): ECME steps taken and whether -2 ln L
+    // settled before the cap; empty when nothing was estimated here (one replicate, carried).
+    int scatter_steps = 0;
+    std::optional<bool> scatter_converged;
     double relative_sd = 0.0;                 // kappa: scatter proportional to |q| (per trial)
     std::vector<std::pair<std::string, double>> trial_factor_sd;  // shared by one trial's zones (per trial)
     std::map<int, double> zone_sd_w_m2;       // sigma0 per zone (per trial)

@@ -53,6 +53,9 @@ TEST_CASE("cli: reconcile of a campaign with no hidden physics claims nothing", 
     const auto j = nlohmann::json::parse(r.out);
     CHECK(j["explanation"].is_null());
     CHECK(j["consistent_before"] == true);
+    // The replicate scatter was estimated here, to convergence, and the JSON says so.
+    CHECK(j["noise_model"]["scatter_converged"] == true);
+    CHECK(j["noise_model"]["scatter_steps"].get<int>() > 0);
     std::filesystem::remove_all(dir);
 }
 
@@ -124,6 +127,7 @@ TEST_CASE("cli: reconcile of a one-replicate campaign claims nothing and says wh
     REQUIRE(r.exit_code == 0);
     j = nlohmann::json::parse(r.out);
     CHECK_FALSE(j["noise_model"]["carried_from"].get<std::string>().empty());
+    CHECK(j["noise_model"]["scatter_converged"].is_null());  // nothing of this campaign's estimated
     CHECK(j["claim_rule"]["covariance_draws"].get<int>() > 0);
     REQUIRE(j["explanation"].is_object());
     CHECK(j["explanation"]["term"] == "humidity_buoyancy");
