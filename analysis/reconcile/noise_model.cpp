@@ -101,19 +101,32 @@ struct FactorTerms {
     Eigen::MatrixXd fisher;
 };
 
+// W = (T^-1 + M)^-1 = T^1/2 (I + T^1/2 M T^1/2)^-1 T^1/2 (eta's posterior covariance given one
+// contrast), in the form that holds at a variance of zero, and ln det(I + T^1/2 M T^1/2).
+struct Posterior {
+    Eigen::MatrixXd w;
+    double logdet = 0.0;
+};
+
+Posterior posterior(const Eigen::MatrixXd& m, const Eigen::VectorXd& t) {
+    const Eigen::VectorXd root = t.cwiseMax(0.0).cwiseSqrt();
+    Eigen::MatrixXd b = root.asDiagonal() * m * root.asDiagonal();
+    b.diagonal().array() += 1.0;
+    const Eigen::LLT<Eigen::MatrixXd> llt(b);
+    Posterior out;
+    for (Eigen::Index i = 0; i < t.size(); ++i) out.logdet += 2.0 * std::log(llt.matrixL()(i, i));
+    out.w = root.asDiagonal() * llt.solve(Eigen::MatrixXd(root.asDiagonal()));
+    return out;
+}
+
 FactorTerms factor_terms(const std::vector<FactorStats>& cases, const Eigen::VectorXd& t, bool derivatives) {
     const Eigen::Index k = t.size();
     FactorTerms out;
     out.grad = Eigen::VectorXd::Zero(k);
     out.fisher = Eigen::MatrixXd::Zero(k, k);
-    const Eigen::VectorXd root = t.cwiseMax(0.0).cwiseSqrt();
     const Eigen::MatrixXd identity = Eigen::MatrixXd::Identity(k, k);
     for (const auto& c : cases) {
-        const Eigen::MatrixXd b = identity + root.asDiagonal() * c.m * root.asDiagonal();
-        const Eigen::LLT<Eigen::MatrixXd> llt(b);
-        double logdet = 0.0;
-        for (Eigen::Index i = 0; i < k; ++i) logdet += 2.0 * std::log(llt.matrixL()(i, i));
-        const Eigen::MatrixXd w = root.asDiagonal() * llt.solve(Eigen::MatrixXd(root.asDiagonal()));
+        const auto [w, logdet] = posterior(c.m, t);
         out.value += c.n * logdet - w.cwiseProduct(c.s).sum();
         if (!derivatives) continue;
         const Eigen::MatrixXd g = c.m - c.m * w * c.m;
@@ -281,12 +294,8 @@ ScatterModel estimate_scatter(const ReplicateResiduals& data, int max_iterations
             Eigen::MatrixXd post_cov = Eigen::MatrixXd::Zero(k_count, k_count);
             Eigen::VectorXd explained_var = Eigen::VectorXd::Zero(z_count);
             if (k_count > 0) {
-                // Posterior covariance of eta, T - T J'(D + J T J')^-1 J T, in the form that
-                // holds at a variance of zero: T^1/2 (I + T^1/2 M T^1/2)^-1 T^1/2.
-                const Eigen::VectorXd root = tau_sq.cwiseSqrt();
-                Eigen::MatrixXd b = root.asDiagonal() * (j.transpose() * d_inv.asDiagonal() * j) * root.asDiagonal();
-                b.diagonal().array() += 1.0;
-                post_cov = root.asDiagonal() * b.llt().solve(Eigen::MatrixXd(root.asDiagonal()));
+                // Posterior covariance of eta, T - T J'(D + J T J')^-1 J T.
+                post_cov = posterior(j.transpose() * d_inv.asDiagonal() * j, tau_sq).w;
                 explained_var = (j * post_cov * j.transpose()).diagonal();
             }
             std::vector<double> ss(n_zones, 0.0);
