@@ -92,32 +92,21 @@ void Acquisition::step(double dt_s) {
     if (!manual_clock_ || realtime_) throw std::logic_error("Acquisition::step needs the virtual clock");
     const auto ws0 = windsonic_->bytes_received(), cs0 = csat3b_->bytes_received();
     const auto mf0 = manikin_->frames_received();
+    if (!modbus_on_caller_) serve_modbus_here(true);
     lab_->step(dt_s);
     manual_clock_->advance_s(dt_s);
-    // Modbus first, so that its round trips overlap the bus reads below: the datalogger on its
-    // worker, the chamber here. Both read the lab as this step left it (lab_->step is done and
-    // nothing below changes the world), so the result is the lockstep's, only sooner. The
-    // datalogger's samples reach the sink from this thread, which holds the daemon's lock.
+    // The simulated Modbus devices answer on this thread, inside each driver's transaction
+    // (serve_modbus_here): both polls read the lab as this step left it, with no thread
+    // hand-off. The chamber's samples reach the sink now, the datalogger's after the bus reads
+    // below (the order the lockstep always had).
     const double now_s = manual_clock_->elapsed_s();
     const bool poll_due = now_s + 1e-9 >= next_poll_s_;
+    std::vector<drivers::Sample> datalogger_samples;
     if (poll_due) {
         next_poll_s_ = now_s + poll_period_s_;
-        if (!datalogger_poll_)
-            datalogger_poll_ = std::make_unique<StepWorker>([this] { datalogger_samples_ = datalogger_->read_all(); });
-        datalogger_poll_->start();
+        chamber_->poll();
+        datalogger_samples = datalogger_->read_all();
     }
-    // Whatever leaves this step early (a sink that throws), the datalogger's read is over first.
-    struct AwaitPoll {
-        StepWorker* worker;
-        ~AwaitPoll() {
-            if (!worker) return;
-            try {
-                worker->wait();
-            } catch (...) {  // already leaving with another error; the read's own is lost
-            }
-        }
-    } await_poll{poll_due ? datalogger_poll_.get() : nullptr};
-    if (poll_due) chamber_->poll();
     const auto ws_expected = windsonic_->status().connected ? lab_->serial_bytes_last_step("windsonic") : 0;
     const auto cs_expected = csat3b_->status().connected ? lab_->serial_bytes_last_step("csat3b") : 0;
     const auto mf_expected = lab_->can_frames_last_step();
@@ -135,15 +124,26 @@ void Acquisition::step(double dt_s) {
     }
     if (io_.stopped()) io_.restart();
     io_.poll();  // completions already queued (errors, writes)
-    if (poll_due) {
-        await_poll.worker = nullptr;
-        datalogger_poll_->wait();
-        for (const auto& s : datalogger_samples_) sink_(s);
-    }
+    for (const auto& s : datalogger_samples) sink_(s);
     checks(manual_clock_->mono_ns());
 }
 
+void Acquisition::serve_modbus_here(bool on) {
+    if (!lab_ || modbus_on_caller_ == on) return;
+    lab_->serve_modbus_on_caller(on);
+    auto hook = [this](const char* device) -> drivers::ModbusTcpClient::SentHook {
+        if (!modbus_on_caller_) return {};
+        return [lab = lab_.get(), device](int fd, std::size_t requests, std::int64_t deadline_ns) {
+            lab->answer_modbus(device, fd, requests, deadline_ns);
+        };
+    };
+    modbus_on_caller_ = on;
+    chamber_->set_sent_hook(hook("chamber"));
+    datalogger_->set_sent_hook(hook("datalogger"));
+}
+
 void Acquisition::start_realtime(double speed) {
+    serve_modbus_here(false);  // paced: each device answers on its own thread, as a real one
     realtime_ = true;
     stop_ = false;
     if (lab_) {  // keep the virtual poll rate when the simulated lab runs faster than the wall clock

@@ -20,7 +20,6 @@
 #include "daemon/config.hpp"
 #include "daemon/simulated_lab.hpp"
 #include "drivers/register_map.hpp"
-#include "daemon/step_worker.hpp"
 #include "drivers/anemometers.hpp"
 #include "drivers/clock.hpp"
 #include "drivers/manikin_can_driver.hpp"
@@ -75,9 +74,9 @@ private:
     std::atomic<bool> stop_{false};
     std::thread io_thread_, pacer_thread_;
     double lockstep_stalls_ = 0;
-    // Virtual clock: the datalogger's poll on its own thread, overlapping the rest of the step.
-    std::unique_ptr<StepWorker> datalogger_poll_;
-    std::vector<drivers::Sample> datalogger_samples_;
+    // Virtual clock: the simulated Modbus devices answer on the stepping thread.
+    void serve_modbus_here(bool on);
+    bool modbus_on_caller_ = false;
     std::string manikin_open_error_;   // real mode: why can0 could not be opened
 };
 

@@ -6,6 +6,7 @@
 // hang. Campaigns are cases x replicates, queued. The daemon enforces the manikin's safety
 // limits itself (skin temperature, heater power, a watchdog on the manikin and chamber) and
 // records every such event. Thread-safe: the control API calls in from its own thread.
+#include <array>
 #include <atomic>
 #include <deque>
 #include <functional>
@@ -167,7 +168,9 @@ private:
     };
     void on_sample(const drivers::Sample& s);
     void record_sample_locked(const drivers::Sample& s);
-    void offer_row_locked(const recorder::SampleRow& row);
+    void offer_row_locked(const recorder::SampleRow& row);  // into bins, then the step's batch or the recorder
+    void offer_now_locked(const recorder::SampleRow& row);
+    void release_step_rows_locked();
     void hold_unnamed_locked(const drivers::Sample& s);
     void retry_unnamed_locked();
     void tick_locked();     // advance_locked(), surviving a full disk
@@ -203,11 +206,15 @@ private:
     void write(recorder::Recorder::Job job);
     double stage_elapsed_s() const;
     std::int64_t recorded_channel(const std::string& device, const std::string& channel);  // cached database id
-    double enclosure_mean(const char* prefix, const char* quantity_suffix) const;
+    // The mean of the good live readings of one enclosure quantity (the EE181 probes' air
+    // temperature or RH, the wall thermocouples), from the members listed as their channels first
+    // report (enclosure_members_): each tick reads a few values instead of scanning every channel.
+    enum class Enclosure { air, rh, wall };
+    double enclosure_mean(Enclosure quantity) const;
     void physiological_tick_locked(std::int64_t now_ns);  // acquiring, control = "physiological"
-    double enclosure_air_c() const { return enclosure_mean("datalogger/ee181_", ".air_temp_c"); }
-    double enclosure_rh_pct() const { return enclosure_mean("datalogger/ee181_", ".air_rh_pct"); }
-    double enclosure_wall_c() const { return enclosure_mean("datalogger/wall_tc_", ".wall_temp_c"); }
+    double enclosure_air_c() const { return enclosure_mean(Enclosure::air); }
+    double enclosure_rh_pct() const { return enclosure_mean(Enclosure::rh); }
+    double enclosure_wall_c() const { return enclosure_mean(Enclosure::wall); }
     // Where settling stands: targets, distances, the window, an ETA (status trial.settling).
     nlohmann::json settling_json_locked(std::int64_t now_ns) const;
     // The steady-state rule's inputs now: evicts samples older than the window, then measures.
@@ -250,6 +257,8 @@ private:
     std::string storage_error_;
     std::uint64_t jobs_lost_when_full_ = 0;
     std::deque<recorder::SampleRow> overflow_;  // readings waiting for room in the recorder's queue, in order
+    bool step_rows_active_ = false;             // inside step_virtual's device reads
+    std::vector<recorder::SampleRow> step_rows_;  // their readings, handed over together after them
     // Readings of a channel not yet in the database while it could not be added (locked, full):
     // kept with their device/channel and added at a later tick, then recorded in order.
     std::deque<std::pair<drivers::Sample, std::int64_t>> unnamed_;  // (reading, trial id then)
@@ -276,6 +285,9 @@ private:
         int zone = 0;  // manikin zone of a skin channel ("zNN."), else 0
     };
     std::unordered_map<std::string, ChannelSlot> slots_;
+    // Per Enclosure quantity, its live readings in key order (the order a scan of live_ took, so
+    // the sums are the same to the bit). live_ never drops a key, so the pointers stay valid.
+    std::array<std::vector<std::pair<std::string, const drivers::Sample*>>, 3> enclosure_members_;
     std::string slot_key_;  // reused per reading
     // On the virtual clock, the running campaign's trials binned as they are recorded (issue 36):
     // its results then read no reading back (CampaignReader takes a trial's bins only where they

@@ -181,14 +181,21 @@ void ManikinCanDriver::ingest(const can_frame& frame) {
                                                  heater_bad ? "heater fault" : "");
             }
         }
-        const std::string prefix = fmt::format("z{:02d}.", z->zone);
+        // The zone's four channel names, made once (35 zones x 4 readings a step otherwise built
+        // a name and its copy each).
+        auto [names, fresh] = zone_channels_.try_emplace(z->zone);
+        if (fresh) {
+            const std::string prefix = fmt::format("z{:02d}.", z->zone);
+            names->second = {prefix + "skin_temp_c", prefix + "heat_flux_w_m2", prefix + "heater_power_w_m2",
+                             prefix + "sweat_rate_g_m2_h"};
+        }
+        const auto& channel = names->second;
         const bool too_hot = z->skin_temp_c > options_.max_skin_temp_c;
-        emit(prefix + "skin_temp_c", z->skin_temp_c, sensor_bad || too_hot ? Quality::out_of_range : Quality::good,
-             mono, utc);
+        emit(channel[0], z->skin_temp_c, sensor_bad || too_hot ? Quality::out_of_range : Quality::good, mono, utc);
         const Quality hq = heater_bad ? Quality::out_of_range : Quality::good;
-        emit(prefix + "heat_flux_w_m2", z->heat_flux_w_m2, hq, mono, utc);
-        emit(prefix + "heater_power_w_m2", z->heater_power_w_m2, hq, mono, utc);
-        emit(prefix + "sweat_rate_g_m2_h", z->sweat_rate_g_m2_h, Quality::good, mono, utc);
+        emit(channel[1], z->heat_flux_w_m2, hq, mono, utc);
+        emit(channel[2], z->heater_power_w_m2, hq, mono, utc);
+        emit(channel[3], z->sweat_rate_g_m2_h, Quality::good, mono, utc);
     } else if (const auto* hb = std::get_if<mc::Heartbeat>(&msg)) {
         std::lock_guard lk(lock_);
         if (heartbeat_ && static_cast<std::uint8_t>(heartbeat_->sequence + 1) != hb->sequence) {

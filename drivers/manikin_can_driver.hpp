@@ -13,8 +13,10 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/posix/stream_descriptor.hpp>
 
+#include <array>
 #include <atomic>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -70,6 +72,7 @@ private:
     bool write_frame(const can_frame& frame);
     void capture(const can_frame& frame);
     void emit(const std::string& channel, double value, Quality q, std::int64_t mono, std::int64_t utc);
+    std::map<int, std::array<std::string, 4>> zone_channels_;  // zone -> its channels' names (ingest)
 
     boost::asio::io_context& io_;
     std::unique_ptr<boost::asio::posix::stream_descriptor> stream_;

@@ -75,6 +75,11 @@ public:
     std::optional<double> read(const std::string& channel);
 
     const ModbusOptions& options() const { return options_; }
+    // TCP: see ModbusTcpClient::set_sent_hook (the simulated lab answering on this thread).
+    void set_sent_hook(ModbusTcpClient::SentHook hook) {
+        std::lock_guard lk(io_lock_);
+        tcp_.set_sent_hook(std::move(hook));
+    }
     // Before start_worker(): the simulated lab at N x real time polls N times as often.
     void set_poll_period(double seconds) { options_.poll_period_s = seconds; }
 

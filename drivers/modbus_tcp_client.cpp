@@ -157,6 +157,7 @@ void ModbusTcpClient::transact(std::span<Call> calls) {
         }
         sent += static_cast<std::size_t>(n);
     }
+    if (sent_hook_) sent_hook_(fd_, calls.size(), deadline_ns);
     std::size_t pending = calls.size();
     bool first = true;
     while (pending > 0) {

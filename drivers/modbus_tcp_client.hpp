@@ -13,6 +13,7 @@
 // backends alike. A timeout, a broken link or a malformed reply closes the connection: bytes
 // of unknown meaning may still be in flight.
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <vector>
@@ -46,10 +47,17 @@ public:
     // Replies are paired with requests by transaction id, in whatever order they come.
     void transact(std::span<Call> calls);
 
+    // Called after a transaction's requests are sent, before its replies are read: the socket,
+    // how many requests went out, and the reply deadline (steady clock, ns). The simulated lab
+    // on the virtual clock answers its devices here, on this thread (sim/devices/modbus_server).
+    using SentHook = std::function<void(int fd, std::size_t requests, std::int64_t deadline_ns)>;
+    void set_sent_hook(SentHook hook) { sent_hook_ = std::move(hook); }
+
 private:
     int receive_some(bool first, std::int64_t deadline_ns);  // bytes appended to in_, or -errno
     void fail_pending(std::span<Call> calls, int err);       // closes; see transact
 
+    SentHook sent_hook_;
     int fd_ = -1;
     double timeout_s_ = 0.5;
     std::uint16_t next_transaction_ = 1;

@@ -129,6 +129,27 @@ bool Recorder::offer(const SampleRow& row) noexcept {
     return true;
 }
 
+std::size_t Recorder::offer_many(std::span<const SampleRow> rows) noexcept {
+    if (rows.empty()) return 0;
+    std::size_t taken = 0, before = 0, depth = 0;
+    {
+        std::lock_guard lock(mutex_);
+        before = queue_.size();
+        taken = std::min(rows.size(), options_.queue_capacity - std::min(options_.queue_capacity, before));
+        for (std::size_t i = 0; i < taken; ++i) {
+            queue_.push_back(rows[i]);  // within the reserved capacity: no allocation
+            if (ring_) ring_->append(rows[i]);
+        }
+        stats_.accepted += taken;
+        stats_.queue_depth += taken;
+        depth = queue_.size();
+        if (before == 0 && taken > 0) first_row_at_ = Clock::now();
+    }
+    // The same transitions offer() wakes the writer on: the first row, or reaching wake_rows_.
+    if (taken > 0 && (before == 0 || (before < wake_rows_ && depth >= wake_rows_))) wake_writer_.notify_one();
+    return taken;
+}
+
 bool Recorder::post(Job job) {
     {
         std::lock_guard lock(mutex_);

@@ -22,6 +22,7 @@
 #include <mutex>
 #include <type_traits>
 #include <optional>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -103,6 +104,9 @@ public:
     // The same, for a caller that keeps a refused row and offers it again (the daemon's
     // overflow): a refusal is not counted as dropped.
     bool offer(const SampleRow& row) noexcept;
+    // offer() for rows in order under one lock (a virtual-clock step's readings): takes the
+    // longest prefix that fits and returns its length; the caller keeps the rest, in order.
+    std::size_t offer_many(std::span<const SampleRow> rows) noexcept;
     using Job = std::function<void(Database&)>;
     // A write made by the writer thread on its connection, after the rows it has in hand, in the
     // order posted. A lock held elsewhere, a full disk or an I/O error: it waits at the head of

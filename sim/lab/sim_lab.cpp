@@ -120,6 +120,20 @@ SimLab::~SimLab() {
     if (host_fd_ >= 0) ::close(host_fd_);
 }
 
+void SimLab::serve_modbus_on_caller(bool on) {
+    for (auto* server : {chamber_.get(), datalogger_.get()}) {
+        if (on) server->serve_on_caller();
+        else server->serve_on_own_thread();
+    }
+}
+
+VirtualModbusServer::Served SimLab::answer_modbus(const std::string& device, int client_fd, std::uint64_t requests,
+                                    std::int64_t deadline_ns) {
+    VirtualModbusServer* server = device == "chamber" ? chamber_.get() : device == "datalogger" ? datalogger_.get() : nullptr;
+    if (!server) throw std::invalid_argument("answer_modbus: no simulated Modbus device '" + device + "'");
+    return server->serve_until(client_fd, requests, deadline_ns);
+}
+
 int SimLab::take_manikin_fd() {
     const int fd = host_fd_;
     host_fd_ = -1;

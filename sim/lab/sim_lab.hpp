@@ -92,6 +92,14 @@ public:
     void clear_faults(const std::string& device);
     std::vector<std::string> active_faults() const;
 
+    // The virtual clock: the chamber and datalogger answer on the caller's thread, inside the
+    // driver's transaction (answer_modbus), instead of on their own threads: no hand-off per
+    // request. false: their own threads again (real-time pacing).
+    void serve_modbus_on_caller(bool on);
+    // Caller mode: the device ("chamber" or "datalogger") answers what was sent to it; see
+    // VirtualModbusServer::serve_until.
+    VirtualModbusServer::Served answer_modbus(const std::string& device, int client_fd, std::uint64_t requests, std::int64_t deadline_ns);
+
     // The world, under its lock (the Modbus servers read it from their threads).
     std::mutex& world_lock() { return world_lock_; }
     World& world() { return world_; }

@@ -628,6 +628,64 @@ TEST_CASE("recorder: a full queue drops and counts rows instead of waiting", "[r
     CHECK(db.sample_count(f.trial) == static_cast<std::int64_t>(stats.committed));
 }
 
+TEST_CASE("recorder: offer_many takes the longest prefix that fits, in order, without counting the rest dropped, "
+          "and its rows survive kill -9 in the crash ring", "[recorder][crash_ring]") {
+    TempDir dir("offer_many");
+    const auto path = dir.path / "trials.db";
+    const Fixture f = fixture_file(path);
+    std::vector<SampleRow> rows;
+    for (std::int64_t i = 0; i < 12; ++i) rows.push_back({f.trial, f.channel_a, i * 1000, i * 1000, static_cast<double>(i), 0});
+    {
+        RecorderOptions options;
+        options.queue_capacity = 8;
+        options.max_batch_delay = std::chrono::minutes(10);  // nothing commits unless flushed or the queue fills
+        Recorder recorder(path, options);
+        CHECK(recorder.offer_many(std::span<const SampleRow>()) == 0);
+        const std::size_t first = recorder.offer_many(rows);
+        CHECK(first == 8);  // the queue was empty: exactly its capacity, the rest left to the caller
+        std::size_t taken = first;
+        while (taken < rows.size()) {
+            REQUIRE(recorder.flush());
+            taken += recorder.offer_many(std::span<const SampleRow>(rows).subspan(taken));
+        }
+        REQUIRE(recorder.flush());
+        const auto stats = recorder.stats();
+        CHECK(stats.accepted == 12);
+        CHECK(stats.dropped == 0);
+        CHECK(stats.committed == 12);
+    }
+    {
+        auto db = Database::open(path);
+        const auto a = db.samples(f.trial, f.channel_a);
+        REQUIRE(a.size() == 12);
+        bool ordered = true;
+        for (std::size_t k = 0; k < a.size(); ++k) ordered = ordered && a[k].value == static_cast<double>(k);
+        CHECK(ordered);
+    }
+    RecorderOptions options;
+    options.crash_ring_dir = dir.path;
+    options.max_batch_delay = std::chrono::minutes(10);
+    {
+        RecordingChild child([&](const RecordingChild::Report& report) {
+            Recorder recorder(path, options);
+            std::vector<SampleRow> more;
+            for (std::int64_t i = 100; i < 400; ++i) more.push_back({f.trial, f.channel_b, i * 1000, i * 1000, static_cast<double>(i), 0});
+            const std::size_t taken = recorder.offer_many(more);
+            if (!report(taken)) return;
+            for (;;) ::pause();  // killed here, nothing of these committed
+        });
+        const auto taken = child.next();
+        child.kill();
+        REQUIRE(taken);
+        CHECK(*taken == 300);
+    }
+    {
+        Recorder next(path, options);
+        CHECK(next.stats().recovered == 300);
+    }
+    CHECK(Database::open(path).samples(f.trial, f.channel_b).size() == 300);
+}
+
 TEST_CASE("recorder: a re-sent reading is stored once and counted", "[recorder]") {
     TempDir dir("duplicate");
     const auto path = dir.path / "trials.db";
