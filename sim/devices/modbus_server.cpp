@@ -41,6 +41,15 @@ VirtualModbusServer::VirtualModbusServer(std::string name, std::vector<ServedReg
         n = std::max(n, r.spec.address + mr::register_count(r.spec.type));
     }
     for (const auto& [unit, n] : size_per_unit) mappings_[unit] = modbus_mapping_new(0, 0, n, 0);
+    // Each register encoded for the image: limits are the client's to respect. Made once, not
+    // copied (with its name) at every request.
+    for (const auto& r : registers_) {
+        auto spec = r.spec;
+        spec.writable = true;
+        spec.min_value = -1e300;
+        spec.max_value = 1e300;
+        image_specs_.push_back(std::move(spec));
+    }
 }
 
 VirtualModbusServer::~VirtualModbusServer() {
@@ -145,13 +154,9 @@ void VirtualModbusServer::refresh(int unit) {
         if (r.unit_id != unit) continue;
         double v = f.stuck && frozen_.count(r.spec.name) ? frozen_.at(r.spec.name) : r.read();
         if (r.probe) v = r.probe->to_raw(v);
-        auto spec = r.spec;
-        spec.writable = true;  // encode for the image: limits are the client's to respect
-        spec.min_value = -1e300;
-        spec.max_value = 1e300;
         std::vector<std::uint16_t> words;
         try {
-            words = mr::encode(spec, v);
+            words = mr::encode(image_specs_[static_cast<std::size_t>(&r - registers_.data())], v);
         } catch (const std::exception&) {
             continue;  // out of the raw type's range: the image keeps the last value
         }

@@ -89,6 +89,7 @@ private:
 
     std::string name_;
     std::vector<ServedRegister> registers_;
+    std::vector<protocol::modbus_registers::RegisterSpec> image_specs_;  // registers_[i] as the image encodes it
     std::mutex& world_lock_;
     std::map<int, void*> mappings_;  // unit id -> modbus_mapping_t*
     void* ctx_ = nullptr;            // modbus_t*
