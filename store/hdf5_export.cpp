@@ -5,9 +5,11 @@
 
 #include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
+#include <fstream>
 #include <limits>
-#include <sstream>
+#include <streambuf>
 
 #include <fmt/format.h>
 
@@ -27,6 +29,7 @@ struct H5Api {
     decltype(&::H5Awrite) Awrite = nullptr;
     decltype(&::H5Dclose) Dclose = nullptr;
     decltype(&::H5Dcreate2) Dcreate2 = nullptr;
+    decltype(&::H5Dget_offset) Dget_offset = nullptr;
     decltype(&::H5Dget_space) Dget_space = nullptr;
     decltype(&::H5Dget_type) Dget_type = nullptr;
     decltype(&::H5Dopen2) Dopen2 = nullptr;
@@ -41,6 +44,11 @@ struct H5Api {
     decltype(&::H5Gcreate2) Gcreate2 = nullptr;
     decltype(&::H5Gopen2) Gopen2 = nullptr;
     decltype(&::H5Ldelete) Ldelete = nullptr;
+    decltype(&::H5Pclose) Pclose = nullptr;
+    decltype(&::H5Pcreate) Pcreate = nullptr;
+    decltype(&::H5Pset_alloc_time) Pset_alloc_time = nullptr;
+    decltype(&::H5Pset_fill_time) Pset_fill_time = nullptr;
+    decltype(&::H5Pset_layout) Pset_layout = nullptr;
     decltype(&::H5Lexists) Lexists = nullptr;
     decltype(&::H5Sclose) Sclose = nullptr;
     decltype(&::H5Screate) Screate = nullptr;
@@ -59,6 +67,7 @@ struct H5Api {
     // The predefined types: global ids the library sets in H5open (the header's H5T_NATIVE_DOUBLE
     // and the like are macros that read them).
     hid_t native_double, native_int32, native_int64, native_uint8, c_s1, ieee_f64le, std_i64le;
+    hid_t dataset_create;  // the property list class H5P_DATASET_CREATE
 };
 
 // HDF5 is loaded by the first HDF5 call, not at start-up (base/lazy_library.hpp). A failed load
@@ -74,6 +83,7 @@ const H5Api& h5() {
         MANIKIND_BIND(l, a, Awrite, H5Awrite);
         MANIKIND_BIND(l, a, Dclose, H5Dclose);
         MANIKIND_BIND(l, a, Dcreate2, H5Dcreate2);
+        MANIKIND_BIND(l, a, Dget_offset, H5Dget_offset);
         MANIKIND_BIND(l, a, Dget_space, H5Dget_space);
         MANIKIND_BIND(l, a, Dget_type, H5Dget_type);
         MANIKIND_BIND(l, a, Dopen2, H5Dopen2);
@@ -88,6 +98,11 @@ const H5Api& h5() {
         MANIKIND_BIND(l, a, Gcreate2, H5Gcreate2);
         MANIKIND_BIND(l, a, Gopen2, H5Gopen2);
         MANIKIND_BIND(l, a, Ldelete, H5Ldelete);
+        MANIKIND_BIND(l, a, Pclose, H5Pclose);
+        MANIKIND_BIND(l, a, Pcreate, H5Pcreate);
+        MANIKIND_BIND(l, a, Pset_alloc_time, H5Pset_alloc_time);
+        MANIKIND_BIND(l, a, Pset_fill_time, H5Pset_fill_time);
+        MANIKIND_BIND(l, a, Pset_layout, H5Pset_layout);
         MANIKIND_BIND(l, a, Lexists, H5Lexists);
         MANIKIND_BIND(l, a, Sclose, H5Sclose);
         MANIKIND_BIND(l, a, Screate, H5Screate);
@@ -116,6 +131,7 @@ const H5Api& h5() {
         a.c_s1 = global("H5T_C_S1_g");
         a.ieee_f64le = global("H5T_IEEE_F64LE_g");
         a.std_i64le = global("H5T_STD_I64LE_g");
+        a.dataset_create = global("H5P_CLS_DATASET_CREATE_ID_g");
     });
 }
 
@@ -202,6 +218,26 @@ public:
         check(h5().Dwrite(set.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, text.data()) >= 0, "writing " + name);
     }
 
+    // The same kind of dataset, `size` bytes, whose bytes the caller writes itself once the file
+    // is closed, at the returned file offset: contiguous, its space allocated now and never
+    // filled by the library, so the region is the string's raw bytes (H5Dget_offset, the
+    // library's direct access to a contiguous dataset). A reader sees an ordinary string.
+    std::uint64_t reserve_string_dataset(hid_t parent, const std::string& name, std::size_t size) {
+        Handle type(fixed_string_type(size), h5().Tclose);
+        Handle space(h5().Screate(H5S_SCALAR), h5().Sclose);
+        Handle create(h5().Pcreate(h5().dataset_create), h5().Pclose);
+        check(create.ok() && h5().Pset_layout(create.get(), H5D_CONTIGUOUS) >= 0 &&
+                  h5().Pset_alloc_time(create.get(), H5D_ALLOC_TIME_EARLY) >= 0 &&
+                  h5().Pset_fill_time(create.get(), H5D_FILL_TIME_NEVER) >= 0,
+              "setting up dataset " + name);
+        Handle set(h5().Dcreate2(parent, name.c_str(), type.get(), space.get(), H5P_DEFAULT, create.get(), H5P_DEFAULT),
+                   h5().Dclose);
+        check(set.ok(), "creating dataset " + name);
+        const haddr_t at = h5().Dget_offset(set.get());
+        check(at != HADDR_UNDEF, "placing dataset " + name);
+        return static_cast<std::uint64_t>(at);
+    }
+
     // Fixed-length strings, one per element, padded with NUL (a char matrix in Octave).
     void strings_dataset(hid_t parent, const std::string& name, const std::vector<std::string>& texts) {
         std::size_t width = 1;
@@ -286,17 +322,30 @@ private:
     Handle file_;
 };
 
-// Results per case in columns: what a script plots without parsing JSON; the whole `manikin
-// analyze --json` document beside them, written a case at a time (analysis::write_json: 14 MB
-// of text at 450 trials, where the JSON tree of it had made the export's peak grow with the
-// campaign).
-void write_results(Writer& w, hid_t parent, const analysis::CampaignResult& result) {
-    Handle results = w.group(parent, "results");
-    {
-        std::ostringstream text;
-        analysis::write_json(text, result, 0);
-        w.string_dataset(results.get(), "analysis_json", std::move(text).str());  // the buffer itself, not a copy
+// Counts what is written to it and keeps none of it.
+class CountingBuffer : public std::streambuf {
+public:
+    std::size_t bytes = 0;
+
+protected:
+    int_type overflow(int_type c) override {
+        if (!traits_type::eq_int_type(c, traits_type::eof())) ++bytes;
+        return traits_type::not_eof(c);
     }
+    std::streamsize xsputn(const char*, std::streamsize n) override {
+        bytes += static_cast<std::size_t>(n);
+        return n;
+    }
+};
+
+// Results per case in columns: what a script plots without parsing JSON; the whole `manikin
+// analyze --json` document beside them (analysis_json: 14 MB of text at 450 trials). Its text
+// is never held: its length is counted first (analysis::write_json into a counter), its place
+// in the file reserved here, and its bytes streamed there once the file is closed (finish).
+// Returns that place.
+std::uint64_t write_results(Writer& w, hid_t parent, const analysis::CampaignResult& result, std::size_t json_bytes) {
+    Handle results = w.group(parent, "results");
+    const std::uint64_t json_at = w.reserve_string_dataset(results.get(), "analysis_json", json_bytes);
     std::vector<std::int32_t> case_ids, n;
     std::vector<double> q, u95, k, u_a, u_b;
     for (const auto& c : result.cases) {
@@ -317,6 +366,7 @@ void write_results(Writer& w, hid_t parent, const analysis::CampaignResult& resu
     w.dataset(results.get(), "u_a_w_m2", u_a, h5().native_double, "W/m²");
     w.dataset(results.get(), "u_b_w_m2", u_b, h5().native_double, "W/m²");
     w.attribute(results.get(), "heat_flux_sign", std::string(analysis::kHeatFluxSign));
+    return json_at;
 }
 
 // The root's attributes, the zone map and the notebook: everything but the trials and results.
@@ -475,9 +525,26 @@ void Hdf5CampaignFile::write_trial(const analysis::Campaign& campaign, const ana
 void Hdf5CampaignFile::finish(const analysis::CampaignResult& analysis) {
     auto& w = impl_->writer;
     impl_->trials.close();
-    write_results(w, w.root(), analysis);
+    CountingBuffer counter;
+    {
+        std::ostream counting(&counter);
+        analysis::write_json(counting, analysis, 0);
+    }
+    const std::uint64_t json_at = write_results(w, w.root(), analysis, counter.bytes);
     w.check(h5().Fflush(w.root(), H5F_SCOPE_GLOBAL) >= 0, "flushing");
     w.close();
+    {
+        // The analysis document into the place reserved for it, as it is formatted (memory flat
+        // in the number of trials, issue 36). The same result gives the same bytes; the count
+        // is checked all the same.
+        std::fstream out(impl_->partial, std::ios::in | std::ios::out | std::ios::binary);
+        out.seekp(static_cast<std::streamoff>(json_at));
+        analysis::write_json(out, analysis, 0);
+        out.flush();
+        const auto end = out.tellp();
+        if (!out || end < 0 || static_cast<std::uint64_t>(end) - json_at != counter.bytes)
+            throw UserError(fmt::format("{}: writing the analysis document failed (disk full?)", impl_->partial.string()));
+    }
     std::filesystem::rename(impl_->partial, impl_->file);
     impl_->finished = true;
 }
