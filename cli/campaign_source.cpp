@@ -17,17 +17,20 @@
 namespace manikind::cli {
 namespace {
 
-// A private folder under $TMPDIR (or /tmp), removed with everything in it: the pulled database
-// and SQLite's -wal and -shm files beside it.
+// A new folder under $TMPDIR (or /tmp) that only this user can enter (mkdtemp).
+std::filesystem::path make_private_folder() {
+    const char* tmpdir = std::getenv("TMPDIR");
+    std::string pattern = std::string(tmpdir && *tmpdir ? tmpdir : "/tmp") + "/manikin-archive-XXXXXX";
+    if (!mkdtemp(pattern.data()))
+        throw UserError(fmt::format("cannot create a temporary folder {}: {}", pattern, std::strerror(errno)));
+    return pattern;
+}
+
+// Such a folder, removed with everything in it: the pulled database and SQLite's -wal and -shm
+// files beside it.
 class TempFolder {
 public:
-    TempFolder() {
-        const char* tmpdir = std::getenv("TMPDIR");
-        std::string pattern = std::string(tmpdir && *tmpdir ? tmpdir : "/tmp") + "/manikin-archive-XXXXXX";
-        if (!mkdtemp(pattern.data()))
-            throw UserError(fmt::format("cannot create a temporary folder {}: {}", pattern, std::strerror(errno)));
-        path_ = pattern;
-    }
+    TempFolder() : path_(make_private_folder()) {}
     TempFolder(const TempFolder&) = delete;
     TempFolder& operator=(const TempFolder&) = delete;
     ~TempFolder() {
@@ -70,6 +73,26 @@ analysis::Campaign campaign_from_archive(const std::string& conninfo, const std:
         c.provenance["database"] = fmt::format("archive {} lab {}", pulled.archive, lab_id);
     }  // closed before the folder goes
     return c;
+}
+
+PulledCampaign::PulledCampaign(const std::string& conninfo, const std::string& lab_id, const std::string& campaign_name)
+    : folder_(make_private_folder()) {
+    try {
+        db_.emplace(recorder::Database::open(folder_ / "pulled.db"));
+        const auto pulled = archive::pull_campaign(conninfo, lab_id, campaign_name, *db_);
+        source_ = fmt::format("archive {} lab {}", pulled.archive, lab_id);
+    } catch (...) {
+        db_.reset();  // closed before its folder goes
+        std::error_code ec;
+        std::filesystem::remove_all(folder_, ec);
+        throw;
+    }
+}
+
+PulledCampaign::~PulledCampaign() {
+    db_.reset();
+    std::error_code ec;
+    std::filesystem::remove_all(folder_, ec);
 }
 
 analysis::Campaign read_campaign_source(const CampaignSource& source, const analysis::ReadOptions& options) {

@@ -3,11 +3,14 @@
 // database with --db FILE [--campaign NAME], or the PostgreSQL archive with --archive CONNINFO
 // --lab ID --campaign NAME. One rule for every command that reads campaigns (analyze, reconcile;
 // docs/cli.md).
+#include <filesystem>
+#include <optional>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "analysis/recording.hpp"
+#include "store/database.hpp"
 
 namespace manikind::cli {
 
@@ -29,5 +32,23 @@ analysis::Campaign read_campaign_source(const CampaignSource& source, const anal
 // returns or throws) and read by campaign_from_database, as a lab's own file would be.
 analysis::Campaign campaign_from_archive(const std::string& conninfo, const std::string& lab_id,
                                          const std::string& campaign_name);
+
+// The same pull, kept open for a reader that goes a trial at a time (`manikin export`: memory
+// flat in the campaign's length, as from a lab's own file). The file and its folder go with it.
+class PulledCampaign {
+public:
+    PulledCampaign(const std::string& conninfo, const std::string& lab_id, const std::string& campaign_name);
+    ~PulledCampaign();
+    PulledCampaign(const PulledCampaign&) = delete;
+    PulledCampaign& operator=(const PulledCampaign&) = delete;
+    recorder::Database& database() { return *db_; }
+    // Where the numbers came from, for the campaign's provenance (no password: conninfo may hold one).
+    const std::string& source() const { return source_; }
+
+private:
+    std::filesystem::path folder_;
+    std::optional<recorder::Database> db_;
+    std::string source_;
+};
 
 }  // namespace manikind::cli

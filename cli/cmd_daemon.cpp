@@ -726,20 +726,21 @@ void add_daemon_commands(CLI::App& app) {
             std::vector<std::filesystem::path> inputs;
             if (o->archive.empty()) inputs.emplace_back(o->db);
             ExportTarget target(o->out, o->format == "hdf5" ? ExportShape::file : ExportShape::folder, o->force, inputs);
-            // From the database one trial at a time: read, written, freed (memory: one trial's,
-            // whatever the campaign's length). From the archive: the campaign pulled whole.
+            // One trial at a time: read, written, freed (memory: one trial's, whatever the
+            // campaign's length). From the archive: pulled into a temporary file first, then read
+            // from it the same way.
             std::optional<recorder::Database> database;
-            std::unique_ptr<CampaignReader> reader;
-            analysis::Campaign pulled;
+            std::optional<PulledCampaign> pulled;
             if (!o->archive.empty()) {
                 if (o->lab.empty()) throw UserError("--archive needs --lab <id>: the lab the campaign was pushed under");
-                pulled = campaign_from_archive(o->archive, o->lab, o->campaign);
+                pulled.emplace(o->archive, o->lab, o->campaign);
             } else {
                 database.emplace(recorder::Database::open_read_only(o->db));
-                // A trial still acquiring goes too, up to its last committed reading, marked partial.
-                reader = std::make_unique<CampaignReader>(*database, o->campaign, 5.0, true);
             }
-            analysis::Campaign& c = reader ? reader->campaign() : pulled;
+            // A trial still acquiring goes too, up to its last committed reading, marked partial.
+            auto reader = std::make_unique<CampaignReader>(pulled ? pulled->database() : *database, o->campaign, 5.0, true);
+            analysis::Campaign& c = reader->campaign();
+            if (pulled) c.provenance["database"] = pulled->source();
             c.provenance["exported_utc"] = analysis::iso_utc_ms(
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
             // Progress on stderr where a person watches: the trial count as it goes.
@@ -749,14 +750,7 @@ void add_daemon_commands(CLI::App& app) {
             };
             ExportCounts counts;
             try {
-                if (!reader) {
-                    for (const auto& t : c.trials) {
-                        counts.rows += t.data.rows();
-                        counts.last_t_s.push_back(t.data.t_s.empty() ? 0.0 : t.data.t_s.back());
-                    }
-                    if (o->format == "hdf5") write_campaign_hdf5(target.staging(), c, analysis::analyze_campaign(c));
-                    else analysis::write_campaign(target.staging(), c);
-                } else if (o->format == "hdf5") {
+                if (o->format == "hdf5") {
                     // The analysis beside the data, from each trial's summary as it passes.
                     Hdf5CampaignFile file(target.staging(), c);
                     std::vector<analysis::TrialResult> summaries;

@@ -10,6 +10,8 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <optional>
@@ -69,6 +71,11 @@ std::int64_t archive_count(const std::string& conninfo, const std::string& sql) 
 }
 
 using manikind::test::run_manikin;
+
+std::string read_file(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
 
 constexpr std::int64_t second_ns = 1'000'000'000;
 
@@ -466,6 +473,27 @@ TEST_CASE("archive pull gives analyze the same campaign as the lab database", "[
         REQUIRE(from_archive.status == 0);
         CHECK(nlohmann::json::parse(from_db.out)["cases"].size() == 2);
         CHECK(from_archive.out == from_db.out);
+
+        // manikin export --archive reads the pulled file a trial at a time, as from the lab's own:
+        // the same trials, byte for byte, and the archive named as the source.
+        const auto csv_db = tmp.path() / "export-db", csv_archive = tmp.path() / "export-archive";
+        REQUIRE(run_manikin("export --db " + db + " " + name + " " + csv_db.string() + " >/dev/null").status == 0);
+        REQUIRE(run_manikin("export --archive '" + server.conninfo() + "' --lab lab-7 " + name + " " + csv_archive.string() +
+                            " >/dev/null")
+                    .status == 0);
+        std::size_t compared = 0;
+        for (const auto& f : std::filesystem::directory_iterator(csv_db / "trials")) {
+            const auto other = csv_archive / "trials" / f.path().filename();
+            REQUIRE(std::filesystem::exists(other));
+            CHECK(read_file(f.path()) == read_file(other));
+            ++compared;
+        }
+        CHECK(compared == 4);
+        const auto meta = nlohmann::json::parse(read_file(csv_archive / "campaign.json"));
+        CHECK_THAT(meta["provenance"]["database"].get<std::string>(), Catch::Contains("lab lab-7"));
+        REQUIRE(run_manikin("export --archive '" + server.conninfo() + "' --lab lab-7 " + name + " " +
+                            (tmp.path() / "a.h5").string() + " --format hdf5 >/dev/null")
+                    .status == 0);
 
         // The temporary database is gone afterwards.
         const auto unknown =
