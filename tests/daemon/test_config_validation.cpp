@@ -7,7 +7,6 @@
 #include <unistd.h>
 
 #include <array>
-#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -108,12 +107,11 @@ TEST_CASE("a directory as a register map is refused as a directory, naming the c
 TEST_CASE("/dev/zero as a register map is refused at once (stat first, never read to the end)", "[daemon][config]") {
     TempDir dir;
     const auto file = dir.write("lab.toml", "[devices.chamber]\nregister_map = \"/dev/zero\"\n");
-    const auto t0 = std::chrono::steady_clock::now();
+    // "not a regular file" is the stat's verdict: a reader of the file would have had none to give
+    // (and no wall-clock cap decides this: a loaded machine must not fail it).
     const auto p = joined(problems_of(file));
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     CHECK_THAT(p, Catch::Contains(file.string() + ":2:") && Catch::Contains("devices.chamber.register_map: /dev/zero: ") &&
                       Catch::Contains("not a regular file"));
-    CHECK(seconds < 1.0);
 }
 
 TEST_CASE("a FIFO, a directory and a file over 1 MiB are refused as configuration files without being read", "[daemon][config]") {
