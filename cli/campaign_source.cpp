@@ -26,23 +26,6 @@ std::filesystem::path make_private_folder() {
     return pattern;
 }
 
-// Such a folder, removed with everything in it: the pulled database and SQLite's -wal and -shm
-// files beside it.
-class TempFolder {
-public:
-    TempFolder() : path_(make_private_folder()) {}
-    TempFolder(const TempFolder&) = delete;
-    TempFolder& operator=(const TempFolder&) = delete;
-    ~TempFolder() {
-        std::error_code ec;
-        std::filesystem::remove_all(path_, ec);
-    }
-    const std::filesystem::path& path() const { return path_; }
-
-private:
-    std::filesystem::path path_;
-};
-
 }  // namespace
 
 void add_campaign_source_options(CLI::App* cmd, CampaignSource& source) {
@@ -63,15 +46,9 @@ void add_campaign_source_options(CLI::App* cmd, CampaignSource& source) {
 
 analysis::Campaign campaign_from_archive(const std::string& conninfo, const std::string& lab_id,
                                          const std::string& campaign_name) {
-    TempFolder tmp;
-    analysis::Campaign c;
-    {
-        auto db = recorder::Database::open(tmp.path() / "pulled.db");
-        const auto pulled = archive::pull_campaign(conninfo, lab_id, campaign_name, db);
-        c = campaign_from_database(db, campaign_name);
-        // Not the temporary file's name: where the numbers came from (no password, conninfo may hold one).
-        c.provenance["database"] = fmt::format("archive {} lab {}", pulled.archive, lab_id);
-    }  // closed before the folder goes
+    PulledCampaign pulled(conninfo, lab_id, campaign_name);  // its file and folder go when this returns
+    analysis::Campaign c = campaign_from_database(pulled.database(), campaign_name);
+    c.provenance["database"] = pulled.source();  // not the temporary file's name
     return c;
 }
 
