@@ -7,7 +7,7 @@
 //   3. the coverage of the 95 % interval per term over M campaigns each.
 //   4. the power check: each candidate's printed 80 % limit (`--power`, 3 replicates) put into
 //      campaigns made by the generator and run through the whole of reconcile: how often it is named.
-// Usage: bench_reconcile [nulls=100] [coverage_runs=30] [power_runs=0]
+// Usage: bench_reconcile [nulls=100] [coverage_runs=30] [power_runs=0]   (environment knobs: BENCH_* below)
 #include <algorithm>
 #include <cmath>
 #include <chrono>
@@ -35,7 +35,7 @@ namespace {
 
 std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersion& world, std::uint64_t seed, int replicates = 3,
                                                  std::optional<rc::CarriedNoise> carried = std::nullopt,
-                                                 bool probes_within_spec = false) {
+                                                 bool probes_within_spec = false, std::uint64_t lab_seed = 0) {
     sim::GeneratorOptions g;
     g.seed = seed;
     g.world = world;
@@ -44,7 +44,9 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
         // A real lab's probes: each off by a fixed calibration error, uniform within its
         // specification's limit (the campaign's `instruments`), the same in every trial.
         const auto specs = analysis::default_instrument_specs();
-        std::mt19937_64 rng(seed ^ 0x9e3779b97f4a7c15ULL);
+        // `lab_seed`: the lab whose probes these are (a lab's next campaign keeps its probes'
+        // calibration errors); 0: each campaign is its own lab.
+        std::mt19937_64 rng((lab_seed != 0 ? lab_seed : seed) ^ 0x9e3779b97f4a7c15ULL);
         std::uniform_real_distribution<double> within(-1.0, 1.0);
         auto limit = [&](const char* channel, double reading) {
             const auto it = specs.find(channel);
@@ -56,6 +58,7 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
         // ... and the manikin's flux calibration, within the heat-flux spec (a + b |q|).
         g.flux_calibration_offset_w_m2 = limit("heat_flux_w_m2", 0.0) * within(rng);
         g.flux_calibration_gain = (limit("heat_flux_w_m2", 1.0) - limit("heat_flux_w_m2", 0.0)) * within(rng);
+        if (std::getenv("BENCH_PRINT_PROBES")) std::printf("seed %llu biases air %.4f rh %.4f wall %.4f offset %.4f gain %.5f\n", static_cast<unsigned long long>(seed), g.probe_air_bias_c, g.probe_rh_bias_pct, g.probe_wall_bias_c, g.flux_calibration_offset_w_m2, g.flux_calibration_gain);
     }
     const auto campaign = simulate_campaign("bench", sim::table_s3_cases(), g);
     const auto result = analysis::analyze_campaign(campaign);
@@ -153,8 +156,9 @@ int main(int argc, char** argv) {
         const int runs = argc > 1 ? std::atoi(argv[1]) : 10;
         for (int i = 0; i < runs; ++i) {
             const auto seed = 7000 + static_cast<std::uint64_t>(i);
-            const auto [bg, lg, pg] = beta(*campaign_model({"world", {}}, seed, 3, std::nullopt, within_spec),
-                                           *campaign_model({"world", {term}}, seed, 3, std::nullopt, within_spec));
+            const std::uint64_t lab = std::getenv("BENCH_LAB") ? std::strtoull(std::getenv("BENCH_LAB"), nullptr, 10) : 0;
+            const auto [bg, lg, pg] = beta(*campaign_model({"world", {}}, seed, 3, std::nullopt, within_spec, lab),
+                                           *campaign_model({"world", {term}}, seed, 3, std::nullopt, within_spec, lab));
             const auto [bp, lp, pp] = beta(*simulator->draw({}, 3, 1000 + static_cast<std::uint64_t>(i)),
                                            *simulator->draw({term}, 3, 1000 + static_cast<std::uint64_t>(i)));
             std::printf("%2d generator beta %.3f lambda %6.2f null_proj %6.2f | planner beta %.3f lambda %6.2f null_proj %6.2f\n",
@@ -309,11 +313,50 @@ int main(int argc, char** argv) {
         std::printf("coverage of the 95 %% interval, %s %s = %g: %d of %d (%.0f %%)\n", t.term, t.parameter, t.value, covered,
                     coverage_runs, 100.0 * covered / coverage_runs);
     }
+    // BENCH_POWER_AT=term:region:parameter:v1,v2,...: the generator's power curve (power_runs
+    // campaigns per value, the power check's seeds), to hold against the planner's `tried` points.
+    if (const char* at = std::getenv("BENCH_POWER_AT"); at && power_runs > 0) {
+        const std::string spec = at;
+        const auto c1 = spec.find(':'), c2 = c1 == std::string::npos ? c1 : spec.find(':', c1 + 1),
+                   c3 = c2 == std::string::npos ? c2 : spec.find(':', c2 + 1);
+        if (c3 == std::string::npos) {
+            std::fprintf(stderr, "BENCH_POWER_AT: expected term:region:parameter:v1,v2 (region may be empty), got '%s'\n", at);
+            return 2;
+        }
+        const std::string term = spec.substr(0, c1), region = spec.substr(c1 + 1, c2 - c1 - 1), param = spec.substr(c2 + 1, c3 - c2 - 1);
+        const std::string label = term + (region.empty() ? "" : ":" + region);
+        std::string values = spec.substr(c3 + 1) + ",";
+        // BENCH_POWER_AT_PLANNER=seed: the same curve from the planner's draws of that planning campaign.
+        const char* planner_seed = std::getenv("BENCH_POWER_AT_PLANNER");
+        const auto planning = planner_seed ? campaign_model({"world", {}}, std::strtoull(planner_seed, nullptr, 10), 3, std::nullopt, true) : nullptr;
+        const rc::Options o;
+        const auto simulator = planning ? planning->campaign_simulator(o.instruments, 1.0) : nullptr;
+        // BENCH_LAB=s: the generator's campaigns all in the lab of planning seed s (its probes).
+        const std::uint64_t lab = std::getenv("BENCH_LAB") ? std::strtoull(std::getenv("BENCH_LAB"), nullptr, 10) : 0;
+        for (std::size_t b = 0, e; (e = values.find(',', b)) != std::string::npos; b = e + 1) {
+            const double v = std::atof(values.substr(b, e - b).c_str());
+            int named = 0;
+            for (int i = 0; i < power_runs; ++i) {
+                const std::vector<physics::twin::Term> truth = {{term, {{param, v}}, region, {}}};
+                const auto m = simulator ? simulator->draw(truth, 3, o.seed + 7919u * static_cast<std::uint64_t>(i + 1))
+                                         : campaign_model({"world", truth}, 7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true, lab);
+                const auto r = rc::reconcile(*m);
+                named += r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label ? 1 : 0;
+            }
+            const auto [lo, hi] = binomial_interval(named, power_runs);
+            std::printf("%s %s %s = %g: named in %d of %d (%.0f %%, 95 %% [%.0f, %.0f] %%)\n", simulator ? "planner" : "generator", label.c_str(), param.c_str(), v, named,
+                        power_runs, 100.0 * named / power_runs, 100.0 * lo, 100.0 * hi);
+            std::fflush(stdout);
+        }
+        return 0;
+    }
     // 4. Power at the printed limits, through the whole decision.
     if (power_runs > 0) {
         // Every campaign here, the planning one too, has probes off within their specification,
         // as a real lab's are (the generator's default probes are exact).
-        const auto planning = campaign_model({"world", {}}, 77, 3, std::nullopt, true);
+        // BENCH_PLANNING_SEED=s: another planning campaign (default 77).
+        const std::uint64_t planning_seed = std::getenv("BENCH_PLANNING_SEED") ? std::strtoull(std::getenv("BENCH_PLANNING_SEED"), nullptr, 10) : 77;
+        const auto planning = campaign_model({"world", {}}, planning_seed, 3, std::nullopt, true);
         rc::PowerOptions po;
         // BENCH_POWER_CAMPAIGNS=n: the planner's campaigns per value tried (--power-campaigns).
         if (const char* e = std::getenv("BENCH_POWER_CAMPAIGNS")) po.campaigns = std::max(1, std::atoi(e));
@@ -335,6 +378,12 @@ int main(int argc, char** argv) {
         }
         std::fflush(stdout);
         if (std::getenv("BENCH_PLAN_ONLY")) return 0;
+        // The limit is the planning lab's: its next campaigns keep its probes and its manikin's
+        // calibration (the errors the planning campaign's recorded values carry). BENCH_CHECK_LABS=own:
+        // every check campaign a lab of its own, as before 2026-11-27.
+        const bool own_labs = std::getenv("BENCH_CHECK_LABS") && std::string(std::getenv("BENCH_CHECK_LABS")) == "own";
+        const std::uint64_t check_lab = own_labs ? 0 : planning_seed;
+        std::printf("power check campaigns: %s\n", own_labs ? "each its own lab" : "the planning campaign's lab (its probes and calibration)");
         struct Term {
             const char* term;
             const char* region;
@@ -353,7 +402,7 @@ int main(int argc, char** argv) {
             int named = 0;
             for (int i = 0; i < power_runs; ++i) {
                 const auto m = campaign_model({"world", {{t.term, {{it->parameter, *it->value}}, t.region, {}}}},
-                                              7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true);
+                                              7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true, check_lab);
                 const auto r = rc::reconcile(*m);
                 const bool hit = r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label;
                 named += hit ? 1 : 0;
