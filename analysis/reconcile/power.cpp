@@ -193,9 +193,9 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     o.null_threshold = threshold;
                     o.grid_steps = kPlanningGridSteps;
                     // Pairs are not tried: in these draws they were claimed with the concealed term
-                    // far more often than in the lab's own campaigns (mixed convection, the wall and
-                    // the air bias then printed limits named in 98-100 % of them; docs/reconcile.md,
-                    // "Detection limits"), and they double the time.
+                    // more often than in the generator's campaigns (mixed convection, the wall and
+                    // the air bias then printed limits 1.0-1.6x as large; docs/reconcile.md,
+                    // "Detection limits"), and they took 2.9x the time.
                     o.try_pairs = false;
                     const auto truth = to_twin_terms({library[k]}, {theta});
                     PowerPoint pt;
