@@ -65,6 +65,17 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
     return rc::make_twin_model(rc::case_inputs_from_results(result, campaign.zone_map), {}, std::move(carried));
 }
 
+// A seed from the environment (BENCH_LAB, BENCH_PLANNING_SEED, ...), or `fallback` when unset.
+std::uint64_t env_seed(const char* name, std::uint64_t fallback) {
+    const char* v = std::getenv(name);
+    return v ? std::strtoull(v, nullptr, 10) : fallback;
+}
+
+// The power check's verdict: the concealed term named, and alone.
+bool named_alone(const rc::Report& r, const std::string& label) {
+    return r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label;
+}
+
 // Clopper-Pearson 95 % interval of a binomial proportion.
 std::pair<double, double> binomial_interval(int k, int n) {
     namespace bm = boost::math;
@@ -154,9 +165,9 @@ int main(int argc, char** argv) {
             return std::tuple{delta.dot(cd) / d.dot(cd), d.dot(cd), r0.dot(cd) / std::sqrt(d.dot(cd))};
         };
         const int runs = argc > 1 ? std::atoi(argv[1]) : 10;
+        const std::uint64_t lab = env_seed("BENCH_LAB", 0);  // the generator's campaigns in that lab
         for (int i = 0; i < runs; ++i) {
             const auto seed = 7000 + static_cast<std::uint64_t>(i);
-            const std::uint64_t lab = std::getenv("BENCH_LAB") ? std::strtoull(std::getenv("BENCH_LAB"), nullptr, 10) : 0;
             const auto [bg, lg, pg] = beta(*campaign_model({"world", {}}, seed, 3, std::nullopt, within_spec, lab),
                                            *campaign_model({"world", {term}}, seed, 3, std::nullopt, within_spec, lab));
             const auto [bp, lp, pp] = beta(*simulator->draw({}, 3, 1000 + static_cast<std::uint64_t>(i)),
@@ -332,7 +343,7 @@ int main(int argc, char** argv) {
         const rc::Options o;
         const auto simulator = planning ? planning->campaign_simulator(o.instruments, 1.0) : nullptr;
         // BENCH_LAB=s: the generator's campaigns all in the lab of planning seed s (its probes).
-        const std::uint64_t lab = std::getenv("BENCH_LAB") ? std::strtoull(std::getenv("BENCH_LAB"), nullptr, 10) : 0;
+        const std::uint64_t lab = env_seed("BENCH_LAB", 0);
         for (std::size_t b = 0, e; (e = values.find(',', b)) != std::string::npos; b = e + 1) {
             const double v = std::atof(values.substr(b, e - b).c_str());
             int named = 0;
@@ -341,7 +352,7 @@ int main(int argc, char** argv) {
                 const auto m = simulator ? simulator->draw(truth, 3, o.seed + 7919u * static_cast<std::uint64_t>(i + 1))
                                          : campaign_model({"world", truth}, 7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true, lab);
                 const auto r = rc::reconcile(*m);
-                named += r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label ? 1 : 0;
+                named += named_alone(r, label) ? 1 : 0;
             }
             const auto [lo, hi] = binomial_interval(named, power_runs);
             std::printf("%s %s %s = %g: named in %d of %d (%.0f %%, 95 %% [%.0f, %.0f] %%)\n", simulator ? "planner" : "generator", label.c_str(), param.c_str(), v, named,
@@ -355,7 +366,7 @@ int main(int argc, char** argv) {
         // Every campaign here, the planning one too, has probes off within their specification,
         // as a real lab's are (the generator's default probes are exact).
         // BENCH_PLANNING_SEED=s: another planning campaign (default 77).
-        const std::uint64_t planning_seed = std::getenv("BENCH_PLANNING_SEED") ? std::strtoull(std::getenv("BENCH_PLANNING_SEED"), nullptr, 10) : 77;
+        const std::uint64_t planning_seed = env_seed("BENCH_PLANNING_SEED", 77);
         const auto planning = campaign_model({"world", {}}, planning_seed, 3, std::nullopt, true);
         rc::PowerOptions po;
         // BENCH_POWER_CAMPAIGNS=n: the planner's campaigns per value tried (--power-campaigns).
@@ -405,7 +416,7 @@ int main(int argc, char** argv) {
                 const auto m = campaign_model({"world", {{t.term, {{it->parameter, *it->value}}, t.region, {}}}},
                                               7000 + static_cast<std::uint64_t>(i), 3, std::nullopt, true, check_lab);
                 const auto r = rc::reconcile(*m);
-                const bool hit = r.explanation && r.explanation->terms.size() == 1 && r.explanation->label == label;
+                const bool hit = named_alone(r, label);
                 named += hit ? 1 : 0;
                 // BENCH_VERBOSE=1: what each miss said instead (the whole decision, not only the null).
                 if (!hit && std::getenv("BENCH_VERBOSE")) {

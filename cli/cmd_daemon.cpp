@@ -738,8 +738,8 @@ void add_daemon_commands(CLI::App& app) {
                 database.emplace(recorder::Database::open_read_only(o->db));
             }
             // A trial still acquiring goes too, up to its last committed reading, marked partial.
-            auto reader = std::make_unique<CampaignReader>(pulled ? pulled->database() : *database, o->campaign, 5.0, true);
-            analysis::Campaign& c = reader->campaign();
+            CampaignReader reader(pulled ? pulled->database() : *database, o->campaign, 5.0, true);
+            analysis::Campaign& c = reader.campaign();
             if (pulled) c.provenance["database"] = pulled->source();
             c.provenance["exported_utc"] = analysis::iso_utc_ms(
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
@@ -755,7 +755,7 @@ void add_daemon_commands(CLI::App& app) {
                     Hdf5CampaignFile file(target.staging(), c);
                     std::vector<analysis::TrialResult> summaries;
                     counts = stream_trials(
-                        *reader,
+                        reader,
                         [&](std::size_t s, analysis::TrialData&& data, bool again) {
                             const analysis::Trial trial{c.trials[s].info, std::move(data)};
                             // The summary once; a trial written again only gains an empty column.
@@ -765,7 +765,7 @@ void add_daemon_commands(CLI::App& app) {
                         progress);
                     file.finish(analysis::aggregate_trials(c, summaries));
                 } else {
-                    counts = export_campaign_csv(*reader, target.staging(), progress);
+                    counts = export_campaign_csv(reader, target.staging(), progress);
                 }
             } catch (const analysis::InputError& e) {  // a write failed (a full disk): named, exit 2
                 throw UserError(fmt::format("{}: the export was not written: {}", o->out, e.what()), "write_failed");
