@@ -395,24 +395,49 @@ public:
             s_skin_.resize(z_count);
             for (std::size_t z = 0; z < z_count; ++z) s_skin_[z] = std::sqrt(ss_skin[z] / d);
 
-            const auto flux = instruments_.count("heat_flux_w_m2") ? instruments_.at("heat_flux_w_m2") : InstrumentSpec{};
-            u_offset_ = flux.standard_uncertainty(0.0);
-            u_gain_ = flux.standard_uncertainty(1.0) - u_offset_;
+            flux_ = instruments_.count("heat_flux_w_m2") ? instruments_.at("heat_flux_w_m2") : InstrumentSpec{};
         }
 
-        std::unique_ptr<ForwardModel> draw(const std::vector<tw::Term>& truth, int replicates, std::uint64_t seed) const override {
+        std::unique_ptr<ForwardModel> draw(const std::vector<tw::Term>& truth, int replicates, std::uint64_t seed,
+                                           std::vector<tw::Term>* calibration = nullptr) const override {
             if (replicates < 1) return nullptr;
             const std::size_t z_count = model_.first_zones().size();
             const ScatterModel& scatter = scatter_;
             const Instruments& instruments = instruments_;
             const NoiseParts& parts = parts_;
-            const double phi = phi_, s_air = s_air_, s_rh = s_rh_, s_wall = s_wall_, u_offset = u_offset_, u_gain = u_gain_;
+            const double phi = phi_, s_air = s_air_, s_rh = s_rh_, s_wall = s_wall_;
             const std::vector<double>& s_skin = s_skin_;
             std::mt19937_64 rng(seed);
             std::normal_distribution<double> unit(0.0, 1.0);
             auto tau = [&](std::size_t k) { return k < scatter.factor_sd.size() ? scatter.factor_sd[k] : 0.0; };
-            const double probe_air = unit(rng), probe_rh = unit(rng), probe_wall = unit(rng);
-            const double campaign_gain = u_gain * unit(rng), campaign_offset = u_offset * unit(rng);
+            // A calibration error in units of the spec's limit, from the distribution its Type B
+            // assumes (GUM 4.3.7: rectangular within the limit unless the spec says otherwise). A
+            // normal of the same u has tails past the limit: larger probe errors, which showed as
+            // the air bias or the wall beside the concealed term (docs/reconcile.md).
+            auto calibration_error = [&](const char* channel) {
+                const auto it = instruments.find(channel);
+                return standardised_error_draw(it == instruments.end() ? Distribution::rectangular : it->second.distribution, rng);
+            };
+            const double probe_air = calibration_error("air_temp_c"), probe_rh = calibration_error("air_rh_pct"),
+                         probe_wall = calibration_error("wall_temp_c");
+            const double campaign_offset = flux_.limit(0.0) * standardised_error_draw(flux_.distribution, rng);
+            const double campaign_gain = (flux_.limit(1.0) - flux_.limit(0.0)) * standardised_error_draw(flux_.distribution, rng);
+            if (calibration) {
+                // The common part of each probe's error at the first case's reading (the twin's
+                // terms are one value for every case; with phi = 1, as the planner draws, exact).
+                calibration->clear();
+                if (!model_.cases_.empty() && phi > 0.0) {
+                    const auto& c0 = model_.cases_.front().conditions;
+                    auto limit = [&](const char* channel, double reading) {
+                        const auto it = instruments.find(channel);
+                        return it == instruments.end() ? 0.0 : it->second.limit(reading);
+                    };
+                    calibration->push_back({"air_temp_bias", {{"bias_c", std::sqrt(phi) * limit("air_temp_c", c0.air_temp_c) * probe_air}}, "", {}});
+                    if (c0.wall_temp_c)
+                        calibration->push_back(
+                            {"wall_offset", {{"delta_c", -std::sqrt(phi) * limit("wall_temp_c", *c0.wall_temp_c) * probe_wall}}, "", {}});
+                }
+            }
             tw::TwinVersion world = model_.base_;
             world.terms.insert(world.terms.end(), truth.begin(), truth.end());
 
@@ -431,8 +456,9 @@ public:
                 for (std::size_t z = 0; z < z_count; ++z) centre.zones[z].skin_temp_c += s_skin[z] * here * unit(rng);
                 // This case's probe errors: the calibration part common to every case, the rest its own.
                 auto probe = [&](const char* channel, double reading, double common) {
-                    const double u = spec_u(instruments, channel, reading);
-                    return u * (std::sqrt(phi) * common + std::sqrt(1.0 - phi) * unit(rng));
+                    const auto it = instruments.find(channel);
+                    const double limit = it == instruments.end() ? 0.0 : it->second.limit(reading);
+                    return limit * (std::sqrt(phi) * common + std::sqrt(1.0 - phi) * calibration_error(channel));
                 };
                 const double e_air = probe("air_temp_c", mean.air_temp_c, probe_air);
                 const double e_rh = probe("air_rh_pct", mean.air_rh_pct, probe_rh);
@@ -493,7 +519,7 @@ public:
         double phi_ = 1.0;
         double s_air_ = 0.0, s_rh_ = 0.0, s_wall_ = 0.0;
         std::vector<double> s_skin_;
-        double u_offset_ = 0.0, u_gain_ = 0.0;
+        InstrumentSpec flux_;  // the manikin's flux calibration: offset and gain
     };
 
     std::unique_ptr<CampaignSimulator> campaign_simulator(const Instruments& instruments, double shared_fraction) const override {

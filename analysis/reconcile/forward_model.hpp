@@ -79,8 +79,11 @@ class ForwardModel;
 class CampaignSimulator {
 public:
     virtual ~CampaignSimulator() = default;
-    virtual std::unique_ptr<ForwardModel> draw(const std::vector<physics::twin::Term>& truth, int replicates,
-                                               std::uint64_t seed) const = 0;
+    // `calibration` (optional): the drawn probes' errors common to every case, as the twin terms
+    // that would correct them (air_temp_bias at the air probe's error, wall_offset at minus the
+    // wall probe's), for judging a claim beside the concealed term (names_concealed).
+    virtual std::unique_ptr<ForwardModel> draw(const std::vector<physics::twin::Term>& truth, int replicates, std::uint64_t seed,
+                                               std::vector<physics::twin::Term>* calibration = nullptr) const = 0;
 };
 
 // Predicts every point with a set of extra terms on top of its base physics.

@@ -826,6 +826,32 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     return rep;
 }
 
+bool names_concealed(const Report& report, const std::string& label, const std::vector<physics::twin::Term>& calibration) {
+    if (!report.explanation) return false;
+    const CandidateResult& e = *report.explanation;
+    bool found = false;
+    std::size_t at = 0;  // the first parameter of each term in e.values
+    for (const auto& t : e.terms) {
+        const std::size_t n = t.parameters.size();
+        if (t.label() == label) {
+            found = true;
+        } else {
+            // A partner must be one of the campaign's calibration errors, every parameter's 95 %
+            // interval holding its value.
+            const auto c = std::find_if(calibration.begin(), calibration.end(),
+                                        [&](const auto& k) { return k.name == t.term && k.region == t.region && t.zones.empty(); });
+            if (c == calibration.end() || at + n > e.values.size() || at + n > e.interval_lo.size() || at + n > e.interval_hi.size())
+                return false;
+            for (std::size_t j = 0; j < n; ++j) {
+                const auto v = c->parameters.find(t.parameters[j].name);
+                if (v == c->parameters.end() || !(e.interval_lo[at + j] <= v->second && v->second <= e.interval_hi[at + j])) return false;
+            }
+        }
+        at += n;
+    }
+    return found;
+}
+
 CandidateResult fit_candidate(const ForwardModel& model, const std::vector<CandidateTerm>& terms, const Options& opt) {
     const auto& pts = model.points();
     std::vector<std::size_t> idx(pts.size());

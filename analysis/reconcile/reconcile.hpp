@@ -135,9 +135,19 @@ CandidateResult fit_candidate(const ForwardModel& model, const std::vector<Candi
 // design drawn anew with the effect concealed (ForwardModel::campaign_simulator), starting from a fast
 // noncentral-chi2 model of the evidence; where the model cannot draw campaigns (no replicate
 // scatter), the fast model's own simulation checks it (`method`).
+// The planner's verdict on one drawn campaign, and the power check's: the concealed term `label`
+// is named, alone or beside calibration terms (the air probe's bias, the wall's offset) whose 95 %
+// intervals hold that campaign's own calibration errors (`calibration`, as the twin terms that
+// would correct them). Such a pair is a true answer: the physics concealed and the lab's own probe
+// error, both found (a lab's probes are off within their specification, and a large effect
+// elsewhere can make that visible). A partner not in `calibration`, or whose interval misses
+// its value, is a wrong answer.
+bool names_concealed(const Report& report, const std::string& label, const std::vector<physics::twin::Term>& calibration);
+
 struct PowerPoint {
     double value = 0.0;                      // the effect concealed
-    int named = 0, campaigns = 0;            // simulated campaigns in which reconcile named it
+    int named = 0, campaigns = 0;            // simulated campaigns in which reconcile named it (names_concealed)
+    int named_alone = 0;                     // of those, named with no partner
 };
 struct DetectionLimit {
     std::string label;

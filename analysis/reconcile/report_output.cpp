@@ -122,7 +122,7 @@ nlohmann::json power_to_json(const PowerReport& plan) {
                                {"campaigns", d.campaigns}, {"tried", [&] {
                                     nlohmann::json t = nlohmann::json::array();
                                     for (const auto& pt : d.tried)
-                                        t.push_back({{"value", pt.value}, {"named", pt.named}, {"campaigns", pt.campaigns}});
+                                        t.push_back({{"value", pt.value}, {"named", pt.named}, {"named_alone", pt.named_alone}, {"campaigns", pt.campaigns}});
                                     return t;
                                 }()}});
     return j;
@@ -156,9 +156,11 @@ std::string power_to_text(const PowerReport& plan) {
     if (campaigns > 0)
         o << fmt::format("    At n = {0}: each value tried was checked by running reconcile itself on {1} campaigns of this\n"
                          "    design drawn anew with the effect concealed (conditions landing anew, probes and the manikin's\n"
-                         "    calibration off within their specifications, trials scattering as this campaign's do); the value\n"
-                         "    printed is where the share named crosses 80 % between two values tried. Other n: a fast model,\n"
-                         "    scaled per term by how far the whole decision moved it at n = {0} (docs/reconcile.md).\n",
+                         "    calibration off within their specifications, trials scattering as this campaign's do). Named: the\n"
+                         "    term alone, or beside a drawn probe's own calibration error (the air bias, the wall), found within\n"
+                         "    its interval. The value printed is where the share named crosses 80 % between two values tried.\n"
+                         "    Other n: a fast model, scaled per term by how far the whole decision moved it at n = {0}\n"
+                         "    (docs/reconcile.md).\n",
                          plan.campaign_replicates, campaigns);
     else
         o << "    A fast model of the decision only (no replicate scatter to draw campaigns from, or --power-campaigns 0):\n"

@@ -91,6 +91,8 @@ TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at 
             CHECK(l["method"] == "whole decision");
             CHECK(l["simulated_power"].get<double>() >= 0.8);
             CHECK(l["campaigns"].get<int>() >= 5);  // settled after 5 of 6 named, or all 6 tried
+            // Named: alone, or beside a drawn probe's own error (names_concealed); alone is a part.
+            for (const auto& t : l["tried"]) CHECK(t["named_alone"].get<int>() <= t["named"].get<int>());
         } else {
             CHECK(l["method"] == "scaled");
             CHECK(l["simulated_power"].is_null());

@@ -5,6 +5,7 @@
 // and reproducible from their seed.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 
 #include "tests/reconcile/synthetic_campaign.hpp"
@@ -125,4 +126,79 @@ TEST_CASE("planning: where evidence is beyond the null but no term passes and to
         if (r.statement.find("not confined to a few zones") != std::string::npos) ++unexplained;
     }
     CHECK(unexplained >= 1);  // the path is exercised, not only allowed
+}
+
+TEST_CASE("planning: a drawn lab's probes are off within their specification's limit (rectangular, GUM 4.3.7), and the "
+          "errors it reports are the ones in its data", "[reconcile][power]") {
+    const auto model = recorded(15);
+    const rc::Options opt;
+    const auto simulator = model->campaign_simulator(opt.instruments, 1.0);
+    REQUIRE(simulator);
+    const double air_limit = opt.instruments.at("air_temp_c").limit(30.0);
+    const double wall_limit = opt.instruments.at("wall_temp_c").limit(30.0);
+    // 200 labs: a normal draw of the same u (a / sqrt 3) passes the limit in about 8 % of them.
+    int beyond = 0, wide = 0;
+    double largest_air = 0.0;
+    std::uint64_t largest_seed = 0;
+    std::vector<tw::Term> calibration;
+    for (std::uint64_t seed = 1; seed <= 200; ++seed) {
+        REQUIRE(simulator->draw({}, 1, seed, &calibration));
+        REQUIRE(calibration.size() == 2);
+        CHECK(calibration[0].name == "air_temp_bias");
+        CHECK(calibration[1].name == "wall_offset");
+        const double air = calibration[0].parameters.at("bias_c"), wall = calibration[1].parameters.at("delta_c");
+        beyond += std::abs(air) > air_limit || std::abs(wall) > wall_limit ? 1 : 0;
+        wide += std::abs(air) > 0.6 * air_limit ? 1 : 0;  // rectangular: 40 % of labs
+        if (std::abs(air) > largest_air) largest_air = std::abs(air), largest_seed = seed;
+    }
+    CHECK(beyond == 0);
+    CHECK(wide >= 50);
+    // The reported terms correct the drawn campaign: the twin with them fits its fluxes better than
+    // the twin as given, and better than with their signs turned.
+    const auto m = simulator->draw({}, 3, largest_seed, &calibration);
+    std::vector<tw::Term> turned = calibration;
+    turned[0].parameters["bias_c"] *= -1.0;
+    turned[1].parameters["delta_c"] *= -1.0;
+    auto mse = [&](const std::vector<tw::Term>& terms) {
+        const auto q = m->predict(terms);
+        double s = 0.0;
+        for (std::size_t i = 0; i < q.size(); ++i) s += std::pow(m->points()[i].q_exp - q[i], 2);
+        return s / static_cast<double>(q.size());
+    };
+    INFO("air bias " << calibration[0].parameters.at("bias_c") << " degC, wall " << calibration[1].parameters.at("delta_c"));
+    CHECK(mse(calibration) < mse({}));
+    CHECK(mse({}) < mse(turned));
+}
+
+TEST_CASE("planning: the verdict names the concealed term alone or beside the lab's own probe error within its interval, "
+          "nothing else", "[reconcile][power]") {
+    const auto library = rc::candidate_library({});
+    auto term = [&](const std::string& name) {
+        const auto it = std::find_if(library.begin(), library.end(), [&](const auto& c) { return c.term == name; });
+        REQUIRE(it != library.end());
+        return *it;
+    };
+    auto report = [](std::vector<rc::CandidateTerm> terms, std::vector<double> lo, std::vector<double> hi) {
+        rc::Report r;
+        rc::CandidateResult e;
+        for (std::size_t k = 0; k < terms.size(); ++k) e.label += (k ? " + " : "") + terms[k].label();
+        e.terms = std::move(terms);
+        for (std::size_t k = 0; k < lo.size(); ++k) e.values.push_back(0.5 * (lo[k] + hi[k]));
+        e.interval_lo = std::move(lo);
+        e.interval_hi = std::move(hi);
+        r.explanation = e;
+        return r;
+    };
+    const auto textile = term("textile_resistance"), air = term("air_temp_bias"), gamma = term("humidity_buoyancy");
+    const std::vector<tw::Term> lab = {{"air_temp_bias", {{"bias_c", -0.15}}, "", {}}, {"wall_offset", {{"delta_c", 0.07}}, "", {}}};
+    CHECK_FALSE(rc::names_concealed(rc::Report{}, "textile_resistance", lab));
+    CHECK(rc::names_concealed(report({textile}, {0.0008}, {0.0012}), "textile_resistance", lab));
+    CHECK_FALSE(rc::names_concealed(report({gamma}, {10.0}, {30.0}), "textile_resistance", lab));
+    // Beside the lab's air probe error, its interval holding it: both found.
+    CHECK(rc::names_concealed(report({air, textile}, {-0.19, 0.0008}, {-0.12, 0.0012}), "textile_resistance", lab));
+    // An air bias the lab's probe does not have is a wrong partner.
+    CHECK_FALSE(rc::names_concealed(report({air, textile}, {0.10, 0.0008}, {0.20, 0.0012}), "textile_resistance", lab));
+    CHECK_FALSE(rc::names_concealed(report({air, textile}, {-0.19, 0.0008}, {-0.12, 0.0012}), "textile_resistance", {}));
+    // A physics partner is not a calibration error.
+    CHECK_FALSE(rc::names_concealed(report({gamma, textile}, {10.0, 0.0008}, {30.0, 0.0012}), "textile_resistance", lab));
 }
