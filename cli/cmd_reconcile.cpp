@@ -65,7 +65,9 @@ void add_reconcile_command(CLI::App& app) {
                     "is made there (docs/reconcile.md, \"One replicate\")");
     cmd->add_flag("--power", o->power, "Plan instead: per candidate, the smallest effect named with 80 % power for "
                                        "this campaign's cases and noise, at its replicates and at --power-replicates; "
-                                       "each checked by running reconcile on campaigns of this design drawn anew");
+                                       "each checked by running reconcile on campaigns of this design drawn anew "
+                                       "(named: alone, or beside a drawn probe's own calibration error; with "
+                                       "--no-pairs, planned for reconcile without pairs)");
     cmd->add_option("--power-replicates", o->power_replicates, "Replicates per case to plan for (with --power)")
         ->check(CLI::Range(1, 30))
         ->delimiter(',')
