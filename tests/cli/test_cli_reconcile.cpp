@@ -72,9 +72,10 @@ TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at 
           "the others from it, smaller with more replicates", "[cli][reconcile]") {
     const std::string dir = temp_dir("power");
     REQUIRE(run_manikin("simulate-campaign --seed 5 --out " + dir).exit_code == 0);
-    // Three candidates and few campaigns per value keep the test short; the figures are bench_reconcile's.
+    // Two candidates and few campaigns per value keep the test short (with pairs tried, three took
+    // 234 s in CI); the figures are bench_reconcile's.
     const auto r = run_manikin("reconcile " + dir +
-                               " --power --json --power-terms humidity_buoyancy,wall_offset,textile_resistance --power-campaigns 6");
+                               " --power --json --power-terms humidity_buoyancy,wall_offset --power-campaigns 6");
     REQUIRE(r.exit_code == 0);
     const auto j = nlohmann::json::parse(r.out);
     CHECK(j["campaign_replicates"] == 3);
@@ -98,8 +99,8 @@ TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at 
             CHECK(l["simulated_power"].is_null());
         }
     }
-    CHECK(terms == std::set<std::string>{"humidity_buoyancy", "wall_offset", "textile_resistance"});
-    for (const char* term : {"humidity_buoyancy", "wall_offset", "textile_resistance"}) {
+    CHECK(terms == std::set<std::string>{"humidity_buoyancy", "wall_offset"});
+    for (const char* term : {"humidity_buoyancy", "wall_offset"}) {
         INFO(term);
         REQUIRE(limits[term].count(3) == 1);
         REQUIRE(limits[term].count(10) == 1);
