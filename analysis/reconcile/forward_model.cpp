@@ -20,6 +20,12 @@ double spec_u(const Instruments& instruments, const std::string& channel, double
     return it == instruments.end() ? 0.0 : it->second.standard_uncertainty(reading);
 }
 
+// The half-width of a channel's limit at this reading (0 where the campaign gives no spec).
+double spec_limit(const Instruments& instruments, const std::string& channel, double reading) {
+    const auto it = instruments.find(channel);
+    return it == instruments.end() ? 0.0 : it->second.limit(reading);
+}
+
 class TwinModel final : public ForwardModel {
 public:
     TwinModel(std::vector<CaseInput> cases, tw::TwinVersion base) : cases_(std::move(cases)), base_(std::move(base)) {
@@ -428,14 +434,11 @@ public:
                 calibration->clear();
                 if (!model_.cases_.empty() && phi > 0.0) {
                     const auto& c0 = model_.cases_.front().conditions;
-                    auto limit = [&](const char* channel, double reading) {
-                        const auto it = instruments.find(channel);
-                        return it == instruments.end() ? 0.0 : it->second.limit(reading);
-                    };
-                    calibration->push_back({"air_temp_bias", {{"bias_c", std::sqrt(phi) * limit("air_temp_c", c0.air_temp_c) * probe_air}}, "", {}});
+                    calibration->push_back(
+                        {"air_temp_bias", {{"bias_c", std::sqrt(phi) * spec_limit(instruments, "air_temp_c", c0.air_temp_c) * probe_air}}, "", {}});
                     if (c0.wall_temp_c)
                         calibration->push_back(
-                            {"wall_offset", {{"delta_c", -std::sqrt(phi) * limit("wall_temp_c", *c0.wall_temp_c) * probe_wall}}, "", {}});
+                            {"wall_offset", {{"delta_c", -std::sqrt(phi) * spec_limit(instruments, "wall_temp_c", *c0.wall_temp_c) * probe_wall}}, "", {}});
                 }
             }
             tw::TwinVersion world = model_.base_;
@@ -456,9 +459,7 @@ public:
                 for (std::size_t z = 0; z < z_count; ++z) centre.zones[z].skin_temp_c += s_skin[z] * here * unit(rng);
                 // This case's probe errors: the calibration part common to every case, the rest its own.
                 auto probe = [&](const char* channel, double reading, double common) {
-                    const auto it = instruments.find(channel);
-                    const double limit = it == instruments.end() ? 0.0 : it->second.limit(reading);
-                    return limit * (std::sqrt(phi) * common + std::sqrt(1.0 - phi) * calibration_error(channel));
+                    return spec_limit(instruments, channel, reading) * (std::sqrt(phi) * common + std::sqrt(1.0 - phi) * calibration_error(channel));
                 };
                 const double e_air = probe("air_temp_c", mean.air_temp_c, probe_air);
                 const double e_rh = probe("air_rh_pct", mean.air_rh_pct, probe_rh);

@@ -195,8 +195,8 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     // Pairs are tried, as reconcile tries them: a drawn lab's probe error can show
                     // beside a concealed effect (the air bias beside the textile term), and the
                     // pair that names both is a true answer (names_concealed). Counting only the
-                    // term alone, without pairs, the textile term never reached 80 % in two of
-                    // three planning labs (docs/reconcile.md, "Detection limits").
+                    // term alone, without pairs, the textile term never reached 80 % planning from
+                    // the bench's labs 78 and 80 (docs/reconcile.md, "Detection limits").
                     const auto truth = to_twin_terms({library[k]}, {theta});
                     PowerPoint pt;
                     pt.value = theta;
