@@ -100,11 +100,19 @@ public:
 
     // Per case: the twin's response (W/m² per zone) to one unit of each shared error: air
     // temperature (°C), humidity (% RH), wall temperature (°C), a manikin gain and an offset.
-    // The slopes are secants over +-2 standard uncertainties of each probe, not derivatives at a
-    // point: |dT|^(1/4) has a kink at dT = 0, where a derivative overstates how the flux moves
-    // over the range the error really spans (GUM Supplement 1's concern with linearisation).
+    // The slopes are secants, not derivatives at a point: |dT|^(1/4) has a kink at dT = 0, where a
+    // derivative misstates how the flux moves over the range the error really spans (GUM
+    // Supplement 1's concern with linearisation). So the span is the error's own:
+    // - `Span::calibration`, the probes' Type B: +-2 standard uncertainties of each probe;
+    // - `Span::trial`, each trial's own shared errors (a trial's probe and condition scatter, some
+    //   0.05 °C and 0.5 % RH): +-0.05 °C, +-0.25 % RH. Over the calibration's +-0.23 °C the
+    //   isothermal wet cases' secant is a fraction of their slope at the trial's scale, and the
+    //   scatter estimate made up for it: 0.1-0.25 °C of per-trial air error (and 0-4.5 % RH)
+    //   fitted to the generator's 0.05 °C (0.5 % RH), which the planner's draws then pushed
+    //   through every case, hiding humidity buoyancy and the air bias (docs/reconcile.md).
+    enum class Span { calibration, trial };
     static Eigen::MatrixXd case_loadings(const tw::TwinVersion& physics, const CaseInput& in,
-                                         const std::vector<tw::ZoneFlux>& twin_case, const Instruments& instruments) {
+                                         const std::vector<tw::ZoneFlux>& twin_case, const Instruments& instruments, Span span) {
         const auto z_count = static_cast<Eigen::Index>(in.conditions.zones.size());
         Eigen::MatrixXd j = Eigen::MatrixXd::Zero(z_count, 5);
         auto column = [&](Eigen::Index k, double step, auto apply) {
@@ -116,12 +124,13 @@ public:
                 j(z, k) = (fu[static_cast<std::size_t>(z)].q_total_w_m2 - fd[static_cast<std::size_t>(z)].q_total_w_m2) / (2.0 * step);
         };
         const auto& cond = in.conditions;
-        column(0, std::max(0.05, 2.0 * spec_u(instruments, "air_temp_c", cond.air_temp_c)),
+        const bool cal = span == Span::calibration;
+        column(0, cal ? std::max(0.05, 2.0 * spec_u(instruments, "air_temp_c", cond.air_temp_c)) : 0.05,
                [](tw::TrialConditions& t, double d) { t.air_temp_c += d; });
-        column(1, std::max(0.25, 2.0 * spec_u(instruments, "air_rh_pct", cond.air_rh_pct)),
+        column(1, cal ? std::max(0.25, 2.0 * spec_u(instruments, "air_rh_pct", cond.air_rh_pct)) : 0.25,
                [](tw::TrialConditions& t, double d) { t.air_rh_pct += d; });
         if (cond.wall_temp_c)
-            column(2, std::max(0.05, 2.0 * spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)),
+            column(2, cal ? std::max(0.05, 2.0 * spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)) : 0.05,
                    [](tw::TrialConditions& t, double d) { *t.wall_temp_c += d; });
         for (Eigen::Index z = 0; z < z_count; ++z) {
             j(z, 3) = twin_case[static_cast<std::size_t>(z)].q_total_w_m2;
@@ -135,6 +144,7 @@ public:
     struct NoiseParts {
         ReplicateResiduals data;
         Eigen::MatrixXd systematic;   // probes (P) and the manikin's calibration (K)
+        std::vector<Eigen::MatrixXd> calibration_loadings;  // per case, over the probes' Type B span
         NoiseModel meta;              // everything but the covariances
     };
 
@@ -168,7 +178,8 @@ public:
             for (std::size_t z = 0; z < z_count; ++z) abs_q[z] = std::abs(twin_case[z].q_total_w_m2);
             data.residual_w_m2.push_back(std::move(trials));
             data.abs_flux_w_m2.push_back(std::move(abs_q));
-            data.loadings.push_back(case_loadings(physics, in, twin_case, instruments));
+            data.loadings.push_back(case_loadings(physics, in, twin_case, instruments, Span::trial));
+            parts.calibration_loadings.push_back(case_loadings(physics, in, twin_case, instruments, Span::calibration));
         }
 
         const auto flux = instruments.count("heat_flux_w_m2") ? instruments.at("heat_flux_w_m2") : InstrumentSpec{};
@@ -199,7 +210,8 @@ public:
                                  : k == 1 ? spec_u(instruments, "air_rh_pct", cond.air_rh_pct)
                                  : cond.wall_temp_c ? spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)
                                                     : 0.0;
-                for (std::size_t a : rows[c]) g(static_cast<Eigen::Index>(a)) = u * data.loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
+                for (std::size_t a : rows[c])
+                    g(static_cast<Eigen::Index>(a)) = u * parts.calibration_loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
             }
             parts.systematic += shared_fraction * g * g.transpose();
             for (std::size_t c = 0; c < cases_.size(); ++c)

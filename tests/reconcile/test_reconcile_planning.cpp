@@ -111,11 +111,13 @@ TEST_CASE("planning: where evidence is beyond the null but no term passes and to
           "unexplained, never that the twin agrees", "[reconcile][power]") {
     // Found by the planner: a small humidity buoyancy shows at the isothermal cases' kink as many
     // zones' offsets, no single term passing. The statement fell through to "The twin agrees with
-    // the recordings within their noise" while quoting an evidence beyond the null.
+    // the recordings within their noise" while quoting an evidence beyond the null. (At gamma 30
+    // until the per-trial errors' loadings became local secants, 2026-11-27: there the path is
+    // not taken in these 12 draws, at 20 it is.)
     const auto model = recorded(12);
     rc::Options opt;
     opt.null_simulations = 400;
-    const tw::Term gamma{"humidity_buoyancy", {{"gamma", 30.0}}, "", {}};
+    const tw::Term gamma{"humidity_buoyancy", {{"gamma", 20.0}}, "", {}};
     const auto simulator = model->campaign_simulator(opt.instruments, 1.0);
     int unexplained = 0;
     for (std::uint64_t seed = 1; seed <= 12; ++seed) {
