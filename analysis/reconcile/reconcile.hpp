@@ -149,6 +149,11 @@ struct PowerPoint {
     int named = 0, campaigns = 0;            // simulated campaigns in which reconcile named it (names_concealed)
     int named_alone = 0;                     // of those, named with no partner
 };
+// Where the planner tries once more before reading its power curve: the geometric middle of the
+// bracket around `power` (values sorted by distance from `null_value`) when that bracket climbs
+// steeply (more than a quarter of the campaigns between its ends, or its upper end named in all);
+// none when the bracket is fine enough or there is none (docs/reconcile.md, "Detection limits").
+std::optional<double> coarse_bracket_middle(const std::vector<PowerPoint>& tried, double null_value, double power);
 struct DetectionLimit {
     std::string label;
     std::string parameter, unit;

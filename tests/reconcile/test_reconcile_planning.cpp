@@ -204,3 +204,34 @@ TEST_CASE("planning: the verdict names the concealed term alone or beside the la
     // A physics partner is not a calibration error.
     CHECK_FALSE(rc::names_concealed(report({gamma, textile}, {10.0, 0.0008}, {30.0, 0.0012}), "textile_resistance", lab));
 }
+
+TEST_CASE("planning: a bracket around 80 % that climbs steeply is tried once more at its geometric middle, a fine one "
+          "is read as it is",
+          "[planning][power]") {
+    auto pt = [](double value, int named, int campaigns) {
+        rc::PowerPoint p;
+        p.value = value;
+        p.named = p.named_alone = named;
+        p.campaigns = campaigns;
+        return p;
+    };
+    // The wall's bracket in the bench's plan (2026-11-27): 27/40 at 1.125 °C, 40/40 at 1.406 °C.
+    const auto wall = rc::coarse_bracket_middle({pt(0.9, 12, 40), pt(1.125, 27, 40), pt(1.406, 40, 40)}, 0.0, 0.8);
+    REQUIRE(wall);
+    CHECK(*wall == Approx(std::sqrt(1.125 * 1.406)).epsilon(1e-12));
+    // Below the null (a parameter that walks down): the middle is taken in distance from the null.
+    const auto down = rc::coarse_bracket_middle({pt(0.96, 4, 20), pt(0.90, 19, 20)}, 1.0, 0.8);
+    REQUIRE(down);
+    CHECK(*down == Approx(1.0 - std::sqrt(0.04 * 0.10)).epsilon(1e-12));
+    // From none to most; and 15/20 to 20/20 (a quarter, but saturated: the logit line through an
+    // end named in all leans on the half campaign that keeps it finite).
+    CHECK(rc::coarse_bracket_middle({pt(10.0, 0, 20), pt(12.5, 17, 20)}, 0.0, 0.8).has_value());
+    CHECK(rc::coarse_bracket_middle({pt(10.0, 15, 20), pt(12.5, 20, 20)}, 0.0, 0.8).has_value());
+    // 14/20 and 17/20: a bracket of 15 points, read as it is.
+    CHECK_FALSE(rc::coarse_bracket_middle({pt(10.0, 14, 20), pt(12.5, 17, 20)}, 0.0, 0.8).has_value());
+    // No bracket: everything named, or nothing reaching 80 %.
+    CHECK_FALSE(rc::coarse_bracket_middle({pt(10.0, 17, 20), pt(12.5, 20, 20)}, 0.0, 0.8).has_value());
+    CHECK_FALSE(rc::coarse_bracket_middle({pt(10.0, 3, 20), pt(12.5, 9, 20)}, 0.0, 0.8).has_value());
+    // The bracket read is the one farthest from no effect (as the crossing is read): there, fine.
+    CHECK_FALSE(rc::coarse_bracket_middle({pt(1.0, 0, 20), pt(2.0, 20, 20), pt(3.0, 15, 20), pt(4.0, 17, 20)}, 0.0, 0.8).has_value());
+}
