@@ -36,7 +36,7 @@ void add_reconcile_command(CLI::App& app) {
         bool json = false, no_pairs = false, power = false;
         double alpha = 0.01;
         int simulations = 2000;
-        int power_campaigns = 20;
+        int power_campaigns = 40;
         std::vector<int> power_replicates = {3, 5, 10};
         std::vector<std::string> power_terms;
         std::uint64_t seed = 20261123;

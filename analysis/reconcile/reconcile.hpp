@@ -176,7 +176,7 @@ struct PowerReport {
 };
 struct PowerOptions {
     double power = 0.8;
-    int campaigns = 20;                      // whole-decision campaigns per value tried (0: fast model only)
+    int campaigns = 40;                      // whole-decision campaigns per value tried (0: fast model only)
     std::vector<std::string> terms;          // plan only these (a term, or term:region); empty: every candidate
     // Called after each value tried: checks done so far, the candidate, the replicates.
     std::function<void(int, const std::string&, int)> progress;
