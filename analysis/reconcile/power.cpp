@@ -37,9 +37,18 @@ Eigen::VectorXd at(const ev::WhitenedGrid& g, double theta) {
     return (1.0 - f) * g.w.col(i) + f * g.w.col(i + 1);
 }
 
-// Where the power curve crosses `power` (returns log|effect - null|): between the last value
-// tried that was named too rarely and the next, linear in logit(share) against log|effect| (a
-// half campaign added each way keeps the logit finite at 0 or all). Values sorted by |effect|.
+// The bracket around `power` the limit is read from: the index of its upper value, the last value
+// tried that was named often enough right after one named too rarely (values sorted by |effect|:
+// the bracket farthest from no effect). None when there is no such pair.
+std::optional<std::size_t> upper_bracket(const std::vector<PowerPoint>& tried, double power) {
+    for (std::size_t i = tried.size(); i-- > 1;)
+        if (tried[i - 1].named < power * tried[i - 1].campaigns && tried[i].named >= power * tried[i].campaigns) return i;
+    return std::nullopt;
+}
+
+// Where the power curve crosses `power` (returns log|effect - null|): in the bracket, linear in
+// logit(share) against log|effect| (a half campaign added each way keeps the logit finite at 0 or
+// all). Values sorted by |effect|.
 double power_crossing(const std::vector<PowerPoint>& tried, double null_value, double power) {
     auto x = [&](const PowerPoint& t) { return std::log(std::abs(t.value - null_value)); };
     auto logit = [](const PowerPoint& t) {
@@ -47,32 +56,26 @@ double power_crossing(const std::vector<PowerPoint>& tried, double null_value, d
         return std::log(p / (1.0 - p));
     };
     const double target = std::log(power / (1.0 - power));
-    for (std::size_t i = tried.size(); i-- > 1;) {
-        const auto& lo = tried[i - 1];
-        const auto& hi = tried[i];
-        if (lo.named >= power * lo.campaigns || hi.named < power * hi.campaigns) continue;
-        const double ya = logit(lo), yb = logit(hi);
-        const double f = yb > ya ? std::clamp((target - ya) / (yb - ya), 0.0, 1.0) : 1.0;
-        return x(lo) + f * (x(hi) - x(lo));
-    }
-    return x(tried.back());
+    const auto i = upper_bracket(tried, power);
+    if (!i) return x(tried.back());
+    const auto& lo = tried[*i - 1];
+    const auto& hi = tried[*i];
+    const double ya = logit(lo), yb = logit(hi);
+    const double f = yb > ya ? std::clamp((target - ya) / (yb - ya), 0.0, 1.0) : 1.0;
+    return x(lo) + f * (x(hi) - x(lo));
 }
 
 }  // namespace
 
 std::optional<double> coarse_bracket_middle(const std::vector<PowerPoint>& tried, double null_value, double power) {
     auto share = [](const PowerPoint& t) { return t.campaigns > 0 ? static_cast<double>(t.named) / t.campaigns : 0.0; };
-    // The bracket power_crossing reads: the one farthest from no effect.
-    for (std::size_t i = tried.size(); i-- > 1;) {
-        const auto& lo = tried[i - 1];
-        const auto& hi = tried[i];
-        if (share(lo) >= power || share(hi) < power) continue;
-        const bool coarse = share(hi) - share(lo) > 0.25 || hi.named == hi.campaigns;
-        if (!coarse) return std::nullopt;
-        return null_value + (hi.value > null_value ? 1.0 : -1.0) *
-                                std::sqrt(std::abs(lo.value - null_value) * std::abs(hi.value - null_value));
-    }
-    return std::nullopt;
+    const auto i = upper_bracket(tried, power);  // the bracket power_crossing reads
+    if (!i) return std::nullopt;
+    const auto& lo = tried[*i - 1];
+    const auto& hi = tried[*i];
+    const bool coarse = share(hi) - share(lo) > 0.25 || hi.named == hi.campaigns;
+    if (!coarse) return std::nullopt;
+    return null_value + (hi.value > null_value ? 1.0 : -1.0) * std::sqrt(std::abs(lo.value - null_value) * std::abs(hi.value - null_value));
 }
 
 PowerReport detection_limits(const ForwardModel& model, const Options& opt, const std::vector<int>& replicates,
