@@ -56,6 +56,11 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
         g.probe_air_bias_c = limit("air_temp_c", 30.0) * within(rng);
         g.probe_rh_bias_pct = limit("air_rh_pct", 50.0) * within(rng);
         g.probe_wall_bias_c = limit("wall_temp_c", 30.0) * within(rng);
+        // BENCH_CHAMBER=probes: each lab trims its chamber until its own probes read the case's
+        // air temperature and humidity (the planner's model of a lab); unset, the enclosure
+        // settles at the case's values in every lab and only the recordings are off.
+        const char* chamber = std::getenv("BENCH_CHAMBER");
+        g.chamber_set_by_probes = chamber && std::string(chamber) == "probes";
         // ... and the manikin's flux calibration, within the heat-flux spec (a + b |q|).
         g.flux_calibration_offset_w_m2 = limit("heat_flux_w_m2", 0.0) * within(rng);
         g.flux_calibration_gain = (limit("heat_flux_w_m2", 1.0) - limit("heat_flux_w_m2", 0.0)) * within(rng);

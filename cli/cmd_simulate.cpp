@@ -88,6 +88,7 @@ void add_simulate_command(CLI::App& app) {
         bool json = false;
         sim::ReplicateScatter scatter;
         bool no_scatter = false;
+        bool chamber_by_probes = false;
         double probe_air_bias_c = 0.0, probe_rh_bias_pct = 0.0, probe_wall_bias_c = 0.0;
         double flux_gain = 0.0, flux_offset_w_m2 = 0.0;
     };
@@ -139,6 +140,10 @@ void add_simulate_command(CLI::App& app) {
     cmd->add_option("--probe-rh-bias", o->probe_rh_bias_pct, "RH probe's calibration error, % RH, every trial")->capture_default_str();
     cmd->add_option("--probe-wall-bias", o->probe_wall_bias_c, "Wall thermocouple's calibration error, deg C, every trial")
         ->capture_default_str();
+    cmd->add_flag("--chamber-by-probes", o->chamber_by_probes,
+                  "The lab trims its chamber until its own probes read each case's air temperature and humidity, so the "
+                  "enclosure really settles off them by --probe-air-bias and --probe-rh-bias (default: it settles at the "
+                  "case's values and only the recordings are off)");
     cmd->add_option("--flux-gain", o->flux_gain, "Manikin heat-flux calibration gain: recorded = (1 + this) q + offset")
         ->capture_default_str();
     cmd->add_option("--flux-offset", o->flux_offset_w_m2, "Manikin heat-flux calibration offset, W/m2")->capture_default_str();
@@ -154,6 +159,7 @@ void add_simulate_command(CLI::App& app) {
         g.probe_air_bias_c = o->probe_air_bias_c;
         g.probe_rh_bias_pct = o->probe_rh_bias_pct;
         g.probe_wall_bias_c = o->probe_wall_bias_c;
+        g.chamber_set_by_probes = o->chamber_by_probes;
         g.flux_calibration_gain = o->flux_gain;
         g.flux_calibration_offset_w_m2 = o->flux_offset_w_m2;
         g.world.name = "world";

@@ -66,8 +66,10 @@ std::vector<GeneratedTrial> generate_campaign(const std::vector<CampaignCase>& c
             t.started_utc = fmt::format("{:%Y-%m-%dT%H:%M:%SZ}", fmt::gmtime(start));
             t.unsteady = uniform(rng) < o.unsteady_probability;
             // The enclosure's actual conditions this trial: the physics follows these.
-            const double air_c = c.air_temp_c + sc.replicate_air_sd_c * gauss(rng);
-            const double rh_pct = std::clamp(c.air_rh_pct + sc.replicate_rh_sd_pct * gauss(rng), 1.0, 99.0);
+            const double set_air_c = c.air_temp_c - (o.chamber_set_by_probes ? o.probe_air_bias_c : 0.0);
+            const double set_rh_pct = c.air_rh_pct - (o.chamber_set_by_probes ? o.probe_rh_bias_pct : 0.0);
+            const double air_c = set_air_c + sc.replicate_air_sd_c * gauss(rng);
+            const double rh_pct = std::clamp(set_rh_pct + sc.replicate_rh_sd_pct * gauss(rng), 1.0, 99.0);
             const double wall_c = air_c - o.wall_below_air_c + sc.replicate_wall_sd_c * gauss(rng);
             std::vector<double> zone_offset_w_m2(zones.size());
             for (auto& z : zone_offset_w_m2) z = sc.replicate_flux_sd_w_m2 * gauss(rng);

@@ -51,6 +51,11 @@ struct GeneratorOptions {
     double probe_air_bias_c = 0.0;
     double probe_rh_bias_pct = 0.0;
     double probe_wall_bias_c = 0.0;
+    // How the lab sets its enclosure. false: it settles at the case's T_air and RH_air whatever the
+    // probes read (the probes record it off by their bias). true: the lab trims the chamber until
+    // its own probes read the case's values, so the air really settles off them by the bias
+    // (actual = nominal - bias): where its probes are wrong, its "isothermal" case is not.
+    bool chamber_set_by_probes = false;
     // The manikin's heat-flux calibration error, the same in every trial: recorded = (1 + gain) q + offset.
     double flux_calibration_gain = 0.0;
     double flux_calibration_offset_w_m2 = 0.0;

@@ -212,6 +212,29 @@ TEST_CASE("generator: a probe's calibration error shifts every trial's recording
     CHECK_THROWS_WITH(sim::generate_campaign({table_s3_case(9)}, zones, g), Catch::Contains("gain"));
 }
 
+TEST_CASE("generator: a lab that trims its chamber by its own probes records the case's values, off in truth",
+          "[devices][scatter]") {
+    sim::GeneratorOptions g;
+    g.replicates = 2;
+    g.seed = 23;
+    const auto zones = andi35_zones();
+    g.probe_air_bias_c = 0.15;
+    g.probe_rh_bias_pct = -1.2;
+    const auto by_nominal = sim::generate_campaign({table_s3_case(5)}, zones, g);
+    g.chamber_set_by_probes = true;
+    const auto by_probes = sim::generate_campaign({table_s3_case(5)}, zones, g);
+    REQUIRE(by_probes.size() == by_nominal.size());
+    for (std::size_t t = 0; t < by_probes.size(); ++t) {
+        // The same draws: the enclosure really settles off by the probes' errors, the recordings
+        // land where the other lab's truth is (the case's values plus the trial's scatter).
+        CHECK(by_probes[t].truth.air_temp_c == Approx(by_nominal[t].truth.air_temp_c - 0.15).margin(1e-12));
+        CHECK(by_probes[t].truth.air_rh_pct == Approx(by_nominal[t].truth.air_rh_pct + 1.2).margin(1e-12));
+        CHECK(mean(by_probes[t].air_temp_c) - mean(by_nominal[t].air_temp_c) == Approx(-0.15).margin(0.002));
+        // The manikin feels the real air: case 5's skin sits at 35.0 °C, the air 0.15 °C nearer it.
+        CHECK(mean(by_probes[t].heat_flux_w_m2[3]) != Approx(mean(by_nominal[t].heat_flux_w_m2[3])).margin(0.01));
+    }
+}
+
 TEST_CASE("generator: negative or absurd spreads are refused by name", "[devices][scatter]") {
     sim::GeneratorOptions g;
     g.scatter.probe_rh_sd_pct = -0.1;
