@@ -23,9 +23,6 @@ namespace {
 
 constexpr int kGridSteps = 120;
 constexpr int kPowerSimulations = 400;
-// The simulated campaigns' grids (reconcile's 120 steps cost two thirds of its time; the
-// profile minimum is refined by a parabola and a claimed term by least squares either way).
-constexpr int kPlanningGridSteps = 40;
 
 // The whitened prediction at a parameter value between grid points (linear interpolation).
 Eigen::VectorXd at(const ev::WhitenedGrid& g, double theta) {
@@ -209,7 +206,10 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                 auto run = [&](double theta) {
                     Options o = opt;
                     o.null_threshold = threshold;
-                    o.grid_steps = kPlanningGridSteps;
+                    // reconcile's own grid (opt.grid_steps): on a coarser one a term whose "no effect"
+                    // is the grid's end (the head's wet fraction 1, h0 0, textile 0) lost its evidence
+                    // between the end and the next step, where the parabola cannot refine (40 steps: 5
+                    // of 20 named at fraction 0.9875, 19 of 20 at 0.988 on reconcile's 120).
                     // Pairs are tried, as reconcile tries them: a drawn lab's probe error can show
                     // beside a concealed effect (the air bias beside the textile term), and the
                     // pair that names both is a true answer (names_concealed). Counting only the
