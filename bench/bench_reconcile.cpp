@@ -333,6 +333,8 @@ int main(int argc, char** argv) {
                             {"partial_wettedness", "fraction", "head", 0.7}};
     for (const auto& t : truths) {
         if (coverage_runs <= 0) break;
+        // BENCH_COVERAGE_TERM=air_temp_bias: that term's coverage only.
+        if (const char* only = std::getenv("BENCH_COVERAGE_TERM"); only && std::string(only) != t.term) continue;
         const auto lib = rc::candidate_library({t.region});
         const auto it = std::find_if(lib.begin(), lib.end(), [&](const auto& c) { return c.term == t.term; });
         int covered = 0;
