@@ -343,6 +343,23 @@ int main(int argc, char** argv) {
             const auto r = rc::fit_candidate(*m, {*it});
             covered += r.interval_lo[0] <= t.value && t.value <= r.interval_hi[0] ? 1 : 0;
             if (std::getenv("BENCH_VERBOSE")) std::printf("    %s: %.5g +- %.3g, 95 %% [%.5g, %.5g]\n", t.term, r.values[0], r.uncertainties[0], r.interval_lo[0], r.interval_hi[0]);
+            // BENCH_PROFILE=1: chi2 around the estimate (in steps of its u) and at the truth, relative
+            // to the fit's: the air bias's row of cusps (docs/reconcile.md, "Intervals").
+            if (std::getenv("BENCH_PROFILE")) {
+                const rc::Options o;
+                const auto nm = m->noise_model(o.instruments, o.probe_shared_fraction, rc::to_twin_terms({*it}, r.values));
+                std::vector<std::size_t> all_points(m->points().size());
+                std::iota(all_points.begin(), all_points.end(), 0);
+                const auto twin = m->predict({});
+                const auto s = rc::evidence::make_subset(*m, nm.covariance, all_points, twin);
+                const double c0 = s.chi2(m->predict(rc::to_twin_terms({*it}, r.values)));
+                std::printf("      profile:");
+                for (double f : {-4.0, -3.0, -2.0, -1.0, 1.0, 2.0, 3.0, 4.0}) {
+                    const double th = r.values[0] + f * r.uncertainties[0];
+                    std::printf(" %+.0fu %.2f", f, s.chi2(m->predict(rc::to_twin_terms({*it}, {th}))) - c0);
+                }
+                std::printf(" | at truth %.2f\n", s.chi2(m->predict(rc::to_twin_terms({*it}, {t.value}))) - c0);
+            }
         }
         std::printf("coverage of the 95 %% interval, %s %s = %g: %d of %d (%.0f %%)\n", t.term, t.parameter, t.value, covered,
                     coverage_runs, 100.0 * covered / coverage_runs);
