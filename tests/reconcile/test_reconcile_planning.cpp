@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "analysis/reconcile/report_output.hpp"
 #include "tests/reconcile/synthetic_campaign.hpp"
 
 using namespace manikind;
@@ -234,4 +235,27 @@ TEST_CASE("planning: a bracket around 80 % that climbs steeply is tried once mor
     CHECK_FALSE(rc::coarse_bracket_middle({pt(10.0, 3, 20), pt(12.5, 9, 20)}, 0.0, 0.8).has_value());
     // The bracket read is the one farthest from no effect (as the crossing is read): there, fine.
     CHECK_FALSE(rc::coarse_bracket_middle({pt(1.0, 0, 20), pt(2.0, 20, 20), pt(3.0, 15, 20), pt(4.0, 17, 20)}, 0.0, 0.8).has_value());
+}
+
+TEST_CASE("the plan's text says how far its limits held on independent campaigns, and that a fast model's are lower bounds",
+          "[reconcile][power]") {
+    rc::PowerReport plan;
+    plan.campaign_replicates = 3;
+    plan.replicates = {3};
+    rc::DetectionLimit d;
+    d.label = "wall_offset";
+    d.parameter = "delta_c";
+    d.replicates = 3;
+    d.value = 1.26;
+    d.method = "whole decision";
+    d.tried = {{1.125, 25, 40, 24}, {1.26, 32, 40, 32}};
+    plan.limits = {d};
+    const std::string whole = rc::power_to_text(plan);
+    CHECK_THAT(whole, Catch::Contains("checked by running reconcile itself on 40 campaigns"));
+    CHECK_THAT(whole, Catch::Contains("pooled 75 %: a few points optimistic"));
+    plan.limits.front().tried.clear();
+    plan.limits.front().method = "fast model";
+    const std::string fast = rc::power_to_text(plan);
+    CHECK_THAT(fast, Catch::Contains("read the limits as lower bounds"));
+    CHECK_THAT(fast, !Catch::Contains("pooled 75 %"));
 }
