@@ -242,6 +242,18 @@ const ParameterSpec& parameter_at(const CandidateResult& r, std::size_t index) {
     throw std::out_of_range("parameter index");
 }
 
+// The advice quotes the uncertainty: after a widening, quote the widened one.
+void requote_advice(CandidateResult& r) {
+    r.advice.clear();
+    std::size_t j = 0;
+    for (const auto& t : r.terms) {
+        const std::vector<double> v(r.values.begin() + static_cast<long>(j), r.values.begin() + static_cast<long>(j + t.parameters.size()));
+        const std::vector<double> u(r.uncertainties.begin() + static_cast<long>(j), r.uncertainties.begin() + static_cast<long>(j + t.parameters.size()));
+        for (auto& a : plausibility_advice(t, v, u)) r.advice.push_back(std::move(a));
+        j += t.parameters.size();
+    }
+}
+
 // Jackknife over cases with real refits (not linearised): where the physics is strongly
 // nonlinear (the kink of |dT|^(1/4) at dT = 0) a few cases can carry most of the information,
 // and only refitting without them shows how much the value leans on them. Used for the claimed
@@ -276,15 +288,7 @@ void widen_by_jackknife(const ForwardModel& model, const Eigen::MatrixXd& covari
         r.interval_lo[j] = r.values[j] - k * r.uncertainties[j];
         r.interval_hi[j] = r.values[j] + k * r.uncertainties[j];
     }
-    // The advice quotes the uncertainty: quote the widened one.
-    r.advice.clear();
-    std::size_t j = 0;
-    for (const auto& t : r.terms) {
-        const std::vector<double> v(r.values.begin() + static_cast<long>(j), r.values.begin() + static_cast<long>(j + t.parameters.size()));
-        const std::vector<double> u(r.uncertainties.begin() + static_cast<long>(j), r.uncertainties.begin() + static_cast<long>(j + t.parameters.size()));
-        for (auto& a : plausibility_advice(t, v, u)) r.advice.push_back(std::move(a));
-        j += t.parameters.size();
-    }
+    requote_advice(r);
 }
 
 // The profile's curvature at the scale of the uncertainty (a single one-parameter term): where
@@ -341,6 +345,7 @@ std::optional<double> widen_by_profile(const ForwardModel& model, const ev::Subs
         r.uncertainties[0] = u_env;
         r.interval_lo[0] = centre - k * u_env;
         r.interval_hi[0] = centre + k * u_env;
+        requote_advice(r);
     }
     return lower;
 }
