@@ -56,6 +56,10 @@ TEST_CASE("cli: reconcile of a campaign with no hidden physics claims nothing", 
     // The replicate scatter was estimated here, to convergence, and the JSON says so.
     CHECK(j["noise_model"]["scatter_converged"] == true);
     CHECK(j["noise_model"]["scatter_steps"].get<int>() > 0);
+    // Each zone's own scatter, by zone id: the generator's per-trial offset is 1.2 W/m² on every zone.
+    const auto& zone_sd = j["noise_model"]["zone_sd_w_m2"];
+    REQUIRE(zone_sd.size() == 35);
+    for (const auto& [zone, sd] : zone_sd.items()) CHECK(sd.get<double>() == Approx(1.2).margin(0.5));
     std::filesystem::remove_all(dir);
 }
 
