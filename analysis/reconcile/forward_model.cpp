@@ -315,6 +315,7 @@ public:
         }
         out.random_dof = scatter.dof;
         out.relative_sd = scatter.relative_sd;
+        out.zone_prior_dof = scatter.zone_prior_dof;
         if (scatter.estimable) {
             const char* names[] = {"air °C", "RH %", "wall °C", "gain", "offset W/m²"};
             for (std::size_t k = 0; k < scatter.factor_sd.size() && k < 5; ++k) out.trial_factor_sd.emplace_back(names[k], scatter.factor_sd[k]);

@@ -49,6 +49,7 @@ struct NoiseModel {
     double relative_sd = 0.0;                 // kappa: scatter proportional to |q| (per trial)
     std::vector<std::pair<std::string, double>> trial_factor_sd;  // shared by one trial's zones (per trial)
     std::map<int, double> zone_sd_w_m2;       // sigma0 per zone (per trial)
+    double zone_prior_dof = 0.0;              // the sigma0's pooling prior (0: not estimated here)
     double calibration_offset_u_w_m2 = 0.0;   // shared by every point
     double calibration_gain_u = 0.0;          // relative, shared by every point
     double air_temp_u_c = 0.0, wall_temp_u_c = 0.0;  // probes' Type B (standard)

@@ -32,6 +32,7 @@ struct ScatterModel {
     int dof = 0;                     // sum over cases of (n - 1), per zone
     std::vector<double> zone_sd_w_m2;// sigma0_z
     double relative_sd = 0.0;        // kappa
+    double zone_prior_dof = 0.0;     // how strongly the sigma0_z pool toward their mean (empirical Bayes)
     std::vector<double> factor_sd;   // tau_k, per trial (zero where the likelihood puts it)
     int iterations = 0;              // outer ECME steps taken
     bool converged = false;          // -2 ln L settled before max_iterations

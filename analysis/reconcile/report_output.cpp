@@ -60,7 +60,7 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
     j["noise_model"] = {{"from_replicates", n.from_replicates}, {"carried_from", n.carried_from}, {"random_dof", n.random_dof},
                         {"scatter_steps", n.scatter_steps},
                         {"scatter_converged", n.scatter_converged ? nlohmann::json(*n.scatter_converged) : nlohmann::json()},
-                        {"relative_sd", n.relative_sd}, {"zone_sd_w_m2", zone_sd}, {"trial_factor_sd", n.trial_factor_sd},
+                        {"relative_sd", n.relative_sd}, {"zone_sd_w_m2", zone_sd}, {"zone_sd_prior_dof", n.zone_prior_dof}, {"trial_factor_sd", n.trial_factor_sd},
                         {"calibration_offset_u_w_m2", n.calibration_offset_u_w_m2},
                         {"calibration_gain_u", n.calibration_gain_u}, {"air_temp_u_c", n.air_temp_u_c},
                         {"wall_temp_u_c", n.wall_temp_u_c}, {"probe_shared_fraction", n.probe_shared_fraction}, {"rh_u", n.rh_u_text}, {"notes", n.notes}};

@@ -3,6 +3,7 @@
 // Cholesky), not against the estimator's own Woodbury algebra.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
@@ -155,4 +156,47 @@ TEST_CASE("scatter model: without replicates nothing is estimable, and shapes th
     auto bad = design(5, 3, 6, 3);
     bad.loadings.pop_back();
     CHECK_THROWS_AS(rc::estimate_scatter(bad), std::invalid_argument);
+}
+
+TEST_CASE("scatter model: zones that scatter alike pool their sigma0, a zone that scatters more keeps its own") {
+    // A campaign's shape (15 cases of 3 trials, 35 zones): each zone alone has 30 dof, its sigma0
+    // known to some +-13 %; pooled, the zones know their common sigma0 to about +-2 %.
+    const int zones = 35;
+    const auto shape = design(15, 3, zones, 21);
+    const std::vector<double> tau = {0.05, 0.5, 0.1, 0.0, 0.0};
+    SECTION("every zone alike: the prior's dof climb and every zone's sigma0 is the pooled one") {
+        for (std::uint64_t seed : {31u, 32u, 33u}) {
+            const rc::ScatterModel fit = converged_fit(shape, tau, seed);
+            INFO("seed " << seed << ", prior dof " << fit.zone_prior_dof << ", " << describe(fit));
+            CHECK(fit.zone_prior_dof >= 80.0);
+            const auto [lo, hi] = std::minmax_element(fit.zone_sd_w_m2.begin(), fit.zone_sd_w_m2.end());
+            CHECK(*hi / *lo < 1.1);  // at the floor's 10 dof they spread 0.9-1.5 W/m² about 1.2
+        }
+    }
+    SECTION("one zone three times as noisy: the pooling gives way and that zone keeps its scatter") {
+        rc::ScatterModel truth = truth_model(zones, tau);
+        truth.zone_sd_w_m2[7] = 3.6;
+        for (std::uint64_t seed : {34u, 35u, 36u}) {
+            const rc::ScatterModel fit = rc::estimate_scatter(rc::simulate_residuals(shape, truth, seed));
+            INFO("seed " << seed << ", prior dof " << fit.zone_prior_dof << ", zone 7 " << fit.zone_sd_w_m2[7]);
+            CHECK(fit.converged);
+            // One zone in 35 pulls the prior down to 14-20 dof (pooled at 320 it would read ~1.3).
+            CHECK(fit.zone_prior_dof <= 28.0);
+            // Within 25 % of 3.6: the zone's own 30 dof scatter some 13 %, and 20 dof of prior at
+            // the mean still pull it down a little (seed 36: 2.74; at the floor's 10 dof, 2.99).
+            CHECK(fit.zone_sd_w_m2[7] > 2.7);
+        }
+    }
+    SECTION("two kinds of zone (1.0 and 2.0 W/m²): no more pooling than the floor") {
+        rc::ScatterModel truth = truth_model(zones, tau);
+        for (int z = 0; z < zones; ++z) truth.zone_sd_w_m2[static_cast<std::size_t>(z)] = z % 2 == 0 ? 1.0 : 2.0;
+        const rc::ScatterModel fit = rc::estimate_scatter(rc::simulate_residuals(shape, truth, 37));
+        INFO("prior dof " << fit.zone_prior_dof);
+        double even = 0.0, odd = 0.0;
+        for (int z = 0; z < zones; ++z) (z % 2 == 0 ? even : odd) += fit.zone_sd_w_m2[static_cast<std::size_t>(z)];
+        even /= 18.0, odd /= 17.0;
+        INFO("quiet zones " << even << ", noisy zones " << odd);
+        CHECK(fit.zone_prior_dof == 10.0);
+        CHECK(odd > 1.3 * even);
+    }
 }
