@@ -55,26 +55,26 @@ double best_prior_dof(const std::vector<ZoneData>& zones, double kappa, double p
     constexpr int kNodes = 97;
     constexpr double kHalfWidth = 4.0;  // ln sigma0² within +-4 of ln P: the likelihoods' mass (30 dof: sd 0.26)
     const double centre = std::log(prior_sq), step = 2.0 * kHalfWidth / (kNodes - 1);
-    // Each zone's log-likelihood on the nodes (independent of nu), then log-sum-exp per nu.
+    // Neither a zone's log-likelihood on the nodes nor the prior's shape there depends on nu:
+    // ln of the prior's density in t = ln s is norm(nu) - nu/2 (t + P e^-t), with
+    // norm(nu) = nu/2 ln(nu P / 2) - ln Gamma(nu/2). Then a log-sum-exp per zone and nu.
     std::vector<std::vector<double>> loglik(zones.size(), std::vector<double>(kNodes));
-    for (std::size_t z = 0; z < zones.size(); ++z)
-        for (int i = 0; i < kNodes; ++i) loglik[z][static_cast<std::size_t>(i)] = -0.5 * neg2_loglik(zones[z], std::exp(centre - kHalfWidth + step * i), kappa);
+    std::vector<double> shape(kNodes);
+    for (int i = 0; i < kNodes; ++i) {
+        const double t = centre - kHalfWidth + step * i;
+        shape[static_cast<std::size_t>(i)] = t + prior_sq * std::exp(-t);
+        for (std::size_t z = 0; z < zones.size(); ++z) loglik[z][static_cast<std::size_t>(i)] = -0.5 * neg2_loglik(zones[z], std::exp(t), kappa);
+    }
     double best = kMinPriorDof, best_value = -std::numeric_limits<double>::infinity();
     for (const double nu : kPriorDofs) {
-        // ln of the prior's density in t = ln s: (nu P / 2)^(nu/2) / Gamma(nu/2) s^(-nu/2) exp(-nu P / (2 s)).
         const double norm = 0.5 * nu * std::log(0.5 * nu * prior_sq) - std::lgamma(0.5 * nu);
         double total = 0.0;
-        for (std::size_t z = 0; z < zones.size(); ++z) {
+        for (const auto& ll : loglik) {
             double peak = -std::numeric_limits<double>::infinity();
-            std::vector<double> terms(kNodes);
-            for (int i = 0; i < kNodes; ++i) {
-                const double t = centre - kHalfWidth + step * i;
-                terms[static_cast<std::size_t>(i)] = loglik[z][static_cast<std::size_t>(i)] + norm - 0.5 * nu * t - 0.5 * nu * prior_sq * std::exp(-t);
-                peak = std::max(peak, terms[static_cast<std::size_t>(i)]);
-            }
+            for (std::size_t i = 0; i < shape.size(); ++i) peak = std::max(peak, ll[i] - 0.5 * nu * shape[i]);
             double sum = 0.0;
-            for (const double v : terms) sum += std::exp(v - peak);
-            total += peak + std::log(sum * step);
+            for (std::size_t i = 0; i < shape.size(); ++i) sum += std::exp(ll[i] - 0.5 * nu * shape[i] - peak);
+            total += norm + peak + std::log(sum * step);
         }
         if (total > best_value) best_value = total, best = nu;
     }
