@@ -64,6 +64,9 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
         // ... and the manikin's flux calibration, within the heat-flux spec (a + b |q|).
         g.flux_calibration_offset_w_m2 = limit("heat_flux_w_m2", 0.0) * within(rng);
         g.flux_calibration_gain = (limit("heat_flux_w_m2", 1.0) - limit("heat_flux_w_m2", 0.0)) * within(rng);
+        // BENCH_PROBE_RH_BIAS=x: every campaign's RH probe off by exactly x % RH (the others as
+        // drawn): how much a planning campaign's RH probe sets what its planner plans.
+        if (const char* rh = std::getenv("BENCH_PROBE_RH_BIAS")) g.probe_rh_bias_pct = std::atof(rh);
         // The probes' errors as the twin terms that would correct them (rc::names_concealed).
         if (calibration)
             *calibration = {{"air_temp_bias", {{"bias_c", g.probe_air_bias_c}}, "", {}}, {"wall_offset", {{"delta_c", -g.probe_wall_bias_c}}, "", {}}};
