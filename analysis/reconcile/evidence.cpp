@@ -438,10 +438,26 @@ CaseLevel case_level(const ForwardModel& model, const Subset& s, const std::vect
                 delta(j) = std::clamp(t + delta(j), b.lo, b.hi) - t;
             }
         }
-        out.loo_score += (r[c] - d[c] * delta).squaredNorm();
-        const Eigen::VectorXd e = raw_r[c] - raw_d[c] * delta;
-        sum_sq += e.squaredNorm();
-        count += static_cast<int>(e.size());
+        const Eigen::VectorXd e = r[c] - d[c] * delta;
+        if (p_count > 0 && cases > 1) {
+            // Predictive score of the held-out case: its residual weighed by the covariance of
+            // the rest's prediction, I + d A_rest^-1 d', plus that covariance's log det (the
+            // Gaussian predictive deviance). By Woodbury this is e'e - (d'e)' A_tot^-1 (d'e)
+            // + log det A_tot - log det A_rest. A case that alone carries a term's information
+            // is then scored by how little the rest can say about it, not by how far the rest's
+            // guess lands (a lab's probe error moves that guess; see docs/reconcile.md).
+            const Eigen::LDLT<Eigen::MatrixXd> tot(a_total);
+            const Eigen::VectorXd de = d[c].transpose() * e;
+            const Eigen::MatrixXd shrink =
+                Eigen::MatrixXd::Identity(p_count, p_count) - tot.solve(a_case[c]);  // A_tot^-1 A_rest
+            const double det_ratio = std::max(shrink.determinant(), std::numeric_limits<double>::min());
+            out.loo_score += e.squaredNorm() - de.dot(tot.solve(de)) - std::log(det_ratio);
+        } else {
+            out.loo_score += e.squaredNorm();
+        }
+        const Eigen::VectorXd raw_e = raw_r[c] - raw_d[c] * delta;
+        sum_sq += raw_e.squaredNorm();
+        count += static_cast<int>(raw_e.size());
     }
     out.loo_rmse = count > 0 ? std::sqrt(sum_sq / count) : 0.0;
     out.robust_se.assign(theta.size(), std::numeric_limits<double>::infinity());

@@ -107,7 +107,7 @@ double upper_quantile(std::vector<double> sample, double alpha);
 // Case-level analysis of a fitted model (linearised at the fit): leave-one-case-out error and
 // the case-clustered sandwich covariance.
 struct CaseLevel {
-    double loo_score = 0.0;                 // sum over held-out cases of their chi2 (own block)
+    double loo_score = 0.0;                 // sum over held-out cases of their predictive deviance
     double loo_rmse = 0.0;                  // the observation's unit
     std::vector<double> robust_se;          // sandwich, small-sample corrected C/(C - p)
 };

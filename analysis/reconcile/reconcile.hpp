@@ -53,7 +53,7 @@ struct CandidateResult {
     double evidence = 0.0;       // chi2 reduction against the twin as given (singles: profile on a grid)
     double bic = 0.0;
     double delta_bic = 0.0;      // vs the twin as given, with ln(cases) per parameter
-    std::optional<double> loo_score;  // sum over held-out cases of their generalised chi2
+    std::optional<double> loo_score;  // sum over held-out cases of their predictive deviance
     std::optional<double> loo_rmse;   // leave-one-case-out RMSE, the observation's unit
     FitStats after;
     bool accepted = false;
