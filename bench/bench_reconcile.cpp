@@ -67,6 +67,8 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
         // BENCH_PROBE_RH_BIAS=x: every campaign's RH probe off by exactly x % RH (the others as
         // drawn): how much a planning campaign's RH probe sets what its planner plans.
         if (const char* rh = std::getenv("BENCH_PROBE_RH_BIAS")) g.probe_rh_bias_pct = std::atof(rh);
+        // BENCH_PROBE_AIR_BIAS=x: the same for the air probe (°C).
+        if (const char* air = std::getenv("BENCH_PROBE_AIR_BIAS")) g.probe_air_bias_c = std::atof(air);
         // The probes' errors as the twin terms that would correct them (rc::names_concealed).
         if (calibration)
             *calibration = {{"air_temp_bias", {{"bias_c", g.probe_air_bias_c}}, "", {}}, {"wall_offset", {{"delta_c", -g.probe_wall_bias_c}}, "", {}}};
@@ -400,6 +402,16 @@ int main(int argc, char** argv) {
                 named += hit ? 1 : 0;
                 alone += named_alone(r, label) ? 1 : 0;
                 if (!hit && std::getenv("BENCH_VERBOSE")) print_miss(r, label, i);
+                // BENCH_DRAWS=1: every draw's verdict, the term's evidence and the drawn lab's errors.
+                if (std::getenv("BENCH_DRAWS")) {
+                    double evidence = 0.0;
+                    for (const auto& c : r.candidates)
+                        if (c.label == label) evidence = c.evidence;
+                    std::printf("    draw %d: %s evidence %.1f", i, hit ? "named" : "miss", evidence);
+                    for (const auto& c : calibration)
+                        for (const auto& [k, val] : c.parameters) std::printf(" %s.%s %.4g", c.name.c_str(), k.c_str(), val);
+                    std::printf("\n");
+                }
             }
             const auto [lo, hi] = binomial_interval(named, power_runs);
             std::printf("%s %s %s = %g: named in %d of %d (%.0f %%, 95 %% [%.0f, %.0f] %%; alone %d)\n", simulator ? "planner" : "generator", label.c_str(), param.c_str(), v, named,
