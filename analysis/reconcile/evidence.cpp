@@ -428,6 +428,7 @@ CaseLevel case_level(const ForwardModel& model, const Subset& s, const std::vect
     }
     double sum_sq = 0.0;
     int count = 0;
+    const Eigen::LDLT<Eigen::MatrixXd> tot(a_total);  // every held-out case's predictive score uses it
     for (std::size_t c = 0; c < cases; ++c) {
         Eigen::VectorXd delta = Eigen::VectorXd::Zero(p_count);
         if (p_count > 0 && cases > 1) {
@@ -446,7 +447,6 @@ CaseLevel case_level(const ForwardModel& model, const Subset& s, const std::vect
             // + log det A_tot - log det A_rest. A case that alone carries a term's information
             // is then scored by how little the rest can say about it, not by how far the rest's
             // guess lands (a lab's probe error moves that guess; see docs/reconcile.md).
-            const Eigen::LDLT<Eigen::MatrixXd> tot(a_total);
             const Eigen::VectorXd de = d[c].transpose() * e;
             const Eigen::MatrixXd shrink =
                 Eigen::MatrixXd::Identity(p_count, p_count) - tot.solve(a_case[c]);  // A_tot^-1 A_rest
