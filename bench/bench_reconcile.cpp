@@ -33,6 +33,9 @@ namespace rc = analysis::reconcile;
 
 namespace {
 
+// The check's labs' air probe error as a fraction of the spec's (BENCH_CHECK_CALIBRATED=air_temp_c: 0.5).
+double g_air_error_scale = 1.0;
+
 std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersion& world, std::uint64_t seed, int replicates = 3,
                                                  std::optional<rc::CarriedNoise> carried = std::nullopt,
                                                  bool probes_within_spec = false, std::uint64_t lab_seed = 0,
@@ -53,7 +56,7 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
             const auto it = specs.find(channel);
             return it == specs.end() ? 0.0 : it->second.limit(reading);
         };
-        g.probe_air_bias_c = limit("air_temp_c", 30.0) * within(rng);
+        g.probe_air_bias_c = limit("air_temp_c", 30.0) * within(rng) * g_air_error_scale;
         g.probe_rh_bias_pct = limit("air_rh_pct", 50.0) * within(rng);
         g.probe_wall_bias_c = limit("wall_temp_c", 30.0) * within(rng);
         // BENCH_CHAMBER=probes: each lab trims its chamber until its own probes read the case's
@@ -438,13 +441,19 @@ int main(int argc, char** argv) {
         if (!only.empty())
             std::erase_if(po.terms, [&](const std::string& t) { return only.find("," + t + ",") == std::string::npos; });
         t0 = clock::now();
-        const auto plan = rc::detection_limits(*planning, opt, {3}, po);
+        auto plan = rc::detection_limits(*planning, opt, {3}, po);
         std::printf("power plan (--power, %d campaigns per value tried, %zu candidates, 3 replicates): %.0f s\n", po.campaigns, po.terms.size(),
                     std::chrono::duration<double>(clock::now() - t0).count());
         for (const auto& d : plan.limits) {
             std::printf("  plan %s: %s", d.label.c_str(), d.value ? std::to_string(*d.value).c_str() : "not reached");
             for (const auto& t : d.tried) std::printf("  [%.4g: %d/%d, alone %d]", t.value, t.named, t.campaigns, t.named_alone);
             std::printf("\n");
+            // How the limit hangs on each calibration (the planner's drawn labs split by their errors).
+            for (const auto& c : d.calibration)
+                std::printf("    calibration %s: rho %.2f p %.4f%s; at %.4g within half its limit %d/%d, beyond %d/%d; limit within %s%s\n",
+                            c.channel.c_str(), c.rank_correlation, c.p_value, c.flagged ? " FLAGGED" : "", c.value, c.within_named,
+                            c.within, c.beyond_named, c.beyond, c.limit_within_at_most ? "at most " : "",
+                            c.limit_within ? std::to_string(*c.limit_within).c_str() : "not reached");
         }
         std::fflush(stdout);
         if (std::getenv("BENCH_PLAN_ONLY")) return 0;
@@ -455,6 +464,22 @@ int main(int argc, char** argv) {
         const bool planning_lab = std::getenv("BENCH_CHECK_LABS") && std::string(std::getenv("BENCH_CHECK_LABS")) == "planning";
         const std::uint64_t check_lab = planning_lab ? planning_seed : 0;
         std::printf("power check campaigns: %s\n", planning_lab ? "the planning campaign's lab (its probes and calibration)" : "each its own lab");
+        // BENCH_CHECK_CALIBRATED=air_temp_c: the check's labs have their air probe calibrated to
+        // half its spec, and each term is checked at the limit the plan read for such labs (its
+        // drawn labs within half the limit), where the plan gave one.
+        const char* calibrated = std::getenv("BENCH_CHECK_CALIBRATED");
+        if (calibrated) {
+            if (std::string(calibrated) != "air_temp_c") {
+                std::fprintf(stderr, "BENCH_CHECK_CALIBRATED: only air_temp_c is drawn tighter, got '%s'\n", calibrated);
+                return 2;
+            }
+            g_air_error_scale = 0.5;
+            for (auto& d : plan.limits) {
+                const auto c = std::find_if(d.calibration.begin(), d.calibration.end(), [](const auto& x) { return x.channel == "air_temp_c"; });
+                d.value = c != d.calibration.end() ? c->limit_within : std::nullopt;
+            }
+            std::printf("power check labs: air probe within half its spec, each term at the limit read for such labs\n");
+        }
         struct Term {
             const char* term;
             const char* region;

@@ -67,7 +67,9 @@ void add_reconcile_command(CLI::App& app) {
                                        "this campaign's cases and noise, at its replicates and at --power-replicates; "
                                        "each checked by running reconcile on campaigns of this design drawn anew "
                                        "(named: alone, or beside a drawn probe's own calibration error; with "
-                                       "--no-pairs, planned for reconcile without pairs)");
+                                       "--no-pairs, planned for reconcile without pairs); and which limits hang on "
+                                       "how far a probe or the manikin's calibration erred within its spec, with the "
+                                       "limit a calibration to half the spec would reach");
     cmd->add_option("--power-replicates", o->power_replicates, "Replicates per case to plan for (with --power)")
         ->check(CLI::Range(1, 30))
         ->delimiter(',')

@@ -418,7 +418,8 @@ public:
         }
 
         std::unique_ptr<ForwardModel> draw(const std::vector<tw::Term>& truth, int replicates, std::uint64_t seed,
-                                           std::vector<tw::Term>* calibration = nullptr) const override {
+                                           std::vector<tw::Term>* calibration = nullptr,
+                                           std::vector<DrawnCalibrationError>* errors = nullptr) const override {
             if (replicates < 1) return nullptr;
             const std::size_t z_count = model_.first_zones().size();
             const ScatterModel& scatter = scatter_;
@@ -441,6 +442,18 @@ public:
                          probe_wall = calibration_error("wall_temp_c");
             const double campaign_offset = flux_.limit(0.0) * standardised_error_draw(flux_.distribution, rng);
             const double campaign_gain = (flux_.limit(1.0) - flux_.limit(0.0)) * standardised_error_draw(flux_.distribution, rng);
+            if (errors) {
+                errors->clear();
+                if (!model_.cases_.empty()) {
+                    const auto& c0 = model_.cases_.front().conditions;
+                    errors->push_back({"air_temp_c", probe_air, spec_limit(instruments, "air_temp_c", c0.air_temp_c)});
+                    errors->push_back({"air_rh_pct", probe_rh, spec_limit(instruments, "air_rh_pct", c0.air_rh_pct)});
+                    if (c0.wall_temp_c) errors->push_back({"wall_temp_c", probe_wall, spec_limit(instruments, "wall_temp_c", *c0.wall_temp_c)});
+                }
+                const double offset_limit = flux_.limit(0.0), gain_limit = flux_.limit(1.0) - flux_.limit(0.0);
+                if (offset_limit > 0.0) errors->push_back({"heat_flux_offset", campaign_offset / offset_limit, offset_limit});
+                if (gain_limit > 0.0) errors->push_back({"heat_flux_gain", campaign_gain / gain_limit, gain_limit});
+            }
             if (calibration) {
                 // The common part of each probe's error at the first case's reading (the twin's
                 // terms are one value for every case; with phi = 1, as the planner draws, exact).

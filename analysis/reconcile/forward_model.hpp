@@ -72,6 +72,13 @@ public:
 
 class ForwardModel;
 
+// One calibration error of a drawn lab, for `--power` to say how a limit hangs on it.
+struct DrawnCalibrationError {
+    std::string channel;        // air_temp_c, air_rh_pct, wall_temp_c, heat_flux_offset, heat_flux_gain
+    double in_limits = 0.0;     // the error over its spec's limit (within +-1 for a rectangular spec)
+    double limit = 0.0;         // that limit at the first case's reading, in the channel's unit (gain: a fraction)
+};
+
 // A campaign of a recorded design as it could come out again, with `truth` concealed and
 // `replicates` trials per case, drawn only from what the recorded campaign's own estimates say
 // (docs/reconcile.md, "Detection limits"): each case's conditions land anew (the replicates'
@@ -83,8 +90,11 @@ public:
     // `calibration` (optional): the drawn probes' errors common to every case, as the twin terms
     // that would correct them (air_temp_bias at the air probe's error, wall_offset at minus the
     // wall probe's), for judging a claim beside the concealed term (names_concealed).
+    // `errors` (optional): every calibration error the lab was drawn with, in units of its limit.
+    // A draw's errors depend on its seed alone, not on `truth`: the same lab at every effect tried.
     virtual std::unique_ptr<ForwardModel> draw(const std::vector<physics::twin::Term>& truth, int replicates, std::uint64_t seed,
-                                               std::vector<physics::twin::Term>* calibration = nullptr) const = 0;
+                                               std::vector<physics::twin::Term>* calibration = nullptr,
+                                               std::vector<DrawnCalibrationError>* errors = nullptr) const = 0;
 };
 
 // Predicts every point with a set of extra terms on top of its base physics.

@@ -62,7 +62,134 @@ double power_crossing(const std::vector<PowerPoint>& tried, double null_value, d
     return x(lo) + f * (x(hi) - x(lo));
 }
 
+// The limit read from values tried (sorted by |effect|): the 80 % crossing between the values that
+// bracket it; the smallest value tried when that is already named often enough (`at_most`); none
+// when no value tried was.
+struct ReadLimit {
+    std::optional<double> value;
+    bool at_most = false;
+};
+ReadLimit read_limit(const std::vector<PowerPoint>& tried, double null_value, double far, double power) {
+    auto share = [](const PowerPoint& t) { return t.campaigns > 0 ? static_cast<double>(t.named) / t.campaigns : 0.0; };
+    if (tried.empty()) return {};
+    if (share(tried.front()) < power && share(tried.back()) >= power)
+        return {null_value + (far > null_value ? 1.0 : -1.0) * std::exp(power_crossing(tried, null_value, power)), false};
+    if (share(tried.front()) >= power) return {tried.front().value, true};
+    return {};
+}
+
+// Mid-ranks (ties share their mean rank), for a rank correlation with many tied counts.
+std::vector<double> mid_ranks(const std::vector<double>& v) {
+    std::vector<std::size_t> order(v.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](auto a, auto b) { return v[a] < v[b]; });
+    std::vector<double> r(v.size());
+    for (std::size_t i = 0; i < order.size();) {
+        std::size_t j = i;
+        while (j + 1 < order.size() && v[order[j + 1]] == v[order[i]]) ++j;
+        for (std::size_t k = i; k <= j; ++k) r[order[k]] = 0.5 * static_cast<double>(i + j);
+        i = j + 1;
+    }
+    return r;
+}
+
 }  // namespace
+
+// How the limit of `d` hangs on each calibration its drawn labs erred in (the same labs at every
+// value tried: common random numbers). Each lab's count of values tried at which it named the term
+// against |its error|: Spearman's rho, with a one-sided permutation p (does a larger error hide the
+// term?), flagged at 5 % over the calibrations tested for this term (Bonferroni). The labs whose
+// error lies within half its limit are the labs of a calibration twice as tight (exactly so for a
+// rectangular spec): the limit read from them alone is what that calibration would buy.
+void calibration_sensitivity(DetectionLimit& d, const std::vector<std::vector<DrawnCalibrationError>>& labs, double power,
+                             std::uint64_t seed) {
+    d.calibration.clear();
+    const std::size_t n = labs.size();
+    if (n < 4 || d.tried.empty()) return;
+    const double far = d.tried.back().value;  // which side of "no effect" the values lie on
+    for (const auto& t : d.tried)
+        if (t.draw_named.size() != n) return;
+    std::vector<double> count(n, 0.0);
+    for (const auto& t : d.tried)
+        for (std::size_t i = 0; i < n; ++i) count[i] += t.draw_named[i] ? 1.0 : 0.0;
+    // The value the report's share is counted at: the first tried at or beyond the limit.
+    const PowerPoint* at = &d.tried.back();
+    if (d.value)
+        for (const auto& t : d.tried)
+            if (std::abs(t.value - d.null_value) >= std::abs(*d.value - d.null_value) - 1e-12) {
+                at = &t;
+                break;
+            }
+    const std::vector<double> rc = mid_ranks(count);
+    const double mean_rank = 0.5 * static_cast<double>(n - 1);
+    double ss_c = 0.0;
+    for (double r : rc) ss_c += (r - mean_rank) * (r - mean_rank);
+    std::vector<std::string> channels;
+    for (const auto& e : labs.front()) channels.push_back(e.channel);
+    for (const auto& channel : channels) {
+        CalibrationSensitivity c;
+        c.channel = channel;
+        c.value = at->value;
+        std::vector<double> size(n, 0.0);
+        bool complete = true;
+        for (std::size_t i = 0; i < n && complete; ++i) {
+            const auto it = std::find_if(labs[i].begin(), labs[i].end(), [&](const auto& e) { return e.channel == channel; });
+            complete = it != labs[i].end();
+            if (complete) {
+                size[i] = std::abs(it->in_limits);
+                c.limit = it->limit;
+            }
+        }
+        if (!complete) continue;
+        const std::vector<double> rs = mid_ranks(size);
+        double ss_s = 0.0;
+        for (double r : rs) ss_s += (r - mean_rank) * (r - mean_rank);
+        auto dot = [&](const std::vector<double>& a, const std::vector<double>& b) {
+            double s = 0.0;
+            for (std::size_t i = 0; i < n; ++i) s += (a[i] - mean_rank) * (b[i] - mean_rank);
+            return s;
+        };
+        const double observed = dot(rs, rc);
+        if (ss_s > 0.0 && ss_c > 0.0) {
+            c.rank_correlation = observed / std::sqrt(ss_s * ss_c);
+            constexpr int kPermutations = 20000;
+            std::mt19937_64 rng(seed);
+            std::vector<double> perm = rc;
+            int as_low = 0;
+            for (int b = 0; b < kPermutations; ++b) {
+                std::shuffle(perm.begin(), perm.end(), rng);
+                as_low += dot(rs, perm) <= observed + 1e-9 ? 1 : 0;
+            }
+            c.p_value = (as_low + 1.0) / (kPermutations + 1.0);
+        }
+        // The labs within half the limit and beyond, at the reported value and over every value tried.
+        std::vector<PowerPoint> within;
+        for (const auto& t : d.tried) {
+            PowerPoint w;
+            w.value = t.value;
+            for (std::size_t i = 0; i < n; ++i) {
+                const bool in = size[i] <= 0.5;
+                if (in) {
+                    ++w.campaigns;
+                    w.named += t.draw_named[i] ? 1 : 0;
+                }
+                if (&t == at) {
+                    (in ? c.within : c.beyond) += 1;
+                    (in ? c.within_named : c.beyond_named) += t.draw_named[i] ? 1 : 0;
+                }
+            }
+            within.push_back(std::move(w));
+        }
+        if (c.within > 0) {
+            const ReadLimit r = read_limit(within, d.null_value, far, power);
+            c.limit_within = r.value;
+            c.limit_within_at_most = r.at_most;
+        }
+        d.calibration.push_back(std::move(c));
+        seed += 1;
+    }
+    for (auto& c : d.calibration) c.flagged = c.p_value < 0.05 / static_cast<double>(d.calibration.size());
+}
 
 std::optional<double> coarse_bracket_middle(const std::vector<PowerPoint>& tried, double null_value, double power) {
     auto share = [](const PowerPoint& t) { return t.campaigns > 0 ? static_cast<double>(t.named) / t.campaigns : 0.0; };
@@ -201,6 +328,8 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
             d.method = "fast model";
             d.value = fast;
             if (whole && n == rep.campaign_replicates && fast) {
+                // Each drawn lab's calibration errors, filled by its first draw (the same at every value).
+                std::vector<std::vector<DrawnCalibrationError>> labs(static_cast<std::size_t>(campaigns));
                 // The whole decision (reconcile itself) on campaigns of this design drawn anew with
                 // the effect concealed, the same draws at every value tried (common random numbers).
                 auto run = [&](double theta) {
@@ -220,12 +349,16 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     pt.value = theta;
                     for (int i = 0; i < campaigns; ++i) {
                         std::vector<physics::twin::Term> calibration;
-                        const auto sim = simulator->draw(truth, n, opt.seed + 7919u * static_cast<std::uint64_t>(i + 1), &calibration);
+                        auto& lab = labs[static_cast<std::size_t>(i)];
+                        const auto sim = simulator->draw(truth, n, opt.seed + 7919u * static_cast<std::uint64_t>(i + 1), &calibration,
+                                                         lab.empty() ? &lab : nullptr);
                         const Report r = reconcile(*sim, o);
-                        if (names_concealed(r, d.label, calibration)) {
+                        const bool hit = names_concealed(r, d.label, calibration);
+                        if (hit) {
                             ++pt.named;
                             pt.named_alone += r.explanation->terms.size() == 1 ? 1 : 0;
                         }
+                        pt.draw_named.push_back(hit ? 1 : 0);
                         ++pt.campaigns;
                     }
                     if (progress) progress(++checks_done, d.label, n);
@@ -264,13 +397,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                 }
                 // The power curve read at 80 % between the values that bracket it (interpolated,
                 // where a pass/fail ladder would keep the luckiest value).
-                d.value.reset();
-                if (bracketed) {
-                    const double x_at = power_crossing(d.tried, p.null_value, power);
-                    d.value = p.null_value + (far > p.null_value ? 1.0 : -1.0) * std::exp(x_at);
-                } else if (share(d.tried.front()) >= power) {
-                    d.value = d.tried.front().value;  // named often enough at the smallest value tried
-                }
+                d.value = read_limit(d.tried, p.null_value, far, power).value;
                 int total = 0;
                 for (const auto& t : d.tried) total += t.campaigns;
                 d.campaigns = total;
@@ -283,6 +410,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                             break;
                         }
                 d.method = "whole decision";
+                calibration_sensitivity(d, labs, power, opt.seed + 104729u * (k + 1));
                 whole_scale[d.label] = d.value ? (*d.value - p.null_value) / (*fast - p.null_value) : 0.0;
             }
             rep.limits.push_back(std::move(d));

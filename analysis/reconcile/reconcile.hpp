@@ -148,6 +148,21 @@ struct PowerPoint {
     double value = 0.0;                      // the effect concealed
     int named = 0, campaigns = 0;            // simulated campaigns in which reconcile named it (names_concealed)
     int named_alone = 0;                     // of those, named with no partner
+    std::vector<char> draw_named;            // per drawn campaign (the same labs at every value tried)
+};
+// How a whole-decision limit hangs on one calibration (docs/reconcile.md, "Detection limits"): the
+// drawn labs split by how far that calibration erred, within half its limit or beyond.
+struct CalibrationSensitivity {
+    std::string channel;                     // air_temp_c, air_rh_pct, wall_temp_c, heat_flux_offset, heat_flux_gain
+    double limit = 0.0;                      // the spec's limit at the first case's reading (gain: a fraction)
+    double rank_correlation = 0.0;           // Spearman: |error| against the number of values tried at which a lab named the term
+    double p_value = 1.0;                    // one-sided permutation test of that correlation being below 0
+    bool flagged = false;                    // p below 0.05 over the calibrations tested for this term (Bonferroni)
+    double value = 0.0;                      // the value the shares below are counted at (the reported one)
+    int within_named = 0, within = 0;        // labs whose error lies within half the limit
+    int beyond_named = 0, beyond = 0;
+    std::optional<double> limit_within;      // the limit read from those labs alone (none: not reached)
+    bool limit_within_at_most = false;       // they named the term often enough at the smallest value tried
 };
 // Where the planner tries once more before reading its power curve: the geometric middle of the
 // bracket around `power` (values sorted by distance from `null_value`) when that bracket climbs
@@ -164,6 +179,7 @@ struct DetectionLimit {
     int campaigns = 0;                       // whole-decision campaigns behind it, over every value tried (0: fast model)
     std::vector<PowerPoint> tried;           // whole decision: the values tried, nearest "no effect" first
     std::string method;                      // "whole decision" or "fast model"
+    std::vector<CalibrationSensitivity> calibration;  // whole decision only
 };
 struct PowerReport {
     int campaign_replicates = 0;
@@ -181,6 +197,10 @@ struct PowerOptions {
     // Called after each value tried: checks done so far, the candidate, the replicates.
     std::function<void(int, const std::string&, int)> progress;
 };
+// Fills `d.calibration` from the whole decision's per-lab verdicts (`tried[].draw_named`) and each
+// drawn lab's calibration errors (`labs`, in the same order): docs/reconcile.md, "Detection limits".
+void calibration_sensitivity(DetectionLimit& d, const std::vector<std::vector<DrawnCalibrationError>>& labs, double power,
+                             std::uint64_t seed);
 PowerReport detection_limits(const ForwardModel& model, const Options& options, const std::vector<int>& replicates,
                              const PowerOptions& power = {});
 

@@ -124,6 +124,17 @@ nlohmann::json power_to_json(const PowerReport& plan) {
                                     for (const auto& pt : d.tried)
                                         t.push_back({{"value", pt.value}, {"named", pt.named}, {"named_alone", pt.named_alone}, {"campaigns", pt.campaigns}});
                                     return t;
+                                }()},
+                               {"calibration", [&] {
+                                    nlohmann::json t = nlohmann::json::array();
+                                    for (const auto& c : d.calibration)
+                                        t.push_back({{"channel", c.channel}, {"limit", c.limit}, {"rank_correlation", c.rank_correlation},
+                                                     {"p_value", c.p_value}, {"flagged", c.flagged}, {"value", c.value},
+                                                     {"within_half_limit", {{"named", c.within_named}, {"campaigns", c.within}}},
+                                                     {"beyond_half_limit", {{"named", c.beyond_named}, {"campaigns", c.beyond}}},
+                                                     {"smallest_effect_within_half_limit", c.limit_within ? nlohmann::json(*c.limit_within) : nlohmann::json()},
+                                                     {"at_most", c.limit_within_at_most}});
+                                    return t;
                                 }()}});
     return j;
 }
@@ -165,7 +176,35 @@ std::string power_to_text(const PowerReport& plan) {
                          "    way were named in 69-85 % (gamma 97 %), pooled 75 %: a few points optimistic, and one plan is\n"
                          "    conditional on this campaign's own noise estimate (docs/reconcile.md, \"Detection limits\").\n",
                          plan.campaign_replicates, campaigns);
-    else
+    if (campaigns > 0) {
+        // Which limits hang on how far a probe (or the manikin's calibration) erred within its spec.
+        auto describe = [](const CalibrationSensitivity& c) -> std::pair<std::string, std::string> {
+            if (c.channel == "air_temp_c") return {"air probe", fmt::format("±{:.2g} °C", c.limit / 2)};
+            if (c.channel == "air_rh_pct") return {"humidity probe", fmt::format("±{:.2g} % RH", c.limit / 2)};
+            if (c.channel == "wall_temp_c") return {"wall probe", fmt::format("±{:.2g} °C", c.limit / 2)};
+            if (c.channel == "heat_flux_offset") return {"manikin's flux offset", fmt::format("±{:.2g} W/m²", c.limit / 2)};
+            if (c.channel == "heat_flux_gain") return {"manikin's flux gain", fmt::format("±{:.2g} %", 100.0 * c.limit / 2)};
+            return {c.channel, fmt::format("±{:.2g}", c.limit / 2)};
+        };
+        int tested = 0;
+        std::string lines;
+        for (const auto& d : plan.limits)
+            for (const auto& c : d.calibration) {
+                ++tested;
+                if (!c.flagged) continue;
+                const auto [what, half] = describe(c);
+                lines += fmt::format(
+                    "  {} hangs on the {}'s calibration (rank correlation {:.2f}, p {:.2g}): at {:.3g}, named in {} of {} drawn\n"
+                    "    labs whose {} erred within {} (half its limit), {} of {} beyond. Calibrated to {}: {}.\n",
+                    d.label, what, c.rank_correlation, c.p_value, c.value, c.within_named, c.within, what, half, c.beyond_named, c.beyond, half,
+                    c.limit_within ? fmt::format("{}{:.3g}", c.limit_within_at_most ? "at most " : "", *c.limit_within)
+                                   : std::string("not reached at the values tried"));
+            }
+        if (tested > 0)
+            o << (lines.empty() ? "  No limit here hangs on how far a probe or the manikin's calibration erred within its spec\n"
+                                  "    (each term's drawn labs, 5 % over its calibrations).\n"
+                                : "Calibration (each term's drawn labs, 5 % over its calibrations):\n" + lines);
+    } else
         o << "    A fast model of the decision only (no replicate scatter to draw campaigns from, or --power-campaigns 0):\n"
              "    optimistic where terms share evidence; read the limits as lower bounds (docs/reconcile.md).\n";
     return o.str();

@@ -122,6 +122,16 @@ TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at 
             CHECK(l["campaigns"].get<int>() >= 5);  // settled after 5 of 6 named, or all 6 tried
             // Named: alone, or beside a drawn probe's own error (names_concealed); alone is a part.
             for (const auto& t : l["tried"]) CHECK(t["named_alone"].get<int>() <= t["named"].get<int>());
+            // How the limit hangs on each calibration the drawn labs erred in: every lab counted once.
+            std::set<std::string> channels;
+            for (const auto& c : l["calibration"]) {
+                channels.insert(c["channel"].get<std::string>());
+                CHECK(c["within_half_limit"]["campaigns"].get<int>() + c["beyond_half_limit"]["campaigns"].get<int>() == 6);
+                CHECK(c["p_value"].get<double>() > 0.0);
+                CHECK(c["p_value"].get<double>() <= 1.0);
+                CHECK(c["limit"].get<double>() > 0.0);
+            }
+            CHECK(channels == std::set<std::string>{"air_temp_c", "air_rh_pct", "wall_temp_c", "heat_flux_offset", "heat_flux_gain"});
         } else {
             CHECK(l["method"] == "scaled");
             CHECK(l["simulated_power"].is_null());

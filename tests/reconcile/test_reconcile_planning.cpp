@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 
 #include "analysis/reconcile/report_output.hpp"
 #include "tests/reconcile/synthetic_campaign.hpp"
@@ -248,7 +249,7 @@ TEST_CASE("the plan's text says how far its limits held on independent campaigns
     d.replicates = 3;
     d.value = 1.26;
     d.method = "whole decision";
-    d.tried = {{1.125, 25, 40, 24}, {1.26, 32, 40, 32}};
+    d.tried = {{1.125, 25, 40, 24, {}}, {1.26, 32, 40, 32, {}}};
     plan.limits = {d};
     const std::string whole = rc::power_to_text(plan);
     CHECK_THAT(whole, Catch::Contains("checked by running reconcile itself on 40 campaigns"));
@@ -258,4 +259,127 @@ TEST_CASE("the plan's text says how far its limits held on independent campaigns
     const std::string fast = rc::power_to_text(plan);
     CHECK_THAT(fast, Catch::Contains("read the limits as lower bounds"));
     CHECK_THAT(fast, !Catch::Contains("pooled 75 %"));
+}
+
+namespace {
+
+// A plan's whole-decision verdicts for 40 drawn labs at three values tried, drawn here (not by the
+// planner): lab i names the term at value v when its own latent draw falls under a share that
+// climbs with v and, by `air_weight`, sinks with how far the lab's air probe erred.
+struct SyntheticPlan {
+    rc::DetectionLimit limit;
+    std::vector<std::vector<rc::DrawnCalibrationError>> labs;
+};
+SyntheticPlan synthetic_plan(std::uint64_t seed, double air_weight) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> unit(0.0, 1.0), spec(-1.0, 1.0);
+    SyntheticPlan s;
+    const char* channels[] = {"air_temp_c", "air_rh_pct", "wall_temp_c", "heat_flux_offset", "heat_flux_gain"};
+    const double limits[] = {0.2, 1.6, 0.5, 1.0, 0.03};
+    std::vector<double> latent;
+    for (int i = 0; i < 40; ++i) {
+        std::vector<rc::DrawnCalibrationError> lab;
+        for (int c = 0; c < 5; ++c) lab.push_back({channels[c], spec(rng), limits[c]});
+        s.labs.push_back(lab);
+        latent.push_back(unit(rng));
+    }
+    s.limit.label = "textile_resistance";
+    s.limit.null_value = 0.0;
+    s.limit.method = "whole decision";
+    for (double v : {0.0008, 0.001, 0.00125}) {
+        rc::PowerPoint pt;
+        pt.value = v;
+        for (std::size_t i = 0; i < s.labs.size(); ++i) {
+            // logit share: 1.4 (80 %) at 0.001, 4 per doubling, less air_weight per unit of |air error|.
+            const double logit = 1.4 + 4.0 * std::log2(v / 0.001) + air_weight * (0.5 - std::abs(s.labs[i][0].in_limits));
+            const bool named = latent[i] < 1.0 / (1.0 + std::exp(-logit));
+            pt.draw_named.push_back(named ? 1 : 0);
+            pt.named += named ? 1 : 0;
+            ++pt.campaigns;
+        }
+        s.limit.tried.push_back(pt);
+    }
+    s.limit.value = 0.001;
+    return s;
+}
+
+}  // namespace
+
+TEST_CASE("planning: a limit that hangs on the air probe's calibration is flagged, with the limit a probe calibrated to "
+          "half its spec would reach; calibrations it does not hang on are not", "[planning][power]") {
+    // As textile does in the bench's design (docs/reconcile.md, tenth pass): labs whose air probe
+    // erred by more than half its limit name it far less often.
+    auto s = synthetic_plan(3, 6.0);
+    rc::calibration_sensitivity(s.limit, s.labs, 0.8, 11);
+    REQUIRE(s.limit.calibration.size() == 5);
+    for (const auto& c : s.limit.calibration) {
+        INFO(c.channel << " rho " << c.rank_correlation << " p " << c.p_value);
+        CHECK(c.within + c.beyond == 40);
+        CHECK(c.value == 0.001);
+        CHECK(c.p_value > 0.0);
+        CHECK(c.p_value <= 1.0);
+        if (c.channel == "air_temp_c") {
+            CHECK(c.flagged);
+            CHECK(c.rank_correlation < -0.3);
+            CHECK(static_cast<double>(c.within_named) / c.within > static_cast<double>(c.beyond_named) / c.beyond);
+            // The labs within half the limit, counted here: the limit read from them alone lies in
+            // the bracket where their own share crosses 80 %.
+            std::vector<double> share;
+            for (const auto& t : s.limit.tried) {
+                int in = 0, named = 0;
+                for (std::size_t i = 0; i < s.labs.size(); ++i)
+                    if (std::abs(s.labs[i][0].in_limits) <= 0.5) ++in, named += t.draw_named[i];
+                share.push_back(static_cast<double>(named) / in);
+            }
+            REQUIRE(c.limit_within);
+            if (share[0] >= 0.8) {
+                CHECK(c.limit_within_at_most);
+                CHECK(*c.limit_within == 0.0008);
+            } else {
+                const auto up = std::find_if(share.begin(), share.end(), [](double x) { return x >= 0.8; }) - share.begin();
+                REQUIRE(up > 0);
+                REQUIRE(up < 3);
+                CHECK(*c.limit_within >= s.limit.tried[static_cast<std::size_t>(up - 1)].value);
+                CHECK(*c.limit_within <= s.limit.tried[static_cast<std::size_t>(up)].value);
+            }
+            CHECK(*c.limit_within <= *s.limit.value);
+        } else {
+            CHECK_FALSE(c.flagged);
+        }
+    }
+    // The text says it, in the probe's own terms.
+    rc::PowerReport plan;
+    plan.campaign_replicates = 3;
+    plan.replicates = {3};
+    s.limit.replicates = 3;
+    plan.limits = {s.limit};
+    const std::string text = rc::power_to_text(plan);
+    CHECK_THAT(text, Catch::Contains("textile_resistance hangs on the air probe's calibration"));
+    CHECK_THAT(text, Catch::Contains("within ±0.1 °C (half its limit)"));
+    CHECK_THAT(text, !Catch::Contains("humidity probe's calibration"));
+    const auto j = rc::power_to_json(plan);
+    REQUIRE(j["limits"][0]["calibration"].size() == 5);
+    CHECK(j["limits"][0]["calibration"][0]["channel"] == "air_temp_c");
+    CHECK(j["limits"][0]["calibration"][0]["flagged"] == true);
+}
+
+TEST_CASE("planning: where no calibration matters, a term is flagged in at most 5 % of plans (plus the binomial margin)",
+          "[planning][power]") {
+    // 200 plans whose verdicts are drawn independently of every lab's errors: a flag is false.
+    int flagged = 0, p_low = 0, tests = 0;
+    for (std::uint64_t seed = 1; seed <= 200; ++seed) {
+        auto s = synthetic_plan(1000 + seed, 0.0);
+        rc::calibration_sensitivity(s.limit, s.labs, 0.8, seed);
+        bool any = false;
+        for (const auto& c : s.limit.calibration) {
+            any = any || c.flagged;
+            p_low += c.p_value < 0.05 ? 1 : 0;
+            ++tests;
+        }
+        flagged += any ? 1 : 0;
+    }
+    INFO(flagged << " of 200 plans flagged; " << p_low << " of " << tests << " p-values below 0.05");
+    CHECK(flagged <= 20);             // P(Binomial(200, 0.05) > 20) < 0.01
+    CHECK(p_low <= 72);               // 1000 tests at 5 %: mean 50, and 72 is 3.2 sd above
+    CHECK(p_low >= 30);               // a test that never rejects would pass the first checks too
 }
