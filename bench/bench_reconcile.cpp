@@ -33,8 +33,9 @@ namespace rc = analysis::reconcile;
 
 namespace {
 
-// The check's labs' air probe error as a fraction of the spec's (BENCH_CHECK_CALIBRATED=air_temp_c: 0.5).
-double g_air_error_scale = 1.0;
+// The check's labs' error in one calibration as a fraction of the spec's (BENCH_CHECK_CALIBRATED=channel: 0.5).
+std::string g_calibrated_channel;
+double error_scale(const char* channel) { return g_calibrated_channel == channel ? 0.5 : 1.0; }
 
 std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersion& world, std::uint64_t seed, int replicates = 3,
                                                  std::optional<rc::CarriedNoise> carried = std::nullopt,
@@ -56,17 +57,17 @@ std::unique_ptr<rc::ForwardModel> campaign_model(const physics::twin::TwinVersio
             const auto it = specs.find(channel);
             return it == specs.end() ? 0.0 : it->second.limit(reading);
         };
-        g.probe_air_bias_c = limit("air_temp_c", 30.0) * within(rng) * g_air_error_scale;
-        g.probe_rh_bias_pct = limit("air_rh_pct", 50.0) * within(rng);
-        g.probe_wall_bias_c = limit("wall_temp_c", 30.0) * within(rng);
+        g.probe_air_bias_c = limit("air_temp_c", 30.0) * within(rng) * error_scale("air_temp_c");
+        g.probe_rh_bias_pct = limit("air_rh_pct", 50.0) * within(rng) * error_scale("air_rh_pct");
+        g.probe_wall_bias_c = limit("wall_temp_c", 30.0) * within(rng) * error_scale("wall_temp_c");
         // BENCH_CHAMBER=probes: each lab trims its chamber until its own probes read the case's
         // air temperature and humidity (the planner's model of a lab); unset, the enclosure
         // settles at the case's values in every lab and only the recordings are off.
         const char* chamber = std::getenv("BENCH_CHAMBER");
         g.chamber_set_by_probes = chamber && std::string(chamber) == "probes";
         // ... and the manikin's flux calibration, within the heat-flux spec (a + b |q|).
-        g.flux_calibration_offset_w_m2 = limit("heat_flux_w_m2", 0.0) * within(rng);
-        g.flux_calibration_gain = (limit("heat_flux_w_m2", 1.0) - limit("heat_flux_w_m2", 0.0)) * within(rng);
+        g.flux_calibration_offset_w_m2 = limit("heat_flux_w_m2", 0.0) * within(rng) * error_scale("heat_flux_offset");
+        g.flux_calibration_gain = (limit("heat_flux_w_m2", 1.0) - limit("heat_flux_w_m2", 0.0)) * within(rng) * error_scale("heat_flux_gain");
         // BENCH_PROBE_RH_BIAS=x: every campaign's RH probe off by exactly x % RH (the others as
         // drawn): how much a planning campaign's RH probe sets what its planner plans.
         if (const char* rh = std::getenv("BENCH_PROBE_RH_BIAS")) g.probe_rh_bias_pct = std::atof(rh);
@@ -464,21 +465,16 @@ int main(int argc, char** argv) {
         const bool planning_lab = std::getenv("BENCH_CHECK_LABS") && std::string(std::getenv("BENCH_CHECK_LABS")) == "planning";
         const std::uint64_t check_lab = planning_lab ? planning_seed : 0;
         std::printf("power check campaigns: %s\n", planning_lab ? "the planning campaign's lab (its probes and calibration)" : "each its own lab");
-        // BENCH_CHECK_CALIBRATED=air_temp_c: the check's labs have their air probe calibrated to
-        // half its spec, and each term is checked at the limit the plan read for such labs (its
-        // drawn labs within half the limit), where the plan gave one.
-        const char* calibrated = std::getenv("BENCH_CHECK_CALIBRATED");
-        if (calibrated) {
-            if (std::string(calibrated) != "air_temp_c") {
-                std::fprintf(stderr, "BENCH_CHECK_CALIBRATED: only air_temp_c is drawn tighter, got '%s'\n", calibrated);
-                return 2;
-            }
-            g_air_error_scale = 0.5;
+        // BENCH_CHECK_CALIBRATED=channel (air_temp_c, air_rh_pct, wall_temp_c, heat_flux_offset,
+        // heat_flux_gain): the check's labs have that calibration to half its spec, and each term is
+        // checked at the limit the plan read for such labs (its drawn labs within half the limit).
+        if (const char* calibrated = std::getenv("BENCH_CHECK_CALIBRATED")) {
+            g_calibrated_channel = calibrated;
             for (auto& d : plan.limits) {
-                const auto c = std::find_if(d.calibration.begin(), d.calibration.end(), [](const auto& x) { return x.channel == "air_temp_c"; });
+                const auto c = std::find_if(d.calibration.begin(), d.calibration.end(), [&](const auto& x) { return x.channel == g_calibrated_channel; });
                 d.value = c != d.calibration.end() ? c->limit_within : std::nullopt;
             }
-            std::printf("power check labs: air probe within half its spec, each term at the limit read for such labs\n");
+            std::printf("power check labs: %s within half its spec, each term at the limit read for such labs\n", calibrated);
         }
         struct Term {
             const char* term;

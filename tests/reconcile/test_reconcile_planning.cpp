@@ -305,8 +305,8 @@ SyntheticPlan synthetic_plan(std::uint64_t seed, double air_weight) {
 
 }  // namespace
 
-TEST_CASE("planning: a limit that hangs on the air probe's calibration is flagged, with the limit a probe calibrated to "
-          "half its spec would reach; calibrations it does not hang on are not", "[planning][power]") {
+TEST_CASE("planning: a limit that hangs on the air probe's calibration is flagged with the limit a probe calibrated to "
+          "half its spec would reach and calibrations it does not hang on are not", "[planning][power]") {
     // As textile does in the bench's design (docs/reconcile.md, tenth pass): labs whose air probe
     // erred by more than half its limit name it far less often.
     auto s = synthetic_plan(3, 6.0);
@@ -363,7 +363,7 @@ TEST_CASE("planning: a limit that hangs on the air probe's calibration is flagge
     CHECK(j["limits"][0]["calibration"][0]["flagged"] == true);
 }
 
-TEST_CASE("planning: where no calibration matters, a term is flagged in at most 5 % of plans (plus the binomial margin)",
+TEST_CASE("planning: where no calibration matters a term is flagged in at most 5 % of plans (plus the binomial margin)",
           "[planning][power]") {
     // 200 plans whose verdicts are drawn independently of every lab's errors: a flag is false.
     int flagged = 0, p_low = 0, tests = 0;
