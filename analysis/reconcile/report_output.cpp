@@ -173,8 +173,10 @@ std::string power_to_text(const PowerReport& plan) {
                          "    Other n: a fast model, scaled per term by how far the whole decision moved it at n = {0}\n"
                          "    (docs/reconcile.md).\n"
                          "    How far to trust it: on campaigns from the project's generator, 100 per term, limits printed this\n"
-                         "    way were named in 69-85 % (gamma 97 %), pooled 75 %: a few points optimistic, and one plan is\n"
-                         "    conditional on this campaign's own noise estimate (docs/reconcile.md, \"Detection limits\").\n",
+                         "    way were named in 71-85 %, pooled 78 %, in labs that set their chamber by their own probes (the\n"
+                         "    labs the planner draws); in labs whose air sits exactly at the case's values, 65-82 % (gamma 97 %).\n"
+                         "    One plan is conditional on this campaign's own noise estimate and air probe (docs/reconcile.md,\n"
+                         "    \"Detection limits\").\n",
                          plan.campaign_replicates, campaigns);
     if (campaigns > 0) {
         // Which limits hang on how far a probe (or the manikin's calibration) erred within its spec.
@@ -194,16 +196,19 @@ std::string power_to_text(const PowerReport& plan) {
                 if (!c.flagged) continue;
                 const auto [what, half] = describe(c);
                 lines += fmt::format(
-                    "  {} hangs on the {}'s calibration (rank correlation {:.2f}, p {:.2g}): at {:.3g}, named in {} of {} drawn\n"
-                    "    labs whose {} erred within {} (half its limit), {} of {} beyond. Calibrated to {}: {}.\n",
-                    d.label, what, c.rank_correlation, c.p_value, c.value, c.within_named, c.within, what, half, c.beyond_named, c.beyond, half,
+                    "  {}: the {}'s calibration (rank correlation {:.2f}, p {:.2g}). At {:.3g} named in {} of {}\n"
+                    "    drawn labs whose {} erred within {} (half its limit), {} of {} beyond.\n"
+                    "    With the {} calibrated to {}: {}.\n",
+                    d.label, what, c.rank_correlation, c.p_value, c.value, c.within_named, c.within, what, half, c.beyond_named, c.beyond, what,
+                    half,
                     c.limit_within ? fmt::format("{}{:.3g}", c.limit_within_at_most ? "at most " : "", *c.limit_within)
                                    : std::string("not reached at the values tried"));
             }
         if (tested > 0)
-            o << (lines.empty() ? "  No limit here hangs on how far a probe or the manikin's calibration erred within its spec\n"
-                                  "    (each term's drawn labs, 5 % over its calibrations).\n"
-                                : "Calibration (each term's drawn labs, 5 % over its calibrations):\n" + lines);
+            o << (lines.empty() ? "Calibration: no limit here hangs on how far a probe or the manikin's calibration erred within its\n"
+                                  "    spec (each term's drawn labs split by that error; 5 % over the term's calibrations).\n"
+                                : "Calibration: limits that hang on how far a probe or the manikin's calibration erred within its\n"
+                                  "    spec (each term's drawn labs split by that error; 5 % over the term's calibrations):\n" + lines);
     } else
         o << "    A fast model of the decision only (no replicate scatter to draw campaigns from, or --power-campaigns 0):\n"
              "    optimistic where terms share evidence; read the limits as lower bounds (docs/reconcile.md).\n";

@@ -253,12 +253,12 @@ TEST_CASE("the plan's text says how far its limits held on independent campaigns
     plan.limits = {d};
     const std::string whole = rc::power_to_text(plan);
     CHECK_THAT(whole, Catch::Contains("checked by running reconcile itself on 40 campaigns"));
-    CHECK_THAT(whole, Catch::Contains("pooled 75 %: a few points optimistic"));
+    CHECK_THAT(whole, Catch::Contains("pooled 78 %, in labs that set their chamber by their own probes"));
     plan.limits.front().tried.clear();
     plan.limits.front().method = "fast model";
     const std::string fast = rc::power_to_text(plan);
     CHECK_THAT(fast, Catch::Contains("read the limits as lower bounds"));
-    CHECK_THAT(fast, !Catch::Contains("pooled 75 %"));
+    CHECK_THAT(fast, !Catch::Contains("pooled 78 %"));
 }
 
 namespace {
@@ -354,10 +354,18 @@ TEST_CASE("planning: a limit that hangs on the air probe's calibration is flagge
     s.limit.replicates = 3;
     plan.limits = {s.limit};
     const std::string text = rc::power_to_text(plan);
-    CHECK_THAT(text, Catch::Contains("textile_resistance hangs on the air probe's calibration"));
+    CHECK_THAT(text, Catch::Contains("textile_resistance: the air probe's calibration"));
+    CHECK_THAT(text, Catch::Contains("With the air probe calibrated to ±0.1 °C: "));
     CHECK_THAT(text, Catch::Contains("within ±0.1 °C (half its limit)"));
     CHECK_THAT(text, !Catch::Contains("humidity probe's calibration"));
     const auto j = rc::power_to_json(plan);
+    // A plan whose verdicts do not hang on the air error says so, in one line.
+    auto none = synthetic_plan(4, 0.0);
+    rc::calibration_sensitivity(none.limit, none.labs, 0.8, 11);
+    for (const auto& c : none.limit.calibration) REQUIRE_FALSE(c.flagged);
+    none.limit.replicates = 3;
+    plan.limits = {none.limit};
+    CHECK_THAT(rc::power_to_text(plan), Catch::Contains("Calibration: no limit here hangs on how far a probe"));
     REQUIRE(j["limits"][0]["calibration"].size() == 5);
     CHECK(j["limits"][0]["calibration"][0]["channel"] == "air_temp_c");
     CHECK(j["limits"][0]["calibration"][0]["flagged"] == true);
