@@ -197,8 +197,10 @@ struct PowerOptions {
     // Called after each value tried: checks done so far, the candidate, the replicates.
     std::function<void(int, const std::string&, int)> progress;
 };
-// Fills `d.calibration` from the whole decision's per-lab verdicts (`tried[].draw_named`) and each
-// drawn lab's calibration errors (`labs`, in the same order): docs/reconcile.md, "Detection limits".
+// Fills `d.calibration` from the whole decision's per-lab verdicts (`tried[].draw_named`, values
+// sorted by distance from "no effect", as detection_limits leaves them) and each drawn lab's
+// calibration errors (`labs`, in the same order); leaves it empty when they do not line up or
+// there are fewer than 4 labs (docs/reconcile.md, "Detection limits", eleventh pass).
 void calibration_sensitivity(DetectionLimit& d, const std::vector<std::vector<DrawnCalibrationError>>& labs, double power,
                              std::uint64_t seed);
 PowerReport detection_limits(const ForwardModel& model, const Options& options, const std::vector<int>& replicates,
