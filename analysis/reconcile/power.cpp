@@ -22,6 +22,17 @@ namespace ev = evidence;
 namespace {
 
 constexpr int kGridSteps = 120;
+
+// The share of a value's campaigns that named the term.
+double share(const PowerPoint& t) { return t.campaigns > 0 ? static_cast<double>(t.named) / t.campaigns : 0.0; }
+
+// The value the plan reports its share at: the first tried at or beyond the limit (none: no limit).
+const PowerPoint* at_limit(const DetectionLimit& d) {
+    if (!d.value) return nullptr;
+    for (const auto& t : d.tried)
+        if (std::abs(t.value - d.null_value) >= std::abs(*d.value - d.null_value) - 1e-12) return &t;
+    return nullptr;
+}
 constexpr int kPowerSimulations = 400;
 
 // The whitened prediction at a parameter value between grid points (linear interpolation).
@@ -70,7 +81,6 @@ struct ReadLimit {
     bool at_most = false;
 };
 ReadLimit read_limit(const std::vector<PowerPoint>& tried, double null_value, double far, double power) {
-    auto share = [](const PowerPoint& t) { return t.campaigns > 0 ? static_cast<double>(t.named) / t.campaigns : 0.0; };
     if (tried.empty()) return {};
     if (share(tried.front()) < power && share(tried.back()) >= power)
         return {null_value + (far > null_value ? 1.0 : -1.0) * std::exp(power_crossing(tried, null_value, power)), false};
@@ -112,14 +122,9 @@ void calibration_sensitivity(DetectionLimit& d, const std::vector<std::vector<Dr
     std::vector<double> count(n, 0.0);
     for (const auto& t : d.tried)
         for (std::size_t i = 0; i < n; ++i) count[i] += t.draw_named[i] ? 1.0 : 0.0;
-    // The value the report's share is counted at: the first tried at or beyond the limit.
-    const PowerPoint* at = &d.tried.back();
-    if (d.value)
-        for (const auto& t : d.tried)
-            if (std::abs(t.value - d.null_value) >= std::abs(*d.value - d.null_value) - 1e-12) {
-                at = &t;
-                break;
-            }
+    // The counts are taken where the report's share is (the largest value tried when no limit).
+    const PowerPoint* at = at_limit(d);
+    if (!at) at = &d.tried.back();
     const std::vector<double> rc = mid_ranks(count);
     const double mean_rank = 0.5 * static_cast<double>(n - 1);
     double ss_c = 0.0;
@@ -192,7 +197,6 @@ void calibration_sensitivity(DetectionLimit& d, const std::vector<std::vector<Dr
 }
 
 std::optional<double> coarse_bracket_middle(const std::vector<PowerPoint>& tried, double null_value, double power) {
-    auto share = [](const PowerPoint& t) { return t.campaigns > 0 ? static_cast<double>(t.named) / t.campaigns : 0.0; };
     const auto i = upper_bracket(tried, power);  // the bracket power_crossing reads
     if (!i) return std::nullopt;
     const auto& lo = tried[*i - 1];
@@ -364,7 +368,6 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     if (progress) progress(++checks_done, d.label, n);
                     return pt;
                 };
-                auto share = [](const PowerPoint& pt) { return static_cast<double>(pt.named) / pt.campaigns; };
                 // Steps of 25 % of the effect from the fast model's value until the 80 % share is
                 // bracketed (a value named less often and one named at least that often).
                 constexpr double kStep = 1.25;
@@ -402,13 +405,8 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                 for (const auto& t : d.tried) total += t.campaigns;
                 d.campaigns = total;
                 // Reported: the share named at the first value tried at or beyond the limit.
-                d.simulated_power = 0.0;
-                if (d.value)
-                    for (const auto& t : d.tried)
-                        if (std::abs(t.value - p.null_value) >= std::abs(*d.value - p.null_value) - 1e-12) {
-                            d.simulated_power = share(t);
-                            break;
-                        }
+                const PowerPoint* reported = at_limit(d);
+                d.simulated_power = reported ? share(*reported) : 0.0;
                 d.method = "whole decision";
                 calibration_sensitivity(d, labs, power, opt.seed + 104729u * (k + 1));
                 whole_scale[d.label] = d.value ? (*d.value - p.null_value) / (*fast - p.null_value) : 0.0;
