@@ -39,6 +39,39 @@ bool is_utf8(std::string_view text) {
     return true;
 }
 
+namespace {
+
+// The first control character in `text` (UTF-8 already checked): C0 but the `allowed` ones, DEL,
+// or a C1 control (U+0080..U+009F, encoded C2 80..C2 9F), which terminals act on too.
+bool has_control(std::string_view text, std::string_view allowed) {
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        const auto c = static_cast<unsigned char>(text[i]);
+        if ((c < 0x20 && allowed.find(static_cast<char>(c)) == std::string_view::npos) || c == 0x7F) return true;
+        if (c == 0xC2 && i + 1 < text.size() && static_cast<unsigned char>(text[i + 1]) <= 0x9F) return true;
+    }
+    return false;
+}
+
+}  // namespace
+
+std::string label_problem(std::string_view value, std::size_t max_bytes, bool path_safe) {
+    if (value.empty()) return "empty";
+    if (!is_utf8(value)) return "not UTF-8 text";
+    if (value.size() > max_bytes) return fmt::format("{} bytes, more than the {} allowed", value.size(), max_bytes);
+    if (has_control(value, {})) return "holds a control character (a line break, NUL, escape, ...)";
+    if (path_safe && value.find_first_of("/\\") != std::string_view::npos) return "holds '/' or '\\' (it names a folder in exports)";
+    if (value.find_first_not_of(" \t") == std::string_view::npos) return "only spaces";
+    return {};
+}
+
+std::string text_problem(std::string_view value, std::size_t max_bytes) {
+    if (!is_utf8(value)) return "not UTF-8 text";
+    if (value.size() > max_bytes) return fmt::format("{} bytes, more than the {} allowed", value.size(), max_bytes);
+    if (has_control(value, "\n\t")) return "control characters are not allowed (newlines and tabs are)";
+    if (value.find_first_not_of(" \t\n") == std::string_view::npos) return "empty";
+    return {};
+}
+
 std::string printable(std::string_view text, std::size_t max_bytes) {
     std::string out;
     std::size_t i = 0;

@@ -7,11 +7,13 @@
 #include <string>
 
 #include <CLI/CLI.hpp>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 
 #include "cli/commands.hpp"
+#include "base/text.hpp"
 #include "base/user_error.hpp"
 
 namespace {
@@ -53,6 +55,15 @@ int main(int argc, char** argv) {
     CLI::App app{"manikin: thermal-manikin trials, heat fluxes with 95 % CIs, and the physics behind them"};
     app.footer("Every command takes --json. Exit status: 0 ok, 1 internal error, 2 bad usage or input, 3 daemon not\n"
                "reachable, 4 refused, 5 negative verdict (a check found problems). docs/cli.md has the contract.");
+    // Every argument is UTF-8 text (names, notes, paths): one that is not went into a JSON request
+    // and came back as "internal error" (issue 60); it is a usage error, named here.
+    for (int i = 1; i < argc; ++i)
+        if (!manikind::is_utf8(argv[i]))
+            return report_error(json, "bad_usage",
+                                fmt::format("argument {} ('{}') is not UTF-8 text: manikin takes its names, texts and paths "
+                                            "as UTF-8 (check the terminal's or the script's encoding)",
+                                            i, manikind::printable(argv[i], 80)),
+                                ExitStatus::bad_input);
     try {
         manikind::cli::add_commands_for(app, argc, argv);
         app.parse(argc, argv);

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 #include <toml++/toml.h>
 
+#include "base/text.hpp"
 #include "base/toml_input.hpp"
 #include "base/user_error.hpp"
 #include "sim/campaign/campaign_generator.hpp"
@@ -79,6 +80,25 @@ CampaignPlan table_s3_plan(const std::string& name) {
                            c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt});
     }
     return p;
+}
+
+std::string plan_text_problem(const CampaignPlan& plan) {
+    // The lengths the campaign file allows (parse_campaign_plan): 120 for the name, 60 for an id.
+    if (const auto why = label_problem(plan.name, 120, true); !why.empty())
+        return fmt::format("\"name\" '{}': {}", printable(plan.name, 60), why);
+    for (const auto& [id, e] : plan.ensembles) {
+        if (const auto why = label_problem(id, 60, true); !why.empty())
+            return fmt::format("ensemble id '{}': {}", printable(id, 60), why);
+        if (e.description.empty()) continue;
+        if (const auto why = label_problem(e.description, 500); !why.empty())
+            return fmt::format("ensembles.{}.description: {}", id, why);
+    }
+    for (const auto& c : plan.cases)
+        for (const auto* field : {&c.ensemble, &c.test})
+            if (!field->empty())
+                if (const auto why = label_problem(*field, 60, true); !why.empty())
+                    return fmt::format("case {}: '{}': {}", c.id, printable(*field, 60), why);
+    return {};
 }
 
 std::size_t edit_distance(std::string_view a, std::string_view b) {
@@ -218,12 +238,10 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
     const auto* name = root.get("name");
     if (!name || !name->is_string()) throw UserError(fmt::format("{}: name: expected the campaign's name (a string)", source));
     p.name = name->as_string()->get();
-    if (p.name.empty() || p.name.find_first_of("/\\") != std::string::npos)
-        throw UserError(fmt::format("{}: name: must be non-empty and contain no '/'", where(*name)));
-    // The name becomes a folder name and a column in exports: printable and of a sane length.
-    if (p.name.size() > 120 ||
-        std::any_of(p.name.begin(), p.name.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; }))
-        throw UserError(fmt::format("{}: name: at most 120 characters, none of them control characters", where(*name)));
+    // The name becomes a folder name and a column in exports: printable, of a sane length, no
+    // '/' (the same rule as every other way a plan arrives: plan_text_problem).
+    if (const auto why = label_problem(p.name, 120, true); !why.empty())
+        throw UserError(fmt::format("{}: name: {} (1 to 120 bytes of UTF-8 text, no control character, no '/')", where(*name), why));
     p.replicates = whole(root, "replicates", 3, 1, 20);
     p.trial_duration_s = 60.0 * number(root, "trial_duration_min", 75, 1, 24 * 60);
     p.settle_window_s = 60.0 * number(root, "settle_window_min", 10, 0, 600);

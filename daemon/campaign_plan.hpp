@@ -100,6 +100,11 @@ std::vector<std::string> plan_differences(const CampaignPlan& plan, const nlohma
 // The paper's 15 validation cases (Table S3) x 3 replicates.
 CampaignPlan table_s3_plan(const std::string& name);
 
+// Why the plan's names and texts cannot be stored (base/text.hpp's one rule: the campaign's name,
+// each ensemble's id and description, each case's ensemble and test), or empty. LabDaemon checks
+// every plan with it, whatever brought it (API, console, file, built-in), before it is stored.
+std::string plan_text_problem(const CampaignPlan& plan);
+
 // `text` is the TOML; `source` names it in messages. A key the parser does not know is an error
 // ("file:line:column: key: unknown key (did you mean '...'?)"): the daemon refuses such a plan. "builtin:table-s3" as a file name gives the
 // Table S3 plan. Throws UserError.

@@ -70,10 +70,16 @@ LabDaemon::LabDaemon(DaemonOptions options)
       db_lock_(InstanceLock::acquire(db_path_, "database")),
       // The recorder opens (creates, upgrades) the file; then the daemon's read-only connection.
       recorder_(std::make_unique<recorder::Recorder>(db_path_, recorder_options_of(o_.config))),
-      db_(recorder::Database::open_read_only(db_path_)) {
+      db_(recorder::Database::open_read_only(db_path_)),
+      row_mark_(db_.row_mark()) {
     last_tick_steady_ns_ = steady_now_ns();
     const auto [interrupted, campaigns_interrupted] = recorder_->call([&](recorder::Database& db) {
-        const int trials = db.mark_interrupted_trials(system_clock_.utc_ns());
+        // On the virtual clock the last thing recorded is when the run stopped; the wall clock
+        // may lie months before it.
+        std::int64_t ended_utc_ns = system_clock_.utc_ns();
+        if (o_.virtual_clock && o_.config.mode == "simulated")
+            if (const auto newest = db.newest_utc_ns()) ended_utc_ns = *newest;
+        const int trials = db.mark_interrupted_trials(ended_utc_ns);
         return std::pair{trials, db.mark_interrupted_campaigns()};
     });
     if (interrupted > 0 || campaigns_interrupted > 0) {
@@ -203,15 +209,11 @@ std::string LabDaemon::add_note(const std::string& campaign, std::optional<std::
                                 const std::string& text, const std::string& author) {
     // Checked here, whoever asks (console, socket): the notebook holds text a person can read.
     if (!analysis::is_note_kind(kind)) return fmt::format("\"kind\": expected comment, operator, ensemble or garment, not '{}'", printable(kind, 40));
-    if (!is_utf8(text) || !is_utf8(author)) return "\"text\" and \"author\": expected UTF-8 text";
-    const bool has_words = std::any_of(text.begin(), text.end(), [](char c) { return !std::isspace(static_cast<unsigned char>(c)); });
-    if (!has_words) return "\"text\": empty (a note needs words)";
-    if (text.size() > analysis::kMaxNoteBytes)
-        return fmt::format("\"text\": {} bytes, more than a note holds ({})", text.size(), analysis::kMaxNoteBytes);
-    for (const char c : text)
-        if ((static_cast<unsigned char>(c) < 0x20 && c != '\n' && c != '\t') || c == 0x7F)
-            return "\"text\": control characters are not allowed (newlines and tabs are)";
-    if (author.empty() || author.size() > 100) return "\"author\": expected a name of 1 to 100 bytes";
+    // base/text.hpp's one rule: the author is a label (no control character: a NUL, CR or ESC
+    // reached the HTML report), the text may hold newlines and tabs.
+    if (const auto why = text_problem(text, analysis::kMaxNoteBytes); !why.empty())
+        return fmt::format("\"text\": {}{}", why, why == "empty" ? " (a note needs words)" : "");
+    if (const auto why = label_problem(author, 100); !why.empty()) return fmt::format("\"author\": {}", why);
     std::lock_guard lk(lock_);
     flush_all_locked();  // a campaign or trial created a moment ago is found
     const auto id = db_.find_campaign(campaign);
@@ -553,6 +555,9 @@ void LabDaemon::enter(Stage s, const std::string& why) {
 }
 
 std::string LabDaemon::start_campaign(const CampaignPlan& plan) {
+    // One gate for every plan, whatever brought it: a name with a NUL or a line break (the API's
+    // built-in plan took any) broke every later archive push of the database (issue 60).
+    if (const auto why = plan_text_problem(plan); !why.empty()) return why;
     std::lock_guard lk(lock_);
     if (const auto why = check_plan_against_limits(plan, o_.config.safety); !why.empty()) return why;
     if (const auto why = check_plan_against_devices(plan, o_.config); !why.empty()) return why;

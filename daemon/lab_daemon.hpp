@@ -142,6 +142,9 @@ public:
     void flush_recorder();
     Acquisition& acquisition() { return *acq_; }
     const std::filesystem::path& database_path() const { return db_path_; }
+    // The file's readings as this run began (after a crash ring's rows were restored): the stop
+    // line counts what the run stored from the file, past this mark (docs/recorder.md).
+    const recorder::Database::RowMark& row_mark() const { return row_mark_; }
     std::optional<std::string> last_campaign() const { return last_campaign_; }
     // Virtual clock only: the last finished campaign as its results read it from the database, so
     // `manikin demo` need not read 9 M values back a second time (nullptr on a real clock: a lab's
@@ -232,6 +235,7 @@ private:
     InstanceLock db_lock_;   // first: a second daemon must not touch the database at all
     std::unique_ptr<recorder::Recorder> recorder_;  // the one writer: every write goes through it
     recorder::Database db_;  // read-only: what the daemon reads back (campaigns to continue, results)
+    recorder::Database::RowMark row_mark_;
     drivers::ManualClock virtual_clock_;
     drivers::SystemClock system_clock_;
     const drivers::Clock* clock_ = nullptr;

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <csignal>
 #include <cstdio>
@@ -35,6 +36,7 @@
 #include "base/user_error.hpp"
 #include "analysis/physio.hpp"
 #include "daemon/web_server.hpp"
+#include "store/database.hpp"
 
 namespace {
 
@@ -117,167 +119,201 @@ int main(int argc, char** argv) {
         // no token file of the first.
         InstanceLock socket_lock = InstanceLock::acquire(api.socket_path, "control socket");
         api.token = load_or_create_token(cfg.api.token, api.socket_path);
-        // [notifications]: made before the daemon so that it outlives every notice the daemon posts
-        // (the last ones at its exit are tried once more as it stops).
-        std::unique_ptr<Notifier> notifier;
-        const auto& nc = cfg.notifications;
-        if (!nc.webhook_url.empty() || (!nc.smtp_url.empty() && !nc.mail_to.empty())) {
-            NotifierOptions no;
-            no.lab_name = cfg.lab_name;
-            no.events = std::set<std::string>(nc.events.begin(), nc.events.end());
-            no.webhook_url = nc.webhook_url;
-            no.webhook_format = nc.webhook_format;
-            no.smtp_url = nc.smtp_url;
-            no.mail_from = nc.mail_from;
-            no.mail_to = nc.mail_to;
-            no.min_interval_s = nc.min_interval_s;
-            no.retries = static_cast<int>(nc.retries);
-            no.timeout_s = nc.timeout_s;
-            notifier = std::make_unique<Notifier>(no);
-        }
-        LabDaemon daemon({cfg, virtual_clock, speed});
-        if (notifier) {
-            daemon.set_notice_listener([n = notifier.get()](const std::string& kind, const std::string& severity, const std::string& title,
-                                                            const std::string& body, std::int64_t utc_ns) {
-                n->post({kind, severity, title, body, utc_ns});
-            });
-            daemon.add_status_section("notifications", [n = notifier.get()] { return n->status_json(); });
-        }
-        // [archive]: forwarded from the recorder's file on a thread of its own (docs/archive.md).
-        std::unique_ptr<archive::BackgroundForwarder> forwarder;
-        if (!cfg.archive.postgresql.empty()) {
-            archive::ForwardingOptions fo;
-            fo.database = daemon.database_path();
-            fo.conninfo = cfg.archive.postgresql;
-            fo.lab_id = cfg.archive.lab_id;
-            fo.lab_name = cfg.archive.lab_name.empty() ? cfg.lab_name : cfg.archive.lab_name;
-            fo.interval = std::chrono::milliseconds(std::llround(cfg.archive.interval_s * 1000.0));
-            forwarder = std::make_unique<archive::BackgroundForwarder>(
-                fo, [&daemon](const std::string& severity, const std::string& message) {
-                    daemon.external_event(severity, "archive", message);
-                });
-            daemon.add_status_section("archive", [f = forwarder.get()] { return f->status_json(); });
-        }
-        ControlServer server(daemon, api);
-        server.adopt_socket_lock(std::move(socket_lock));
-        server.start();
-        std::unique_ptr<WebServer> console;
-        if (!cfg.http.listen.empty()) {
-            console = std::make_unique<WebServer>(daemon, api, parse_listen(cfg.http.listen, "http.listen"));
-            console->start();
-        }
-        std::printf("manikind: %s lab, %s clock; database %s; control socket %s%s\n", cfg.mode.c_str(),
-                    virtual_clock ? "virtual" : "real", daemon.database_path().c_str(), api.socket_path.c_str(),
-                    api.tcp_port ? fmt::format(" and 127.0.0.1:{}", api.tcp_port).c_str() : "");
-        if (console) std::printf("manikind: console %s\n", console->url().c_str());
-        std::fflush(stdout);
-        ::sd_notifyf(0, "READY=1\nSTATUS=%s lab, control socket %s", cfg.mode.c_str(), api.socket_path.c_str());
-        // The watchdog (WatchdogSec=) is fed at a third of its period, and only while the daemon
-        // is really alive: its tick ran and the control server's timer ran within the last 5 s.
-        std::uint64_t watchdog_usec = 0;
-        const bool watchdog = ::sd_watchdog_enabled(0, &watchdog_usec) > 0 && watchdog_usec > 0;
-        auto last_ping = std::chrono::steady_clock::now() - std::chrono::hours(1);
-        auto feed_watchdog = [&] {
-            if (!watchdog) return;
-            const auto now = std::chrono::steady_clock::now();
-            if (now - last_ping < std::chrono::microseconds(watchdog_usec / 3)) return;
-            if (daemon.seconds_since_tick() > 5.0 || server.seconds_since_heartbeat() > 5.0) return;
-            ::sd_notify(0, "WATCHDOG=1");
-            last_ping = now;
-        };
-        std::string campaign_name;
-        if (!campaign.empty()) {
-            CampaignPlan plan = load_campaign_plan(campaign);
-            if (const auto why = daemon.start_campaign(plan); !why.empty()) throw UserError(why);
-            campaign_name = plan.name;
-        }
-        auto signalled = [&] {
-            signalfd_siginfo si{};
-            return ::read(sig_fd, &si, sizeof si) == static_cast<ssize_t>(sizeof si);
-        };
-        if (virtual_clock) {
-            const double dt = cfg.simulation.step_s;
-            std::string last_stage;
-            // The signal descriptor is read at most every 20 ms of wall time, not at every step:
-            // a read answering EAGAIN each virtual second was one of the daemon's ~36 system calls
-            // per step (issue 36). A SIGTERM still stops it within 20 ms.
-            constexpr auto kSignalCheck = std::chrono::milliseconds(20);
-            auto next_signal_check = std::chrono::steady_clock::now();
-            for (;;) {
-                if (const auto now = std::chrono::steady_clock::now(); now >= next_signal_check) {
-                    if (signalled()) break;
-                    next_signal_check = now + kSignalCheck;
-                }
-                if (server.shutdown_requested() || (console && console->shutdown_requested())) break;
-                feed_watchdog();
-                daemon.step_virtual(dt);
-                // Not status_json(): it measures the steady window and every device, each step.
-                const std::string stage = daemon.stage_line();
-                if (stage != last_stage) {
-                    std::printf("t=%.0f s %s committed=%llu accepted=%llu\n", daemon.virtual_time_s(), stage.c_str(),
-                                static_cast<unsigned long long>(daemon.committed_rows()),
-                                static_cast<unsigned long long>(daemon.accepted_rows()));
-                    std::fflush(stdout);
-                    last_stage = stage;
-                }
-                if (exit_when_done && !daemon.campaign_active()) break;
-            }
-        } else {
-            daemon.start_realtime();
-            for (;;) {
-                pollfd p{sig_fd, POLLIN, 0};
-                ::poll(&p, 1, watchdog ? static_cast<int>(std::clamp<std::uint64_t>(watchdog_usec / 3000, 10, 500)) : 500);
-                feed_watchdog();
-                if (signalled() || server.shutdown_requested() || (console && console->shutdown_requested())) break;
-                if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;
-            }
-        }
-        // --exit-when-done: the exit status says how the campaign ended (0 done, 6 otherwise; docs/cli.md).
+        // What the run stored is counted from the file once the daemon, its recorder and every
+        // connection of its own are gone (the block below): the file as the next reader finds it.
+        struct RunTally {
+            nlohmann::json recorder, storage;
+            recorder::Database::RowMark mark;
+            std::filesystem::path database;
+        } tally;
         int exit_status = 0;
-        if (exit_when_done && !campaign_name.empty() && !daemon.campaign_active()) {
-            print_results_summary(daemon, campaign_name);
-            const auto outcome = daemon.campaign_outcome_json(campaign_name);
-            if (!outcome.value("ok", false)) {
-                exit_status = static_cast<int>(ExitStatus::not_done);
-                std::fprintf(stderr, "manikind: campaign '%s' ended %s (trials: %s): exit status %d\n", campaign_name.c_str(),
-                             outcome.value("state", "?").c_str(), outcome["trials"].dump().c_str(), exit_status);
+        {
+            // [notifications]: made before the daemon so that it outlives every notice the daemon posts
+            // (the last ones at its exit are tried once more as it stops).
+            std::unique_ptr<Notifier> notifier;
+            const auto& nc = cfg.notifications;
+            if (!nc.webhook_url.empty() || (!nc.smtp_url.empty() && !nc.mail_to.empty())) {
+                NotifierOptions no;
+                no.lab_name = cfg.lab_name;
+                no.events = std::set<std::string>(nc.events.begin(), nc.events.end());
+                no.webhook_url = nc.webhook_url;
+                no.webhook_format = nc.webhook_format;
+                no.smtp_url = nc.smtp_url;
+                no.mail_from = nc.mail_from;
+                no.mail_to = nc.mail_to;
+                no.min_interval_s = nc.min_interval_s;
+                no.retries = static_cast<int>(nc.retries);
+                no.timeout_s = nc.timeout_s;
+                notifier = std::make_unique<Notifier>(no);
+            }
+            LabDaemon daemon({cfg, virtual_clock, speed});
+            if (notifier) {
+                daemon.set_notice_listener([n = notifier.get()](const std::string& kind, const std::string& severity, const std::string& title,
+                                                                const std::string& body, std::int64_t utc_ns) {
+                    n->post({kind, severity, title, body, utc_ns});
+                });
+                daemon.add_status_section("notifications", [n = notifier.get()] { return n->status_json(); });
+            }
+            // [archive]: forwarded from the recorder's file on a thread of its own (docs/archive.md).
+            std::unique_ptr<archive::BackgroundForwarder> forwarder;
+            if (!cfg.archive.postgresql.empty()) {
+                archive::ForwardingOptions fo;
+                fo.database = daemon.database_path();
+                fo.conninfo = cfg.archive.postgresql;
+                fo.lab_id = cfg.archive.lab_id;
+                fo.lab_name = cfg.archive.lab_name.empty() ? cfg.lab_name : cfg.archive.lab_name;
+                fo.interval = std::chrono::milliseconds(std::llround(cfg.archive.interval_s * 1000.0));
+                forwarder = std::make_unique<archive::BackgroundForwarder>(
+                    fo, [&daemon](const std::string& severity, const std::string& message) {
+                        daemon.external_event(severity, "archive", message);
+                    });
+                daemon.add_status_section("archive", [f = forwarder.get()] { return f->status_json(); });
+            }
+            ControlServer server(daemon, api);
+            server.adopt_socket_lock(std::move(socket_lock));
+            server.start();
+            std::unique_ptr<WebServer> console;
+            if (!cfg.http.listen.empty()) {
+                console = std::make_unique<WebServer>(daemon, api, parse_listen(cfg.http.listen, "http.listen"));
+                console->start();
+            }
+            std::printf("manikind: %s lab, %s clock; database %s; control socket %s%s\n", cfg.mode.c_str(),
+                        virtual_clock ? "virtual" : "real", daemon.database_path().c_str(), api.socket_path.c_str(),
+                        api.tcp_port ? fmt::format(" and 127.0.0.1:{}", api.tcp_port).c_str() : "");
+            if (console) std::printf("manikind: console %s\n", console->url().c_str());
+            std::fflush(stdout);
+            ::sd_notifyf(0, "READY=1\nSTATUS=%s lab, control socket %s", cfg.mode.c_str(), api.socket_path.c_str());
+            // The watchdog (WatchdogSec=) is fed at a third of its period, and only while the daemon
+            // is really alive: its tick ran and the control server's timer ran within the last 5 s.
+            std::uint64_t watchdog_usec = 0;
+            const bool watchdog = ::sd_watchdog_enabled(0, &watchdog_usec) > 0 && watchdog_usec > 0;
+            auto last_ping = std::chrono::steady_clock::now() - std::chrono::hours(1);
+            auto feed_watchdog = [&] {
+                if (!watchdog) return;
+                const auto now = std::chrono::steady_clock::now();
+                if (now - last_ping < std::chrono::microseconds(watchdog_usec / 3)) return;
+                if (daemon.seconds_since_tick() > 5.0 || server.seconds_since_heartbeat() > 5.0) return;
+                ::sd_notify(0, "WATCHDOG=1");
+                last_ping = now;
+            };
+            std::string campaign_name;
+            if (!campaign.empty()) {
+                CampaignPlan plan = load_campaign_plan(campaign);
+                if (const auto why = daemon.start_campaign(plan); !why.empty()) throw UserError(why);
+                campaign_name = plan.name;
+            }
+            auto signalled = [&] {
+                signalfd_siginfo si{};
+                return ::read(sig_fd, &si, sizeof si) == static_cast<ssize_t>(sizeof si);
+            };
+            if (virtual_clock) {
+                const double dt = cfg.simulation.step_s;
+                std::string last_stage;
+                // The signal descriptor is read at most every 20 ms of wall time, not at every step:
+                // a read answering EAGAIN each virtual second was one of the daemon's ~36 system calls
+                // per step (issue 36). A SIGTERM still stops it within 20 ms.
+                constexpr auto kSignalCheck = std::chrono::milliseconds(20);
+                auto next_signal_check = std::chrono::steady_clock::now();
+                for (;;) {
+                    if (const auto now = std::chrono::steady_clock::now(); now >= next_signal_check) {
+                        if (signalled()) break;
+                        next_signal_check = now + kSignalCheck;
+                    }
+                    if (server.shutdown_requested() || (console && console->shutdown_requested())) break;
+                    feed_watchdog();
+                    daemon.step_virtual(dt);
+                    // Not status_json(): it measures the steady window and every device, each step.
+                    const std::string stage = daemon.stage_line();
+                    if (stage != last_stage) {
+                        std::printf("t=%.0f s %s committed=%llu accepted=%llu\n", daemon.virtual_time_s(), stage.c_str(),
+                                    static_cast<unsigned long long>(daemon.committed_rows()),
+                                    static_cast<unsigned long long>(daemon.accepted_rows()));
+                        std::fflush(stdout);
+                        last_stage = stage;
+                    }
+                    if (exit_when_done && !daemon.campaign_active()) break;
+                }
+            } else {
+                daemon.start_realtime();
+                for (;;) {
+                    pollfd p{sig_fd, POLLIN, 0};
+                    ::poll(&p, 1, watchdog ? static_cast<int>(std::clamp<std::uint64_t>(watchdog_usec / 3000, 10, 500)) : 500);
+                    feed_watchdog();
+                    if (signalled() || server.shutdown_requested() || (console && console->shutdown_requested())) break;
+                    if (exit_when_done && !campaign.empty() && !daemon.campaign_active()) break;
+                }
+            }
+            // --exit-when-done: the exit status says how the campaign ended (0 done, 6 otherwise; docs/cli.md).
+            if (exit_when_done && !campaign_name.empty() && !daemon.campaign_active()) {
+                print_results_summary(daemon, campaign_name);
+                const auto outcome = daemon.campaign_outcome_json(campaign_name);
+                if (!outcome.value("ok", false)) {
+                    exit_status = static_cast<int>(ExitStatus::not_done);
+                    std::fprintf(stderr, "manikind: campaign '%s' ended %s (trials: %s): exit status %d\n", campaign_name.c_str(),
+                                 outcome.value("state", "?").c_str(), outcome["trials"].dump().c_str(), exit_status);
+                }
+            }
+            ::sd_notify(0, "STOPPING=1");
+            std::printf("manikind: stopping\n");
+            if (console) console->stop();
+            server.stop();
+            daemon.stop();
+            {
+                const auto st = daemon.status_json();
+                tally.recorder = st["recorder"];
+                tally.storage = st["storage"];
+                tally.mark = daemon.row_mark();
+                tally.database = daemon.database_path();
+            }
+            // What the last seconds committed goes now if the archive answers within 10 s; else at
+            // the next start (nothing is lost either way).
+            if (forwarder) {
+                // Everything recorded goes to the archive before the exit, with progress; a second
+                // SIGTERM/SIGINT (or 60 s without a chunk committed) ends the wait, and the next start
+                // sends the rest: the local database keeps every row.
+                std::printf("manikind: forwarding what is left to the archive (Ctrl-C again to leave it for the next start)\n");
+                std::fflush(stdout);
+                const bool complete = forwarder->finish(
+                    std::chrono::seconds(60),
+                    [](std::int64_t sent) {
+                        std::printf("manikind: archive: %lld rows sent since the stop\n", static_cast<long long>(sent));
+                        std::fflush(stdout);
+                    },
+                    [&] { return signalled(); });
+                std::printf("manikind: archive: %s\n", complete ? "everything recorded is in the archive"
+                                                              : "not everything is in the archive yet: the next start sends "
+                                                                "the rest (nothing is lost)");
+                std::fflush(stdout);
             }
         }
-        ::sd_notify(0, "STOPPING=1");
-        std::printf("manikind: stopping\n");
-        if (console) console->stop();
-        server.stop();
-        daemon.stop();
-        {
-            // What this run recorded, in its own count: a lab (and the soak test) checks nothing was lost.
-            const auto st = daemon.status_json();
-            const auto& r = st["recorder"];
-            const auto n = [](const nlohmann::json& v) { return static_cast<unsigned long long>(v.get<std::uint64_t>()); };
-            std::printf("manikind: stopped: %llu readings accepted, %llu stored, %llu re-sent duplicates, %llu dropped, "
-                        "%llu lost; %llu writes waiting\n",
-                        n(r["accepted"]), n(r["committed"]), n(r["duplicates"]), n(r["dropped_queue_full"]),
-                        n(r["lost_after_retries"]), n(st["storage"]["deferred_writes"]));
-            std::fflush(stdout);
+        // What this run recorded: a lab (and the soak test) checks nothing was lost. "stored" is
+        // counted in the file, after the recorder closed, not taken from the recorder's tally:
+        // readings lost after their commit (another program deleting the live -wal, issue 60)
+        // show here, and the stop says so.
+        const auto n = [](const nlohmann::json& v) { return static_cast<unsigned long long>(v.get<std::uint64_t>()); };
+        const auto committed = n(tally.recorder["committed"]);
+        unsigned long long in_file = 0;
+        std::string count_error;
+        try {
+            in_file = static_cast<unsigned long long>(recorder::Database::open_read_only(tally.database).rows_since(tally.mark));
+        } catch (const std::exception& e) {
+            count_error = e.what();
         }
-        // What the last seconds committed goes now if the archive answers within 10 s; else at
-        // the next start (nothing is lost either way).
-        if (forwarder) {
-            // Everything recorded goes to the archive before the exit, with progress; a second
-            // SIGTERM/SIGINT (or 60 s without a chunk committed) ends the wait, and the next start
-            // sends the rest: the local database keeps every row.
-            std::printf("manikind: forwarding what is left to the archive (Ctrl-C again to leave it for the next start)\n");
-            std::fflush(stdout);
-            const bool complete = forwarder->finish(
-                std::chrono::seconds(60),
-                [](std::int64_t sent) {
-                    std::printf("manikind: archive: %lld rows sent since the stop\n", static_cast<long long>(sent));
-                    std::fflush(stdout);
-                },
-                [&] { return signalled(); });
-            std::printf("manikind: archive: %s\n", complete ? "everything recorded is in the archive"
-                                                          : "not everything is in the archive yet: the next start sends "
-                                                            "the rest (nothing is lost)");
-            std::fflush(stdout);
+        std::printf("manikind: stopped: %llu readings accepted, %llu stored, %llu re-sent duplicates, %llu dropped, "
+                    "%llu lost; %llu writes waiting\n",
+                    n(tally.recorder["accepted"]), count_error.empty() ? in_file : committed, n(tally.recorder["duplicates"]),
+                    n(tally.recorder["dropped_queue_full"]), n(tally.recorder["lost_after_retries"]),
+                    n(tally.storage["deferred_writes"]));
+        std::fflush(stdout);
+        if (!count_error.empty()) {
+            std::fprintf(stderr, "manikind: the readings stored could not be counted in %s (%s); the recorder's own count is "
+                                 "given\n", tally.database.c_str(), count_error.c_str());
+        } else if (in_file != committed) {
+            std::fprintf(stderr, "manikind: %s holds %llu readings of this run, the recorder committed %llu: %lld lost after "
+                                 "their commit (did a program other than SQLite open the database, or delete its -wal?)\n",
+                         tally.database.c_str(), in_file, committed,
+                         static_cast<long long>(committed) - static_cast<long long>(in_file));
+            if (exit_status == 0) exit_status = static_cast<int>(ExitStatus::internal);
         }
         return exit_status;
     } catch (const UserError& e) {

@@ -107,8 +107,27 @@ const std::set<std::string>& notice_kinds() {
 std::string Notifier::webhook_body(const std::string& format, const std::string& lab, const std::vector<Notice>& notices) {
     std::string text;
     for (const auto& n : notices) text += (text.empty() ? "" : "\n") + fmt::format("[{}] {}: {}", lab, n.title, n.body);
-    if (format == "slack") return dump_json({{"text", text}});
-    if (format == "matrix") return dump_json({{"msgtype", "m.text"}, {"body", text}});
+    // Each target's markup is escaped: the text comes partly from outside (campaign names, alarm
+    // messages, note authors). Slack reads &, < and > as control characters (`<!channel>` pings the
+    // whole channel, `<url|text>` makes a link): they go as &amp; &lt; &gt;, as Slack's
+    // "Formatting text" asks. Matrix: an empty m.mentions (intentional mentions, spec v1.7) so no
+    // word in the body pings anyone, and "@room" broken by a word joiner for older clients.
+    if (format == "slack") {
+        std::string escaped;
+        for (const char c : text) {
+            if (c == '&') escaped += "&amp;";
+            else if (c == '<') escaped += "&lt;";
+            else if (c == '>') escaped += "&gt;";
+            else escaped += c;
+        }
+        return dump_json({{"text", escaped}});
+    }
+    if (format == "matrix") {
+        std::string body = text;
+        for (std::size_t at = body.find("@room"); at != std::string::npos; at = body.find("@room", at + 1))
+            body.insert(at + 1, "\u2060");
+        return dump_json({{"msgtype", "m.text"}, {"body", body}, {"m.mentions", nlohmann::json::object()}});
+    }
     // json (ntfy's JSON publishing, generic receivers): the notices themselves, and a title.
     nlohmann::json list = nlohmann::json::array();
     std::string worst = "info";

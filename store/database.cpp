@@ -665,12 +665,19 @@ Database Database::open_read_only(const std::filesystem::path& path) {
         throw UserError(fmt::format("{}: no such database ({})", path.string(), std::strerror(errno)));
     if (!S_ISREG(st.st_mode)) throw UserError(fmt::format("{}: not a regular file, so not a manikind database", path.string()));
     if (st.st_size == 0) throw UserError(fmt::format("{}: an empty file, not a manikind database", path.string()));
-    if (!is_sqlite_file(path))
-        throw UserError(fmt::format("{}: not an SQLite database, so not a manikind database", path.string()));
+    // Identified through SQLite itself, never by opening the file outside it: closing any
+    // descriptor of a file drops every POSIX lock this process holds on it, so a peek at the
+    // header while the daemon's recorder has the database open (the interim results, the
+    // console, the archive forwarder all open it read-only in the daemon) left the recorder's
+    // locks gone; a plain `sqlite3` reader then took itself for the last connection,
+    // checkpointed and deleted the live -wal (issue 60; SQLite's "How To Corrupt", 2.2.1).
     auto impl = std::make_unique<Impl>();
     impl->path = path;
     if (open_sqlite_read_only(path, &impl->db) != SQLITE_OK) impl->fail("cannot open the database to read");
     sqlite3_extended_result_codes(impl->db, 1);
+    if (const int rc = sqlite3_exec(impl->db, "SELECT count(*) FROM sqlite_schema", nullptr, nullptr, nullptr);
+        (rc & 0xff) == SQLITE_NOTADB)
+        throw UserError(fmt::format("{}: not an SQLite database, so not a manikind database", path.string()));
     impl->exec("PRAGMA busy_timeout = 5000", "setting busy_timeout");
     int tables = 0;
     {
@@ -789,7 +796,9 @@ void Database::add_trial_flag(std::int64_t trial_id, std::int64_t flag_bits) {
 
 int Database::mark_interrupted_trials(std::int64_t utc_ns) {
     Query(*impl_,
-          "UPDATE trials SET state = 'interrupted', reason = 'daemon restarted', ended_utc_ns = ?"
+          // Never before the trial began, whatever clock the caller has (a virtual clock runs ahead
+          // of the wall clock; issue 60 found interrupted trials ending before they started).
+          "UPDATE trials SET state = 'interrupted', reason = 'daemon restarted', ended_utc_ns = max(?1, coalesce(started_utc_ns, ?1))"
           " WHERE state NOT IN ('done', 'aborted', 'interrupted', 'failed')")
         .bind(utc_ns)
         .run();
@@ -1235,6 +1244,28 @@ std::int64_t Database::idle_sample_count() {
     Query q(*impl_, "SELECT count(*) FROM idle_samples");
     q.step();
     return q.integer(0);
+}
+
+Database::RowMark Database::row_mark() {
+    RowMark mark;
+    {
+        Query q(*impl_, "SELECT max(id) FROM samples");
+        q.step();
+        mark.sample_id = q.optional_integer(0).value_or(-1);
+    }
+    mark.idle_rows = idle_sample_count();
+    return mark;
+}
+
+std::int64_t Database::rows_since(const RowMark& mark) {
+    std::int64_t n = 0;
+    {
+        Query q(*impl_, "SELECT count(*) FROM samples WHERE id > ?1");
+        q.bind(mark.sample_id);
+        q.step();
+        n += q.integer(0);
+    }
+    return n + idle_sample_count() - mark.idle_rows;
 }
 
 std::int64_t Database::sample_count(std::int64_t trial_id) {

@@ -292,6 +292,16 @@ public:
     // a second run never stamps a reading with a time already used.
     std::optional<std::int64_t> newest_utc_ns();
     std::int64_t idle_sample_count();
+    // Where the readings stood when a run began (the newest sample id, the idle log's size):
+    // what the run stored since is counted from the file itself by rows_since, not from a
+    // writer's own tally (issue 60: a tally cannot see rows lost after their commit). The idle
+    // log is counted whole, not by stamp: a real clock stepped back stamps new rows below the mark.
+    struct RowMark {
+        std::int64_t sample_id = -1;
+        std::int64_t idle_rows = 0;
+    };
+    RowMark row_mark();
+    std::int64_t rows_since(const RowMark& mark);
     std::vector<EventRow> events(std::optional<std::int64_t> trial_id);  // empty: all events; by mono_ns
     std::optional<ResultRow> latest_result(std::int64_t campaign_id);
 

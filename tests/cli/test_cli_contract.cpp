@@ -144,6 +144,16 @@ TEST_CASE("cli contract: input and usage errors under --json are one error objec
         CHECK(both.out.rfind("error: ", 0) == 0);
         CHECK(run_manikin("physics psychro --temp 35 --rh 10 --bogus 2>/dev/null").exit_code == 2);
     }
+    SECTION("an argument that is not UTF-8 is a usage error naming it, not an internal error") {
+        // A note's campaign name typed in a Latin-1 terminal went into the JSON request and threw.
+        const auto r = run_manikin("note --socket " + (dir / "none.sock").string() + " --campaign \"$(printf 'caf\\351')\" hello --json");
+        CHECK(r.exit_code == 2);
+        CHECK(error_of(r)["code"] == "bad_usage");
+        CHECK_THAT(error_of(r)["message"].get<std::string>(), Catch::Contains("not UTF-8") && Catch::Contains("caf\\xE9"));
+        const auto plain = run_manikin("note --campaign \"$(printf '\\377')\" x 2>&1");
+        CHECK(plain.exit_code == 2);
+        CHECK(plain.out.find("internal error") == std::string::npos);
+    }
     SECTION("--help is not an error, even with --json") {
         const auto r = run_manikin("thermoreg --help --json");
         CHECK(r.exit_code == 0);

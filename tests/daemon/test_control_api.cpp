@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "daemon/control_api.hpp"
+#include "base/text.hpp"
 #include "analysis/recording.hpp"
 #include "store/database_export.hpp"
 #include "daemon_fixture.hpp"
@@ -205,6 +206,43 @@ TEST_CASE("control API: the lab notebook takes notes on a campaign and its trial
     CHECK(c.notes[0].kind == "operator");
     CHECK(c.notes[1].trial == c.trials[0].info.id);
     CHECK(c.notes[1].text == "coverall #3,\nwashed twice");
+}
+
+TEST_CASE("control API: names and texts pass one rule whatever brings them", "[daemon][api][notes]") {
+    DaemonFixture f;
+    auto start_builtin = [&](const std::string& name) {
+        return ask(f, nlohmann::json{{"cmd", "start_campaign"}, {"token", "s3cret"}, {"builtin", "table-s3"}, {"name", name}}.dump());
+    };
+    auto start_toml = [&](const std::string& name) {
+        const std::string toml = "name = " + nlohmann::json(name).dump() +
+                                 "\nreplicates = 1\n[[cases]]\nchamber_temp_c = 35\nchamber_rh_pct = 27\nskin_setpoint_c = 35\nwet = false\n";
+        return ask(f, nlohmann::json{{"cmd", "start_campaign"}, {"token", "s3cret"}, {"plan_toml", toml}}.dump());
+    };
+    // The built-in plan through the API took any of these (a NUL broke every later archive push).
+    for (const std::string& bad : {std::string("two\nlines"), std::string("cr\r"), std::string("nul\0x", 5), std::string("a/b"),
+                                   std::string("esc\x1b[31m"), std::string(121, 'n'), std::string("   ")}) {
+        INFO(manikind::printable(bad));
+        const auto builtin = start_builtin(bad);
+        CHECK(builtin["ok"] == false);
+        CHECK(builtin["error"].get<std::string>().find("name") != std::string::npos);
+        const auto toml = start_toml(bad);
+        CHECK(toml["ok"] == false);
+        CHECK(toml["error"].get<std::string>().find("name") != std::string::npos);
+    }
+    CHECK(f.daemon().status_json()["campaign"].is_null());
+    REQUIRE(start_builtin("validation 2026 — Ø").at("ok") == true);  // UTF-8 and spaces are welcome
+    // A note's author is a name: no control character reaches a report or the console.
+    auto note = [&](const nlohmann::json& fields) {
+        auto j = fields;
+        j["cmd"] = "note";
+        j["token"] = "s3cret";
+        j["campaign"] = "validation 2026 — Ø";
+        return ask(f, j.dump());
+    };
+    for (const std::string& author : {std::string("ana\x1b[2J"), std::string("n\0ul", 4), std::string("cr\r"), std::string()})
+        CHECK(note({{"author", author}, {"text", "x"}})["error"].get<std::string>().find("\"author\"") == 0);
+    CHECK(note({{"text", "carriage\rreturn"}})["error"].get<std::string>().find("control characters") != std::string::npos);
+    CHECK(note({{"text", "line one\n\tline two"}, {"author", "Ana Müller"}})["ok"] == true);
 }
 
 TEST_CASE("export of a running campaign: the trial still acquiring goes up to its last committed reading, marked partial",

@@ -67,6 +67,12 @@ TEST_CASE("kill -9 mid-trial: restart marks the trial interrupted, committed sam
     REQUIRE(trials.size() == 1);
     CHECK(trials[0].state == "interrupted");
     CHECK(trials[0].reason == "daemon restarted");
+    // On the virtual clock (months ahead of the wall clock here) the trial ends when the
+    // recording stopped, never before it began (it took the wall clock's time before issue 60).
+    REQUIRE(trials[0].started_utc_ns);
+    REQUIRE(trials[0].ended_utc_ns);
+    CHECK(*trials[0].ended_utc_ns >= *trials[0].started_utc_ns);
+    CHECK(*trials[0].ended_utc_ns - *trials[0].started_utc_ns < 24LL * 3600 * 1'000'000'000);
     // Every row accepted before the kill, committed or not (the crash ring kept the rest), is in
     // the trial's samples or (before the trial began) the idle log.
     CHECK(committed_before_kill <= accepted_before_kill);

@@ -179,6 +179,21 @@ TEST_CASE("notifier: message shapes for ntfy-style JSON, Slack and Matrix", "[da
     CHECK_NOTHROW(nlohmann::json::parse(Notifier::webhook_body("json", "lab", bad)));
 }
 
+TEST_CASE("notifier: Slack and Matrix markup in a notice is escaped and pings nobody", "[daemon][notify]") {
+    // A campaign name or alarm text from outside, written to ping a whole channel or room.
+    const std::vector<Notice> hostile{notice("campaign_end", "campaign <!channel> & <https://x.example|click> done",
+                                             "@room look <@U123>")};
+    const auto slack = nlohmann::json::parse(Notifier::webhook_body("slack", "lab", hostile))["text"].get<std::string>();
+    CHECK(slack.find('<') == std::string::npos);
+    CHECK(slack.find('>') == std::string::npos);
+    CHECK(slack.find("&lt;!channel&gt; &amp; &lt;https://x.example|click&gt;") != std::string::npos);
+    const auto matrix = nlohmann::json::parse(Notifier::webhook_body("matrix", "lab", hostile));
+    CHECK(matrix["body"].get<std::string>().find("@room") == std::string::npos);
+    CHECK(matrix["body"].get<std::string>().find("look") != std::string::npos);
+    REQUIRE(matrix.contains("m.mentions"));
+    CHECK(matrix["m.mentions"].empty());
+}
+
 TEST_CASE("the daemon's notices: an alarm once per episode, a trial's and the campaign's end", "[daemon][notify]") {
     manikind::test::DaemonFixture f([](manikind::config::Config& c) { c.simulation.faults = {"windsonic:silent@5-20", "windsonic:silent@40-55"}; });
     std::vector<std::string> kinds, titles;
