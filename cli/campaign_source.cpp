@@ -72,6 +72,13 @@ PulledCampaign::~PulledCampaign() {
     std::filesystem::remove_all(folder_, ec);
 }
 
+std::vector<std::filesystem::path> source_inputs(const CampaignSource& source) {
+    if (!source.archive.empty()) return {};
+    if (!source.db.empty()) return {source.db};
+    if (!source.campaign.empty()) return {source.campaign};
+    return {};
+}
+
 analysis::Campaign read_campaign_source(const CampaignSource& source, const analysis::ReadOptions& options) {
     try {
         if (!source.archive.empty()) {

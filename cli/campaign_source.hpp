@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -23,6 +24,11 @@ struct CampaignSource {
 
 // The positional `campaign`, --db, --campaign (the same as the positional), --archive and --lab.
 void add_campaign_source_options(CLI::App* cmd, CampaignSource& source);
+
+// What a command reading `source` must never write over (store/export_target.hpp,
+// refuse_protected_output): the campaign folder, or the database file; nothing local for the
+// archive (its pull is a temporary file of this process).
+std::vector<std::filesystem::path> source_inputs(const CampaignSource& source);
 
 // Reads the campaign; input problems (no such folder or database, unknown campaign or lab) are
 // UserError, an unreachable archive too (status 3).

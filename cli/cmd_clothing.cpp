@@ -60,6 +60,20 @@ void add_clothing_command(CLI::App& app) {
                 "Example: manikin clothing lab-day --baseline nude-baseline --report report.html\n"
                 "         manikin clothing --db manikind.db --campaign jackets-20261126 --json");
     cmd->callback([o] {
+        // The report is checked before anything is read (docs/cli.md, "Reading a database, writing
+        // an export"): never in a campaign folder read (it could replace campaign.json or a trial's
+        // CSV), never on a database read or any database's companion, links, devices, and an
+        // existing file only with --force; written whole, then renamed into place.
+        std::optional<ExportTarget> target;
+        if (!o->report.empty()) {
+            std::vector<std::filesystem::path> inputs = source_inputs(o->source);
+            if (!o->baseline.empty()) {
+                CampaignSource from = o->source;
+                from.campaign = o->baseline;
+                for (auto& p : source_inputs(from)) inputs.push_back(std::move(p));
+            }
+            target.emplace(o->report, ExportShape::file, o->force, inputs);
+        }
         const analysis::Campaign campaign = read_campaign_source(o->source);
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
         analysis::AnalysisOptions analysis_options;
@@ -80,30 +94,14 @@ void add_clothing_command(CLI::App& app) {
         } catch (const std::invalid_argument& e) {
             throw UserError(e.what());
         }
-        if (!o->report.empty()) {
-            // The report never lands in a campaign folder it read (it could replace campaign.json
-            // or a trial's CSV) nor on a database (ExportTarget: also links, devices, and an
-            // existing file without --force); written whole, then renamed into place.
-            for (const auto* source : {&o->source.campaign, &o->baseline})
-                if (o->source.db.empty() && o->source.archive.empty() && !source->empty()) {
-                    std::error_code ec;
-                    const auto folder = std::filesystem::weakly_canonical(*source, ec);
-                    const auto target = std::filesystem::weakly_canonical(o->report, ec);
-                    const auto inside = target.lexically_relative(folder);
-                    if (!ec && !inside.empty() && *inside.begin() != "..")
-                        throw UserError(fmt::format("--report {}: is inside the campaign folder {} it reads: name a path "
-                                                    "outside it", o->report, *source), "output_refused");
-                }
-            std::vector<std::filesystem::path> inputs;
-            if (!o->source.db.empty()) inputs.emplace_back(o->source.db);
-            ExportTarget target(o->report, ExportShape::file, o->force, inputs);
+        if (target) {
             {
-                std::ofstream out(target.staging(), std::ios::binary | std::ios::trunc);
+                std::ofstream out(target->staging(), std::ios::binary | std::ios::trunc);
                 out << analysis::clothing::to_html(r, campaign.zone_map);
                 out.flush();
                 if (!out) throw UserError(fmt::format("--report {}: write failed", o->report), "write_failed");
             }
-            target.commit();
+            target->commit();
             spdlog::info("wrote {}", o->report);
         }
         if (o->json)

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <fmt/core.h>
@@ -46,6 +47,10 @@ void add_physio_command(CLI::App& app) {
                 "and walls: where the manikin's measured exchange took the trial elsewhere.\n"
                 "Example: manikin physio --db manikind.db --campaign heat-stress --plot fig4-measured.svg");
     cmd->callback([o] {
+        // The plot is checked before anything is read: never in the campaign folder read, on the
+        // database read or any database's companion, --force or not (docs/cli.md).
+        std::optional<ExportTarget> target;
+        if (!o->plot.empty()) target.emplace(o->plot, ExportShape::file, o->force, source_inputs(o->source));
         const analysis::Campaign campaign = read_campaign_source(o->source);
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
         const auto r = analysis::physio::compute(campaign, o->options);
@@ -54,17 +59,14 @@ void add_physio_command(CLI::App& app) {
                                         "control = \"physiological\")",
                                         campaign.name),
                             "no_physiological_trials");
-        if (!o->plot.empty()) {
-            std::vector<std::filesystem::path> inputs;
-            if (!o->source.db.empty()) inputs.emplace_back(o->source.db);
-            ExportTarget target(o->plot, ExportShape::file, o->force, inputs);
+        if (target) {
             {
-                std::ofstream out(target.staging(), std::ios::binary | std::ios::trunc);
+                std::ofstream out(target->staging(), std::ios::binary | std::ios::trunc);
                 out << analysis::physio::svg(r, campaign.name + ": the manikin under the model's control");
                 out.flush();
                 if (!out) throw UserError(fmt::format("--plot {}: write failed", o->plot), "write_failed");
             }
-            target.commit();
+            target->commit();
             spdlog::info("wrote {}", o->plot);
         }
         if (o->json) {

@@ -4,11 +4,11 @@
 // hidden name beside it and renamed into place only when complete; on any error that name is
 // removed, so a failed export leaves nothing behind.
 //
-// Refused always, --force or not: a symbolic link, a device, FIFO or socket, any SQLite
-// database (its first 16 bytes), the database the export reads or its -wal/-shm/-journal, a
-// folder where a file is wanted and a file where a folder is wanted, and a non-empty folder that
-// is not an earlier export (a campaign.json and trials/ only). Refused unless --force: an
-// existing file or export folder.
+// Refused always, --force or not: whatever refuse_protected_output refuses (a database and its
+// companions, an input), a symbolic link, a device, FIFO or socket, a folder where a file is
+// wanted and a file where a folder is wanted, and a non-empty folder that is not an earlier
+// export (a campaign.json and trials/ only). Refused unless --force: an existing file or export
+// folder.
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -17,9 +17,21 @@ namespace manikind {
 
 enum class ExportShape { file, folder };
 
+// The rule every file a command writes obeys, --force or not (issue 60): throws UserError
+// "output_refused" naming the path, what it is and why, when `out` (symbolic links resolved) is
+//   - an SQLite database, write-ahead log or rollback journal by its header;
+//   - named <db>-wal, -shm or -journal where <db> exists: any database's companion, even an empty
+//     -shm or the -wal a crashed daemon left (its committed samples live only there);
+//   - one of `inputs` or, for an input file, its -wal, -shm or -journal (inputs are resolved too,
+//     so a database named through a link protects its real companions);
+//   - inside an input that is a folder (a campaign folder read: everything in it).
+// For writers that open the path themselves (no ExportTarget): call it before reading.
+void refuse_protected_output(const std::filesystem::path& out, const std::vector<std::filesystem::path>& inputs);
+
 class ExportTarget {
 public:
-    // Checks `out` (UserError, exit 2, naming the path and why); `inputs` are the databases read.
+    // Checks `out` (UserError, exit 2, naming the path and why); `inputs` are the databases and
+    // campaign folders read.
     ExportTarget(std::filesystem::path out, ExportShape shape, bool force,
                  const std::vector<std::filesystem::path>& inputs);
     ~ExportTarget();  // removes the staging unless committed: nothing half-written is left
