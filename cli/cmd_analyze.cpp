@@ -23,6 +23,7 @@
 #include "daemon/config.hpp"
 #include "base/user_error.hpp"
 #include "physics/sign_convention.hpp"
+#include "store/export_target.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -86,6 +87,15 @@ void run(const AnalyzeOptions& o) {
     if (!(a.steady.window_s > 0.0)) throw UserError("--window-min must be positive");
     if (!(a.steady.max_skin_fluctuation_c > 0.0)) throw UserError("--max-skin-fluctuation must be positive");
     if (!(a.confidence > 0.0 && a.confidence < 1.0)) throw UserError("--confidence must lie between 0 and 1 (0.95 = 95 %)");
+
+    // Every file this writes is checked before anything is read: never the campaign folder or
+    // database read, nor any database or its companions, --force or not (docs/cli.md).
+    {
+        const auto inputs = source_inputs(o.source);
+        for (const auto& out : {o.csv_path, o.svg_path, o.png_path})
+            if (!out.empty()) refuse_protected_output(out, inputs);
+        if (o.svg_path.empty() && !o.png_path.empty()) refuse_protected_output(o.png_path + ".svg", inputs);
+    }
 
     an::CampaignResult result;
     try {

@@ -6,7 +6,9 @@
 #include <memory>
 #include <optional>
 #include <cstdint>
+#include <filesystem>
 #include <string>
+#include <vector>
 
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
@@ -21,6 +23,7 @@
 #include "analysis/reconcile/twin_store.hpp"
 #include "base/user_error.hpp"
 #include "physics/sign_convention.hpp"
+#include "store/export_target.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -97,6 +100,30 @@ void add_reconcile_command(CLI::App& app) {
     cmd->callback([o] {
         const auto t0 = std::chrono::steady_clock::now();
         const auto base = twin_store::load_twin_version(o->twin);
+        {
+            // What it writes is checked before anything is read: never a database or its companions,
+            // never what it reads (docs/cli.md). A folder read protects its recording, campaign.json
+            // and trials/, not the whole folder: the docs put --plots inside the campaign folder.
+            std::vector<std::filesystem::path> inputs;
+            for (const std::string& name : {o->source.campaign, o->noise_from}) {
+                if (name.empty()) continue;
+                CampaignSource from = o->source;
+                from.campaign = name;
+                for (const auto& in : source_inputs(from)) {
+                    if (from.db.empty() && std::filesystem::is_directory(in)) {
+                        inputs.push_back(in / "campaign.json");
+                        inputs.push_back(in / "trials");
+                    } else {
+                        inputs.push_back(in);
+                    }
+                }
+            }
+            if (!o->plots.empty()) {
+                refuse_protected_output(o->plots, inputs);
+                for (const auto& p : rc::plot_file_names()) refuse_protected_output(std::filesystem::path(o->plots) / p, inputs);
+            }
+            if (!o->write_twin.empty()) refuse_protected_output(o->write_twin, inputs);
+        }
         const analysis::Campaign campaign = read_campaign_source(o->source);
         // With --db the positional names a campaign in it, otherwise a folder: report what was read.
         const std::string campaign_label = !o->source.archive.empty() ? "archive lab " + o->source.lab + ": " + campaign.name

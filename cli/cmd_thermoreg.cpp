@@ -21,6 +21,7 @@
 #include "base/user_error.hpp"
 #include "physics/sign_convention.hpp"
 #include "physics/thermoreg/stolwijk.hpp"
+#include "store/export_target.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -176,6 +177,7 @@ std::string sweep_map_svg(const std::vector<double>& air_temps_c, const std::vec
 }
 
 void write_text(const std::string& path, const std::string& text) {
+    refuse_protected_output(path, {});  // a simulation reads no database, but never writes over one
     std::ofstream f(path, std::ios::binary);
     f << text;
     if (!f) throw UserError(fmt::format("{}: cannot write", path));

@@ -274,6 +274,8 @@ std::string report_to_text(const Report& r) {
     return o.str();
 }
 
+std::vector<std::string> plot_file_names() { return {"parity.svg", "residual_vs_driver.svg"}; }
+
 std::vector<std::filesystem::path> write_plots(const Report& r, const ForwardModel& model, const std::filesystem::path& dir,
                                                const std::string& unit) {
     namespace pl = plot;
@@ -315,7 +317,7 @@ std::vector<std::filesystem::path> write_plots(const Report& r, const ForwardMod
     pp.series.push_back(before);
     if (r.explanation) pp.series.push_back(after);
     parity.xy_panels.push_back(std::move(pp));
-    const auto parity_path = dir / "parity.svg";
+    const auto parity_path = dir / plot_file_names()[0];
     pl::write_svg(parity, parity_path);
     std::vector<std::filesystem::path> written{parity_path};
 
@@ -352,7 +354,7 @@ std::vector<std::filesystem::path> write_plots(const Report& r, const ForwardMod
     rp.series.push_back(res_before);
     if (r.explanation) rp.series.push_back(res_after);
     residual.xy_panels.push_back(std::move(rp));
-    const auto res_path = dir / "residual_vs_driver.svg";
+    const auto res_path = dir / plot_file_names()[1];
     pl::write_svg(residual, res_path);
     written.push_back(res_path);
     return written;

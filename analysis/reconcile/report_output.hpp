@@ -16,6 +16,9 @@ std::string report_to_text(const Report& report);
 nlohmann::json power_to_json(const PowerReport& plan);
 std::string power_to_text(const PowerReport& plan);
 
+// The names write_plots writes in its folder (for a caller to check them before it runs).
+std::vector<std::string> plot_file_names();
+
 // Writes parity.svg (Q_sim vs Q_exp with 95 % error bars, before and after) and
 // residual_vs_driver.svg into `dir` (created if missing); returns the paths written.
 std::vector<std::filesystem::path> write_plots(const Report& report, const ForwardModel& model,

@@ -174,3 +174,25 @@ TEST_CASE("output guard: physio and clothing never write into the campaign folde
     refused("physio " + (dir.path / "linked").string() + " --plot " + json.string() + " --force", json,
             "inside the campaign folder");
 }
+
+TEST_CASE("output guard: analyze thermoreg and reconcile never write over a database or the recording they read",
+          "[cli][hostile]") {
+    TempDir dir("case");
+    const fs::path crashed = crashed_database(dir.path / "crashed");
+    const fs::path wal = crashed.string() + "-wal";
+    const std::string folder = lab().folder.string();
+    refused("analyze " + folder + " --csv " + crashed.string(), crashed, "SQLite database");
+    refused("analyze " + folder + " --csv " + wal.string(), wal, "write-ahead log");
+    refused("analyze " + folder + " --plot " + wal.string(), wal, "write-ahead log");
+    refused("analyze " + folder + " --png " + crashed.string() + "-shm", fs::path(crashed.string() + "-shm"), "shared-memory index");
+    refused("analyze --db " + lab().db.string() + " --campaign " + lab().name + " --csv " + lab().db.string(), lab().db,
+            "which this command reads");
+    refused("analyze " + folder + " --csv " + (lab().folder / "campaign.json").string(), lab().folder / "campaign.json",
+            "inside the campaign folder");
+    refused("thermoreg --duration 10min --plot " + wal.string(), wal, "write-ahead log");
+    refused("reconcile " + folder + " --simulations 200 --write-twin " + (lab().folder / "campaign.json").string(),
+            lab().folder / "campaign.json", "which this command reads");
+    refused("reconcile " + folder + " --simulations 200 --plots " + (lab().folder / "trials").string(),
+            lab().folder / "trials", "inside the campaign folder");
+    CHECK_FALSE(fs::exists(lab().folder / "trials" / "parity.svg"));
+}
