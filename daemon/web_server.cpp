@@ -13,6 +13,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -351,13 +352,16 @@ struct WebServer::Impl {
 
     // --- sessions -----------------------------------------------------------------------
     // Every connection, HTTP or WebSocket. `last_progress` is when it last did something useful:
-    // connected, finished a request, or took an update. When every place is taken, the one
-    // that has gone longest without progress (a slow header writer, an idle keep-alive, a
-    // WebSocket that never reads) makes room for the newcomer, as on the control socket.
+    // connected, finished a request, or took an update. When every place is taken, an HTTP
+    // connection makes room for the newcomer, the one longest without progress first (a slow
+    // header writer, an idle keep-alive); an established WebSocket (an operator's live view)
+    // goes only when every place is one, again the longest without progress (one that never
+    // reads). So a flood of connections cannot take the live view off the page.
     struct Client {
         SteadyClock::time_point last_progress = SteadyClock::now();
         virtual ~Client() = default;
         virtual void drop() = 0;
+        virtual int keep_priority() const { return 0; }  // higher: evicted later
     };
     std::list<std::weak_ptr<Client>> client_list;
     std::uint64_t evicted = 0;
@@ -366,12 +370,18 @@ struct WebServer::Impl {
         client_list.remove_if([](const std::weak_ptr<Client>& w) { return w.expired(); });
         client_list.push_back(c);
     }
-    // Makes room by dropping the client longest without progress; false when there is none.
+    // Makes room by dropping a client: the lowest keep_priority, then the longest without
+    // progress; false when there is none.
     bool evict_longest_idle() {
         client_list.remove_if([](const std::weak_ptr<Client>& w) { return w.expired(); });
         std::shared_ptr<Client> oldest;
-        for (const auto& w : client_list)
-            if (auto c = w.lock(); c && (!oldest || c->last_progress < oldest->last_progress)) oldest = c;
+        for (const auto& w : client_list) {
+            auto c = w.lock();
+            if (!c) continue;
+            if (!oldest || c->keep_priority() < oldest->keep_priority() ||
+                (c->keep_priority() == oldest->keep_priority() && c->last_progress < oldest->last_progress))
+                oldest = c;
+        }
         if (!oldest) return false;
         client_list.remove_if([&](const std::weak_ptr<Client>& w) { return w.lock() == oldest; });
         oldest->drop();
@@ -387,6 +397,7 @@ struct WebServer::Impl {
             beast::get_lowest_layer(ws).socket().close(ignored);
         }
         ~WsSession() { --owner.clients; }
+        int keep_priority() const override { return open ? 1 : 0; }
         Impl& owner;
         websocket::stream<beast::tcp_stream> ws;
         beast::flat_buffer incoming;
@@ -476,6 +487,12 @@ struct WebServer::Impl {
         }
         void on_read(beast::error_code ec) {
             if (ec) {
+                if (ec == http::error::header_limit) {  // RFC 6585 5: say so, then close
+                    http::request<http::string_body> req;
+                    return respond(owner.error(req, http::status::request_header_fields_too_large,
+                                               fmt::format("request headers over the limit of {} bytes", kConsoleHeaderLimitBytes)),
+                                   true);
+                }
                 if (ec == http::error::body_limit) {
                     http::request<http::string_body> req;
                     return respond(owner.error(req, http::status::payload_too_large,
@@ -516,11 +533,14 @@ struct WebServer::Impl {
         acceptor->async_accept([this](beast::error_code ec, tcp::socket socket) {
             if (ec == asio::error::operation_aborted) return;
             if (!ec) {
-                // At most max_clients connections: a newcomer takes the place of the one longest
-                // without progress, which is closed at once (its descriptor freed), never refused.
+                // New connections from one address come at most at a rate (a burst allowed):
+                // past it a newcomer is told 503 and closed, taking no one's place.
+                if (!connection_allowed(socket)) return accept();
+                // At most max_clients connections: a newcomer takes the place of another (HTTP
+                // first, an established WebSocket last), closed at once (its descriptor freed).
                 client_list.remove_if([](const std::weak_ptr<Client>& w) { return w.expired(); });
                 if (client_list.size() >= o.max_clients && evict_longest_idle() && (evicted & (evicted - 1)) == 0)
-                    spdlog::info("console: {} clients connected; the one longest without progress let go for a new one "
+                    spdlog::info("console: {} clients connected; one let go for a new one (an HTTP client first, a WebSocket last) "
                                  "({} so far)", o.max_clients, evicted);
                 ++clients;
                 auto session = std::make_shared<HttpSession>(*this, std::move(socket));
@@ -532,6 +552,52 @@ struct WebServer::Impl {
             push_timer_retry_accept();
         });
     }
+    // Per-address token buckets for new connections (server thread only).
+    struct Bucket {
+        double tokens = 0;
+        SteadyClock::time_point refilled{};
+    };
+    std::map<std::string, Bucket> connection_buckets;
+    std::uint64_t rate_limited = 0;
+    bool connection_allowed(tcp::socket& socket) {
+        beast::error_code ec;
+        const auto remote = socket.remote_endpoint(ec);
+        if (ec) return true;  // already gone: the session's first read says so
+        const auto now = SteadyClock::now();
+        if (connection_buckets.size() > 1024)  // forget addresses whose bucket has refilled
+            std::erase_if(connection_buckets, [&](const auto& kv) {
+                return kv.second.tokens + std::chrono::duration<double>(now - kv.second.refilled).count() *
+                                              o.new_connections_per_s_per_ip >= o.new_connection_burst;
+            });
+        auto [it, fresh] = connection_buckets.try_emplace(remote.address().to_string(), Bucket{o.new_connection_burst, now});
+        Bucket& b = it->second;
+        if (!fresh) {
+            b.tokens = std::min(o.new_connection_burst,
+                                b.tokens + std::chrono::duration<double>(now - b.refilled).count() * o.new_connections_per_s_per_ip);
+            b.refilled = now;
+        }
+        if (b.tokens >= 1.0) {
+            b.tokens -= 1.0;
+            return true;
+        }
+        ++rate_limited;
+        if ((rate_limited & (rate_limited - 1)) == 0)
+            spdlog::info("console: new connections from {} over {} per second; refused with 503 ({} so far)", it->first,
+                         o.new_connections_per_s_per_ip, rate_limited);
+        static const std::string busy =
+            "HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\nContent-Length: 0\r\nConnection: close\r\n\r\n";
+        const int fd = socket.native_handle();
+        [[maybe_unused]] const auto n = ::send(fd, busy.data(), busy.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+        // What it sent already is read and dropped: a close with bytes unread would reset the
+        // connection, and the 503 with it.
+        std::array<char, 4096> scratch{};
+        for (int i = 0; i < 4 && ::recv(fd, scratch.data(), scratch.size(), MSG_DONTWAIT) > 0; ++i) {
+        }
+        ::shutdown(fd, SHUT_WR);
+        socket.close(ec);
+        return false;
+    }
+
     std::optional<asio::steady_timer> accept_retry;
     void push_timer_retry_accept() {
         accept_retry->expires_after(std::chrono::milliseconds(100));
@@ -596,6 +662,12 @@ std::string WebServer::answer_raw(const std::string& request_bytes) {
     while (used < request_bytes.size() && !parser.is_done()) {
         const std::size_t n = parser.put(asio::buffer(request_bytes.data() + used, request_bytes.size() - used), ec);
         if (ec == http::error::need_more) break;
+        if (ec == http::error::header_limit) {  // the server says 431, then closes
+            std::ostringstream out;
+            out << s.error(http::request<http::string_body>{}, http::status::request_header_fields_too_large,
+                           fmt::format("request headers over the limit of {} bytes", kConsoleHeaderLimitBytes));
+            return out.str();
+        }
         if (ec) return {};
         used += n;
         if (n == 0) break;

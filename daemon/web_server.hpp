@@ -10,7 +10,9 @@
 //                               coalesced over 20 ms), and at least every second
 // Reading needs no token; anything that changes state needs the API token. Requests whose Host
 // is not this loopback address (DNS rebinding) or whose Origin is another site are refused.
-// Clients follow the control API's rules: a cap, an idle timeout, and a bound on unsent updates.
+// Clients follow the control API's rules: a cap, an idle timeout, and a bound on unsent updates;
+// at the cap an HTTP client makes room before an established WebSocket (the operator's live
+// view), new connections per address are rate-limited (503 past it), oversized headers get 431.
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -28,7 +30,10 @@ inline constexpr std::size_t kConsoleHeaderLimitBytes = 16 * 1024;
 struct WebOptions {
     std::string host = "127.0.0.1";      // loopback only: 127.0.0.1, ::1 or localhost
     int port = 8470;                     // 0: an ephemeral port (see WebServer::port())
-    std::size_t max_clients = 32;
+    std::size_t max_clients = 32;        // a newcomer takes an HTTP client's place, a WebSocket's last
+    // New connections per client address: a token bucket (this rate, this burst); past it, 503.
+    double new_connections_per_s_per_ip = 50.0;
+    double new_connection_burst = 100.0;
     double idle_timeout_s = 120.0;       // HTTP keep-alive and request read; WebSocket pings
     std::size_t max_unsent_bytes = 4 * 1024 * 1024;  // a WebSocket client this far behind is dropped
     double history_s = 24 * 3600.0;      // chamber history kept for the page's charts (spans: 1 h, trial, campaign)
