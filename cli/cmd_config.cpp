@@ -37,7 +37,9 @@ nlohmann::json to_json(const config::Config& c) {
                               {"max_skin_fluctuation_c", c.steady_state.max_skin_fluctuation_c}}},
             {"instruments", instruments},
             {"api", {{"socket", c.api.socket}, {"tcp_port", c.api.tcp_port}, {"max_clients", c.api.max_clients},
-                     {"idle_timeout_s", c.api.idle_timeout_s}, {"token_set", !c.api.token.empty()}}},
+                     {"idle_timeout_s", c.api.idle_timeout_s},
+                     {"partial_grace_s", c.api.partial_grace_s}, {"max_clients_per_peer", c.api.max_clients_per_peer},
+                     {"token_set", !c.api.token.empty()}}},
             {"warnings", c.warnings}};
 }
 

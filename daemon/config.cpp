@@ -258,6 +258,8 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.text(*a, "api", "token", c.api.token);
         r.number(*a, "api", "max_clients", c.api.max_clients, 1, 4096, "clients");
         r.number(*a, "api", "idle_timeout_s", c.api.idle_timeout_s, 1, 86400, "s");
+        r.number(*a, "api", "partial_grace_s", c.api.partial_grace_s, 0.05, 60, "s");
+        r.number(*a, "api", "max_clients_per_peer", c.api.max_clients_per_peer, 0, 4096, "clients");
     }
     if (const auto* h = r.table(root, "", "http")) r.text(*h, "http", "listen", c.http.listen);
     if (const auto* s = r.table(root, "", "standby")) {

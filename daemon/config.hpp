@@ -88,8 +88,10 @@ struct ApiConfig {
     std::string socket = "manikind.sock";   // Unix socket, mode 0660; relative: from the working directory
     double tcp_port = 0;                     // 0: off; else listens on 127.0.0.1 only
     std::string token;                       // empty: the daemon makes one and writes <socket>.token (0600)
-    double max_clients = 64;                 // simultaneous control connections (the longest idle makes room)
+    double max_clients = 64;                 // simultaneous control connections (docs/daemon.md: who makes room)
     double idle_timeout_s = 120;             // a client silent this long is disconnected
+    double partial_grace_s = 0.5;            // a half-written request older than this is the first to make room
+    double max_clients_per_peer = 0;         // connections per process; 0: max(4, max_clients / 4)
 };
 
 // [standby]: where the chamber and manikin are put when a campaign ends (done, aborted, or by a

@@ -35,6 +35,12 @@ struct ControlOptions {
     std::size_t max_clients = 64;                      // lowered at start to fit RLIMIT_NOFILE
     double idle_timeout_s = 120.0;                     // a client silent this long is disconnected
     double request_timeout_s = 10.0;                   // a request line must arrive whole within this
+    // A request line still incomplete this long after its first byte holds no claim on its place:
+    // when the server is full it is the first to go (a finished request's client is kept longer).
+    double partial_grace_s = 0.5;
+    // Connections one process (SO_PEERCRED pid, Unix socket) may hold; 0: max(4, max_clients / 4).
+    // Past it, that process's own least useful connection makes room: it can crowd out only itself.
+    std::size_t max_clients_per_peer = 0;
     std::size_t max_unread_reply_bytes = 1024 * 1024;  // replies a client has not read; beyond: dropped
     int listen_backlog = 4096;                         // capped by net.core.somaxconn
 };
@@ -53,13 +59,16 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& options, 
 // What the server has done with its clients (status and tests).
 struct ControlServerCounters {
     std::uint64_t accepted = 0;
-    std::uint64_t evicted_idle = 0;       // the longest-idle client, disconnected to make room for a new one
-    std::uint64_t refused_full = 0;       // refused: every slot busy mid-request
+    std::uint64_t evicted_idle = 0;       // disconnected to make room for a new one (a stale half-written
+                                          // request first, then one that never asked, then the longest idle)
+    std::uint64_t evicted_peer = 0;       // one process over max_clients_per_peer: its own connection let go
+    std::uint64_t refused_full = 0;       // refused: every slot mid-reply or with a fresh half-written request
     std::uint64_t dropped_unread = 0;     // replies piled up unread past max_unread_reply_bytes
     std::uint64_t timed_out = 0;          // idle, or a request not finished within request_timeout_s
     std::uint64_t accept_errors = 0;      // accept failed (e.g. out of file descriptors); retried, never spun
     std::size_t connected = 0;
     std::size_t max_clients = 0;          // the effective cap
+    std::size_t max_clients_per_peer = 0; // the effective per-process cap
 };
 
 // Serves the control API on one Boost.Asio thread. A client that never reads, writes slowly, or

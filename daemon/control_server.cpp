@@ -6,8 +6,15 @@
 //   - a request line must arrive whole within request_timeout_s of its first byte (slow writers);
 //   - a client that sends nothing for idle_timeout_s is disconnected;
 //   - at most max_clients (lowered to fit RLIMIT_NOFILE, leaving descriptors for the drivers);
-//     a new client beyond it takes the place of the longest-idle one, and is refused with a
-//     clear reply only when every slot is busy mid-request;
+//     a new client beyond it takes the place of another, in this order: a half-written request
+//     older than partial_grace_s (oldest first), a client that never sent a request (oldest
+//     first), a client whose requests were all answered (longest idle first). A client mid-reply
+//     or with a request still arriving within the grace keeps its place; only when every place is
+//     such is the newcomer refused, with a clear reply (the CLI retries once). So holding places
+//     with half-written requests cannot lock status or abort out;
+//   - one process (SO_PEERCRED pid) holds at most max_clients_per_peer connections; a newer one
+//     of its own takes the place of its least useful one, so it can crowd out only itself (never
+//     refused for it: a reused pid must not lock a newcomer out);
 //   - out of file descriptors, accept is retried after a pause (never spun) once an idle client
 //     has been let go.
 #include <arpa/inet.h>
@@ -57,6 +64,8 @@ std::chrono::nanoseconds seconds(double s) {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(s));
 }
 
+bool is_power_of_two(std::uint64_t n) { return n != 0 && (n & (n - 1)) == 0; }
+
 std::string error_line(const std::string& why) { return dump_json(nlohmann::json{{"ok", false}, {"error", why}}) + "\n"; }
 
 // A last word to a client being let go, only if its socket takes it at once: never blocks.
@@ -87,6 +96,14 @@ bool someone_answers(const std::string& path) {
 
 }  // namespace
 
+// The peer's process on the Unix socket (SO_PEERCRED), 0 over TCP.
+static pid_t peer_pid(stream::socket& socket) {
+    ucred cred{};
+    socklen_t len = sizeof cred;
+    if (::getsockopt(socket.native_handle(), SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0 && len == sizeof cred) return cred.pid;
+    return 0;
+}
+
 // Who is at the other end: on the Unix socket the kernel's word (SO_PEERCRED: user, uid, pid);
 // over TCP (127.0.0.1 only) the address.
 static std::string peer_of(stream::socket& socket) {
@@ -115,11 +132,13 @@ static std::string peer_of(stream::socket& socket) {
 struct ControlServer::Impl {
     struct Session : std::enable_shared_from_this<Session> {
         Session(Impl& server, stream::socket s, std::uint64_t session_id)
-            : owner(server), socket(std::move(s)), id(session_id), who(peer_of(socket)), last_activity(SteadyClock::now()) {}
+            : owner(server), socket(std::move(s)), id(session_id), who(peer_of(socket)), pid(peer_pid(socket)),
+              last_activity(SteadyClock::now()) {}
         Impl& owner;
         stream::socket socket;
         std::uint64_t id;
         std::string who;  // the peer, as an abort records it
+        pid_t pid;        // the peer process (Unix socket), 0 over TCP: its connections share a cap
         std::array<char, 4096> read_buffer{};
         std::string pending_input;                  // bytes of a request line not yet complete
         std::optional<SteadyClock::time_point> partial_since;
@@ -195,6 +214,26 @@ struct ControlServer::Impl {
         bool idle() const { return !writing && replies.empty() && pending_input.empty(); }
     };
 
+    // How readily a client gives up its place to a newcomer: the lower the sooner; none: it keeps
+    // it. 0: a half-written request older than partial_grace_s (by its first byte); 1: never sent
+    // a request (by connection time); 2: all its requests answered (by last activity). Mid-reply,
+    // or a request arriving within the grace: kept, except that a process making room for its
+    // own newcomer (`own`) may lose a fresh half-written request too, last.
+    struct Rank {
+        int order;
+        SteadyClock::time_point since;
+        bool operator<(const Rank& r) const { return order != r.order ? order < r.order : since < r.since; }
+    };
+    std::optional<Rank> eviction_rank(const Session& s, SteadyClock::time_point now, bool own) const {
+        if (s.writing || !s.replies.empty()) return std::nullopt;
+        if (!s.pending_input.empty()) {
+            const auto since = s.partial_since.value_or(s.last_activity);
+            if (now - since >= seconds(o.partial_grace_s)) return Rank{0, since};
+            return own ? std::optional(Rank{3, since}) : std::nullopt;
+        }
+        return s.last_request ? Rank{2, s.last_activity} : Rank{1, s.last_activity};
+    }
+
     Impl(LabDaemon& d, ControlOptions options) : daemon(d), o(std::move(options)) {}
 
     LabDaemon& daemon;
@@ -229,11 +268,12 @@ struct ControlServer::Impl {
         return reply;
     }
 
-    void close(Session& s, const std::string& goodbye) {
+    // `logged`: false for the evictions a flood makes by the thousand (admit logs a sample of them).
+    void close(Session& s, const std::string& goodbye, bool logged = true) {
         if (s.closed) return;
         s.closed = true;
         if (!goodbye.empty() && !s.writing) say_goodbye(s.socket.native_handle(), goodbye);
-        if (!goodbye.empty()) spdlog::info("control API: client {} {}", s.id, goodbye);
+        if (!goodbye.empty() && logged) spdlog::info("control API: client {} {}", s.id, goodbye);
         boost::system::error_code ignored;
         s.socket.shutdown(stream::socket::shutdown_both, ignored);
         s.socket.close(ignored);
@@ -242,17 +282,26 @@ struct ControlServer::Impl {
         counters.connected = sessions.size();
     }
 
-    // The client that has gone longest without a request (never sent one: first), if idle.
-    Session* longest_idle() {
+    // The client that makes room for a newcomer (eviction_rank), among those of process `pid`
+    // when it is not 0; none when every candidate keeps its place.
+    Session* eviction_victim(pid_t pid = 0) {
+        const auto now = SteadyClock::now();
         Session* pick = nullptr;
+        std::optional<Rank> best;
         for (auto& [id, s] : sessions) {
-            if (!s->idle()) continue;
-            if (!pick || (!s->last_request && pick->last_request) ||
-                (s->last_request && pick->last_request && *s->last_request < *pick->last_request) ||
-                (!s->last_request && !pick->last_request && s->last_activity < pick->last_activity))
+            if (pid != 0 && s->pid != pid) continue;
+            const auto r = eviction_rank(*s, now, pid != 0);
+            if (r && (!best || *r < *best)) {
+                best = r;
                 pick = s.get();
+            }
         }
         return pick;
+    }
+
+    static const char* why_chosen(const Session& s) {
+        if (!s.pending_input.empty()) return "its request was incomplete";
+        return s.last_request ? "it was the longest idle" : "it had sent no request";
     }
 
     void admit(stream::socket socket) {
@@ -260,20 +309,44 @@ struct ControlServer::Impl {
             std::lock_guard lk(counters_lock);
             ++counters.accepted;
         }
+        // One process first makes room among its own connections.
+        if (const pid_t pid = peer_pid(socket); pid > 0) {
+            std::size_t own = 0;
+            for (const auto& [id, s] : sessions) own += s->pid == pid ? 1 : 0;
+            if (own >= counters.max_clients_per_peer) {
+                if (Session* victim = eviction_victim(pid)) {
+                    std::uint64_t n = 0;
+                    {
+                        std::lock_guard lk(counters_lock);
+                        n = ++counters.evicted_peer;
+                    }
+                    const std::string why = fmt::format("disconnected to make room for a newer connection of the same process "
+                                                        "(pid {}): {} per process is the limit (api.max_clients_per_peer) and {}",
+                                                        pid, counters.max_clients_per_peer, why_chosen(*victim));
+                    if (is_power_of_two(n)) spdlog::info("control API: client {} {} ({} so far)", victim->id, why, n);
+                    close(*victim, why, false);
+                }
+            }
+        }
         if (sessions.size() >= counters.max_clients) {
-            if (Session* victim = longest_idle()) {
+            if (Session* victim = eviction_victim()) {
+                std::uint64_t n = 0;
                 {
                     std::lock_guard lk(counters_lock);
-                    ++counters.evicted_idle;
+                    n = ++counters.evicted_idle;
                 }
-                close(*victim, fmt::format("disconnected to make room: {} clients is the limit (api.max_clients) and this "
-                                           "one was the longest idle",
-                                           counters.max_clients));
+                const std::string why = fmt::format("disconnected to make room: {} clients is the limit (api.max_clients) and {}",
+                                                    counters.max_clients, why_chosen(*victim));
+                if (is_power_of_two(n)) spdlog::info("control API: client {} {} ({} so far)", victim->id, why, n);
+                close(*victim, why, false);
             } else {
+                std::uint64_t n = 0;
                 {  // counted before the client can read the refusal
                     std::lock_guard lk(counters_lock);
-                    ++counters.refused_full;
+                    n = ++counters.refused_full;
                 }
+                if (is_power_of_two(n))
+                    spdlog::info("control API: a new client refused: every place mid-reply or with a request arriving ({} so far)", n);
                 say_goodbye(socket.native_handle(),
                             fmt::format("refused: {} clients are connected and busy (api.max_clients); try again shortly",
                                         counters.max_clients));
@@ -309,7 +382,7 @@ struct ControlServer::Impl {
             }
             // Out of descriptors: let the longest-idle client go and try at once; with none to let
             // go, wait a little instead of spinning on an accept that cannot succeed.
-            if (Session* victim = longest_idle()) {
+            if (Session* victim = eviction_victim()) {
                 close(*victim, "disconnected: the daemon is out of file descriptors");
                 return accept(acceptor);
             }
@@ -427,6 +500,8 @@ void ControlServer::start() {
                             ? static_cast<long>(s.o.max_clients)
                             : static_cast<long>(nofile.rlim_cur) - count_open_fds() - 32;
     s.counters.max_clients = static_cast<std::size_t>(std::max(2L, std::min(static_cast<long>(s.o.max_clients), budget)));
+    s.counters.max_clients_per_peer =
+        s.o.max_clients_per_peer > 0 ? s.o.max_clients_per_peer : std::max<std::size_t>(4, s.counters.max_clients / 4);
     if (s.counters.max_clients < s.o.max_clients)
         spdlog::warn("control API: at most {} clients (api.max_clients {}), to fit the open-file limit of {}",
                      s.counters.max_clients, s.o.max_clients, nofile.rlim_cur);

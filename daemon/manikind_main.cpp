@@ -115,6 +115,8 @@ int main(int argc, char** argv) {
         api.tcp_port = static_cast<int>(cfg.api.tcp_port);
         api.max_clients = static_cast<std::size_t>(cfg.api.max_clients);
         api.idle_timeout_s = cfg.api.idle_timeout_s;
+        api.partial_grace_s = cfg.api.partial_grace_s;
+        api.max_clients_per_peer = static_cast<std::size_t>(cfg.api.max_clients_per_peer);
         // One daemon per socket, decided first: a refused second daemon touches no database and
         // no token file of the first.
         InstanceLock socket_lock = InstanceLock::acquire(api.socket_path, "control socket");

@@ -226,6 +226,17 @@ TEST_CASE("the [api] max_clients and idle_timeout_s keys are read and range-chec
     CHECK(c.key_where.at("api.max_clients") == "lab.toml:2:15");
 }
 
+TEST_CASE("the [api] partial_grace_s and max_clients_per_peer keys are read and range-checked", "[daemon][config]") {
+    const auto c = config::parse_config("[api]\npartial_grace_s = 0.2\nmax_clients_per_peer = 8\n", "lab.toml");
+    CHECK(c.api.partial_grace_s == 0.2);
+    CHECK(c.api.max_clients_per_peer == 8);
+    CHECK(config::default_config().api.partial_grace_s == 0.5);
+    CHECK(config::default_config().api.max_clients_per_peer == 0);
+    CHECK_THROWS_WITH(config::parse_config("[api]\npartial_grace_s = 0\n", "lab.toml"), Catch::Contains("api.partial_grace_s"));
+    CHECK_THROWS_WITH(config::parse_config("[api]\nmax_clients_per_peer = 5000\n", "lab.toml"),
+                      Catch::Contains("api.max_clients_per_peer"));
+}
+
 TEST_CASE("manikind refuses to start on a file config check refuses, with the same file:line: key message", "[daemon][config]") {
     TempDir dir;
     const auto file = dir.write("lab.toml", "[simulation]\nfaults = [\"toaster:on_fire\"]\n");

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <fmt/format.h>
@@ -157,7 +158,11 @@ TEST_CASE("a slow writer cannot hold the server: abort is answered at once, the 
 
 TEST_CASE("idle clients beyond the cap make room for a new one, which is served, busy slots refuse with a reason",
           "[daemon][api][hardening]") {
-    ServedFixture s([](ControlOptions& o) { o.max_clients = 8; });
+    // One test process plays every client: no per-process cap here.
+    ServedFixture s([](ControlOptions& o) {
+        o.max_clients = 8;
+        o.max_clients_per_peer = 4096;
+    });
     std::vector<int> idle;
     for (int i = 0; i < 20; ++i) idle.push_back(connect_unix(s.options.socket_path, false));
     nlohmann::json reply;
@@ -173,7 +178,12 @@ TEST_CASE("idle clients beyond the cap make room for a new one, which is served,
 }
 
 TEST_CASE("when every slot is busy mid-request, a new client is refused with the reason", "[daemon][api][hardening]") {
-    ServedFixture s([](ControlOptions& o) { o.max_clients = 8; });
+    // A grace longer than the test: every half-sent request below is fresh, so keeps its place.
+    ServedFixture s([](ControlOptions& o) {
+        o.max_clients = 8;
+        o.max_clients_per_peer = 4096;
+        o.partial_grace_s = 60;
+    });
     // Each sends a whole request and the first byte of the next in one write, and reads the reply:
     // once it has, the server holds that client's half-sent request.
     std::vector<int> busy;
@@ -191,6 +201,70 @@ TEST_CASE("when every slot is busy mid-request, a new client is refused with the
     CHECK(s.server->counters().refused_full == 1);
     ::close(ninth);
     for (int fd : busy) ::close(fd);
+}
+
+TEST_CASE("control: a half-written request past the grace makes room before a client that never asked and one whose "
+          "request was answered",
+          "[daemon][api][hardening][lockout]") {
+    ServedFixture s([](ControlOptions& o) {
+        o.max_clients = 4;
+        o.max_clients_per_peer = 4096;  // one test process plays every client
+        o.partial_grace_s = 0;          // every half-written request is past it (the refusal test has the other side)
+    });
+    const std::string live = "{\"cmd\":\"live\"}\n";
+    // A client that asks and reads its answer, then stays.
+    auto asked = [&] {
+        const int fd = connect_unix(s.options.socket_path, false);
+        REQUIRE(::send(fd, live.data(), live.size(), MSG_NOSIGNAL) == ssize_t(live.size()));
+        char ch = 0;
+        while (::read(fd, &ch, 1) == 1 && ch != '\n') {
+        }
+        REQUIRE(ch == '\n');
+        return fd;
+    };
+    const int answered = asked();
+    const int silent = connect_unix(s.options.socket_path, false);
+    std::vector<int> half;
+    const std::string sta = "{\"cmd\":\"sta";
+    for (int i = 0; i < 2; ++i) {
+        half.push_back(connect_unix(s.options.socket_path, false));
+        REQUIRE(::send(half.back(), sta.data(), sta.size(), MSG_NOSIGNAL) == ssize_t(sta.size()));
+    }
+    // Every place taken; each newcomer below takes one: the half-written requests (oldest first),
+    // then the client that never asked, then the one answered longest ago.
+    std::vector<int> newcomers{asked()};
+    CHECK(read_until_closed(half[0], 5.0).find("its request was incomplete") != std::string::npos);
+    newcomers.push_back(asked());
+    CHECK(read_until_closed(half[1], 5.0).find("its request was incomplete") != std::string::npos);
+    newcomers.push_back(asked());
+    CHECK(read_until_closed(silent, 5.0).find("it had sent no request") != std::string::npos);
+    nlohmann::json reply;
+    CHECK(timed_abort(s.options.socket_path, s.options.token, reply) < 1.0);
+    CHECK(reply["ok"] == true);
+    CHECK(read_until_closed(answered, 5.0).find("it was the longest idle") != std::string::npos);
+    CHECK(s.server->counters().evicted_idle == 4);
+    pollfd p{newcomers[0], POLLIN, 0};
+    CHECK(::poll(&p, 1, 0) == 0);  // the newer answered clients keep their places, nothing said
+    for (int fd : {answered, silent, half[0], half[1]}) ::close(fd);
+    for (int fd : newcomers) ::close(fd);
+}
+
+TEST_CASE("control: one process past its share of places loses its own oldest connection and no one else's",
+          "[daemon][api][hardening][lockout]") {
+    ServedFixture s([](ControlOptions& o) {
+        o.max_clients = 16;
+        o.max_clients_per_peer = 4;
+    });
+    std::vector<int> mine;
+    for (int i = 0; i < 6; ++i) mine.push_back(connect_unix(s.options.socket_path, false));
+    // The fifth and sixth each took the place of this process's oldest: the first two.
+    CHECK(read_until_closed(mine[0], 5.0).find("newer connection of the same process") != std::string::npos);
+    CHECK(read_until_closed(mine[1], 5.0).find("4 per process is the limit") != std::string::npos);
+    const auto c = s.server->counters();
+    CHECK(c.evicted_peer >= 2);
+    CHECK(c.evicted_idle == 0);
+    CHECK(c.max_clients_per_peer == 4);
+    for (int fd : mine) ::close(fd);
 }
 
 TEST_CASE("an idle client is disconnected after idle_timeout_s", "[daemon][api][hardening]") {
@@ -214,6 +288,50 @@ TEST_CASE("the CLI's call gives up after its timeout and says what it waited for
         CHECK(std::string(e.what()).find("within 0.3 s: waited for its reply ('abort')") != std::string::npos);
     }
     CHECK(std::chrono::duration<double>(clock_type::now() - t0).count() < 3.0);
+    ::close(listener);
+}
+
+TEST_CASE("control: the CLI's call tries once more when the daemon turned it away and never sends a state-changing "
+          "request twice",
+          "[daemon][api][hardening][lockout]") {
+    DaemonFixture f;
+    const fs::path path = f.dir() / "fake.sock";
+    const int listener = bound_socket(path, true);
+    // A stand-in daemon: for each connection in turn, reads the request line and answers `replies[i]`
+    // ("" closes without a word).
+    auto serve = [&](std::vector<std::string> replies) {
+        return std::thread([listener, replies] {
+            for (const auto& reply : replies) {
+                const int fd = ::accept(listener, nullptr, nullptr);
+                std::string line;
+                char ch = 0;
+                while (::read(fd, &ch, 1) == 1 && ch != '\n') line += ch;
+                if (!reply.empty()) {
+                    [[maybe_unused]] const auto n = ::write(fd, reply.data(), reply.size());
+                }
+                ::close(fd);
+            }
+        });
+    };
+    const std::string refused = "{\"ok\":false,\"error\":\"refused: 64 clients are connected and busy\"}\n";
+    const std::string second = "{\"ok\":true,\"second\":true}\n";
+    SECTION("turned away: the second try is answered, even for a request that changes state") {
+        auto t = serve({refused, second});
+        CHECK(call_daemon(path, {{"cmd", "pause"}, {"token", "x"}}, 5.0)["second"] == true);
+        t.join();
+    }
+    SECTION("closed without a reply: a read is asked again") {
+        auto t = serve({"", second});
+        CHECK(call_daemon(path, {{"cmd", "status"}}, 5.0)["second"] == true);
+        t.join();
+    }
+    SECTION("closed without a reply: a state-changing request is not sent again") {
+        auto t = serve({""});
+        CHECK_THROWS_WITH(call_daemon(path, {{"cmd", "pause"}, {"token", "x"}}, 5.0), Catch::Contains("without replying"));
+        t.join();
+        pollfd p{listener, POLLIN, 0};
+        CHECK(::poll(&p, 1, 0) == 0);  // the call has returned: a second try would be waiting here
+    }
     ::close(listener);
 }
 
