@@ -333,6 +333,9 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             throw UserError(fmt::format("{}: case {}: ensemble \"{}\" is not defined (add [ensembles.{}], or \"nude\")", source,
                                         c.id, c.ensemble, c.ensemble));
     if (p.cases.empty()) throw UserError(fmt::format("{}: no cases (give [[cases]] or builtin_cases = \"table-s3\")", source));
+    // The daemon's own rule for every name and text (LabDaemon::start_campaign applies it to
+    // every plan): `campaign check` refuses what a start would.
+    if (const auto why = plan_text_problem(p); !why.empty()) throw UserError(fmt::format("{}: {}", source, why));
     return p;
 }
 

@@ -265,7 +265,7 @@ TEST_CASE("cli contract: probe --write beyond the register map's limits is refus
     fs::remove_all(dir);
 }
 
-TEST_CASE("cli contract: reconcile reads a campaign from the daemon's database as analyze does", "[cli][contract][reconcile]") {
+TEST_CASE("cli contract: reconcile reads a campaign from the daemon's database as analyze does", "[cli][contract][reconcile][proof]") {
     const auto dir = contract_dir("db");
     REQUIRE(run_manikin("demo --cases 2 --replicates 2 --json --out " + dir.string() + " 2>/dev/null").exit_code == 0);
     const std::string db = (dir / "manikind.db").string();

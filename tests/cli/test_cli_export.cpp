@@ -56,7 +56,7 @@ std::string only_campaign(manikind::recorder::Database& db) {
 
 }  // namespace
 
-TEST_CASE("export: CSV and HDF5 carry every recorded channel exactly as the database holds it", "[cli][export]") {
+TEST_CASE("export: CSV and HDF5 carry every recorded channel exactly as the database holds it", "[cli][export][proof]") {
     const fs::path db_path = recorded_database();
     auto db = manikind::recorder::Database::open(db_path);
     const std::string campaign = only_campaign(db);

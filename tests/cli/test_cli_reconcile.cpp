@@ -19,7 +19,7 @@ std::string temp_dir(const std::string& name) {
 }
 }  // namespace
 
-TEST_CASE("cli: simulate-campaign with hidden humidity buoyancy, then reconcile names it from the files alone", "[cli][reconcile]") {
+TEST_CASE("cli: simulate-campaign with hidden humidity buoyancy, then reconcile names it from the files alone", "[cli][reconcile][proof]") {
     const std::string dir = temp_dir("gamma120");
     auto r = run_manikin("simulate-campaign --effect humidity_buoyancy:gamma=120 --seed 11 --unsteady-probability 0.05 --out " + dir);
     REQUIRE(r.exit_code == 0);
@@ -46,7 +46,7 @@ TEST_CASE("cli: simulate-campaign with hidden humidity buoyancy, then reconcile 
 }
 
 TEST_CASE("cli: simulate-campaign with a textile skin at twice its limit in a lab whose wall thermocouple reads 0.34 C "
-          "high names the textile, not humidity buoyancy with an air bias", "[cli][reconcile][textile]") {
+          "high names the textile, not humidity buoyancy with an air bias", "[cli][reconcile][textile][proof]") {
     // One generator campaign of the power check (seed 7011, its lab's probe and calibration errors,
     // all within specification). One case carries 98 % of textile's information; held out, the
     // rest cannot place R and the wall error pulls their guess to twice the value. Scored by how
@@ -69,7 +69,7 @@ TEST_CASE("cli: simulate-campaign with a textile skin at twice its limit in a la
     std::filesystem::remove_all(dir);
 }
 
-TEST_CASE("cli: reconcile of a campaign with no hidden physics claims nothing", "[cli][reconcile]") {
+TEST_CASE("cli: reconcile of a campaign with no hidden physics claims nothing", "[cli][reconcile][proof]") {
     const std::string dir = temp_dir("clean");
     REQUIRE(run_manikin("simulate-campaign --seed 5 --out " + dir).exit_code == 0);
     const auto r = run_manikin("reconcile " + dir + " --json");
@@ -97,7 +97,7 @@ TEST_CASE("cli: bad --effect and --twin inputs are refused with what was expecte
 }
 
 TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at the campaign's replicates and scales "
-          "the others from it, smaller with more replicates", "[cli][reconcile]") {
+          "the others from it, smaller with more replicates", "[cli][reconcile][proof]") {
     const std::string dir = temp_dir("power");
     REQUIRE(run_manikin("simulate-campaign --seed 5 --out " + dir).exit_code == 0);
     // Two candidates and few campaigns per value keep the test short (with pairs tried, three took
@@ -154,7 +154,7 @@ TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at 
 }
 
 TEST_CASE("cli: reconcile of a one-replicate campaign claims nothing and says why, and --noise-from an earlier campaign "
-          "with replicates allows the claim", "[cli][reconcile]") {
+          "with replicates allows the claim", "[cli][reconcile][proof]") {
     const std::string one = temp_dir("one-replicate"), earlier = temp_dir("earlier");
     REQUIRE(run_manikin("simulate-campaign --effect humidity_buoyancy:gamma=146 --replicates 1 --seed 21 --out " + one).exit_code == 0);
     REQUIRE(run_manikin("simulate-campaign --seed 22 --out " + earlier).exit_code == 0);

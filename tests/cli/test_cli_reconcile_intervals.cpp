@@ -17,7 +17,7 @@ namespace rc = analysis::reconcile;
 
 TEST_CASE("reconcile: the air bias's 95 % interval holds the truth where the fit rests in a cusp of chi2, "
           "and stays about as wide as the estimates scatter",
-          "[reconcile][coverage]") {
+          "[reconcile][coverage][proof]") {
     constexpr double kTruthC = 0.4;
     const auto lib = rc::candidate_library({});
     const auto term = std::find_if(lib.begin(), lib.end(), [](const auto& c) { return c.term == "air_temp_bias"; });

@@ -24,7 +24,7 @@ namespace an = manikind::analysis;
 namespace tw = manikind::physics::twin;
 
 TEST_CASE("clothing test on the simulated lab: the world wears the wardrobe's ensembles, the export names them, and "
-          "the computed insulation and evaporative resistance hold the world's values", "[daemon][clothing]") {
+          "the computed insulation and evaporative resistance hold the world's values", "[daemon][clothing][proof]") {
     manikind::test::DaemonFixture f([](manikind::config::Config& c) { c.simulation.air_speed_m_s = 0.4; });
     auto plan = manikind::load_campaign_plan(MANIKIND_CONFIG_DIR "/campaign-clothing-astm.toml");
     plan.replicates = 2;

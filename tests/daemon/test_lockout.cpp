@@ -278,7 +278,7 @@ struct LiveView {
 }  // namespace
 
 TEST_CASE("console: a tokenless connection flood keeps neither the live view off the page nor abort from the CLI",
-          "[daemon][console][hardening][lockout]") {
+          "[daemon][console][hardening][lockout][proof]") {
     LiveDaemon d("flood", true);
     LiveView view(d.console_port);
     REQUIRE(view.wait_first(std::chrono::seconds(30)));

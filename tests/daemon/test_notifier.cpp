@@ -125,7 +125,7 @@ TEST_CASE("notifier: e-mail through a real SMTP server, headers that cannot be s
 }
 
 TEST_CASE("notifier: within the interval notices wait and go together, and a dead receiver never holds the caller",
-          "[daemon][notify]") {
+          "[daemon][notify][proof]") {
     SECTION("rate limit: the first at once, the next three as one message") {
         Peer peer("http", 2);
         REQUIRE(peer.port() > 0);

@@ -90,7 +90,7 @@ TEST_CASE("planning: a campaign with one replicate per case and no carried scatt
 }
 
 TEST_CASE("planning: a candidate planned alone is judged against the whole family, with reconcile's own claim threshold",
-          "[reconcile][power]") {
+          "[reconcile][power][proof]") {
     // `--power-terms` once built the family's null from the planned candidates only: a lower
     // threshold than reconcile's, so limits reconcile would not reach.
     const auto model = recorded(14);
@@ -110,7 +110,7 @@ TEST_CASE("planning: a candidate planned alone is judged against the whole famil
 }
 
 TEST_CASE("planning: where evidence is beyond the null but no term passes and too many zones stand out, the report says "
-          "unexplained, never that the twin agrees", "[reconcile][power]") {
+          "unexplained, never that the twin agrees", "[reconcile][power][proof]") {
     // Found by the planner: a small humidity buoyancy shows at the isothermal cases' kink as many
     // zones' offsets, no single term passing. The statement fell through to "The twin agrees with
     // the recordings within their noise" while quoting an evidence beyond the null. (At gamma 30

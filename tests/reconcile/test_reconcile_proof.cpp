@@ -43,7 +43,7 @@ struct Magnitude {
 
 }  // namespace
 
-TEST_CASE("reconcile: 20 seeded campaigns with no concealed physics give at most 1 claim (alpha = 1 %)", "[reconcile][null]") {
+TEST_CASE("reconcile: 20 seeded campaigns with no concealed physics give at most 1 claim (alpha = 1 %)", "[reconcile][null][proof]") {
     int claims = 0, anomalies = 0;
     for (unsigned seed = 101; seed <= 120; ++seed) {
         const auto rep = reconcile_world(tw::TwinVersion{"world", {}}, seed);
@@ -62,7 +62,7 @@ TEST_CASE("reconcile: 20 seeded campaigns with no concealed physics give at most
 }
 
 TEST_CASE("reconcile: each candidate at three magnitudes, the smallest near its detection limit: the right term or "
-          "nothing, never a wrong one", "[reconcile][magnitudes]") {
+          "nothing, never a wrong one", "[reconcile][magnitudes][proof]") {
     // The smallest of each row is about 1.2x the 80 %-power limit `manikin reconcile --power`
     // prints for this design (n = 3): there "nothing" is an allowed answer.
     const std::vector<Magnitude> magnitudes = {
@@ -109,7 +109,7 @@ TEST_CASE("reconcile: each candidate at three magnitudes, the smallest near its 
     CHECK(misses <= 2);
 }
 
-TEST_CASE("reconcile: an air probe 1.5 C high is named with advice, not refused as implausible", "[reconcile]") {
+TEST_CASE("reconcile: an air probe 1.5 C high is named with advice, not refused as implausible", "[reconcile][proof]") {
     const auto rep = reconcile_world(world_with("air_temp_bias", "bias_c", 1.5), 7);
     REQUIRE(rep.explanation.has_value());
     CHECK(rep.explanation->label == "air_temp_bias");
@@ -118,7 +118,7 @@ TEST_CASE("reconcile: an air probe 1.5 C high is named with advice, not refused 
     CHECK_THAT(rep.statement, Catch::Contains("check the probe"));
 }
 
-TEST_CASE("reconcile: a 5 W/m2 heat leak on zones 5 and 23 is a local anomaly on exactly those zones, no physics", "[reconcile]") {
+TEST_CASE("reconcile: a 5 W/m2 heat leak on zones 5 and 23 is a local anomaly on exactly those zones, no physics", "[reconcile][proof]") {
     for (unsigned seed : {7u, 8u}) {
         const tw::TwinVersion world{"world", {{"heat_leak", {{"q_w_m2", 5.0}}, "", {5, 23}}}};
         const auto rep = reconcile_world(world, seed);
@@ -138,7 +138,7 @@ TEST_CASE("reconcile: a 5 W/m2 heat leak on zones 5 and 23 is a local anomaly on
 }
 
 TEST_CASE("reconcile: a concealed pair (Eq. 8's physics: humidity buoyancy 146 with a diffusion floor 0.3) is named as "
-          "the pair", "[reconcile]") {
+          "the pair", "[reconcile][proof]") {
     const tw::TwinVersion world{"world", {{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}},
                                           {"diffusion_floor", {{"h0", 0.3}}, "", {}}}};
     const auto rep = reconcile_world(world, 9);
@@ -156,7 +156,7 @@ TEST_CASE("reconcile: a concealed pair (Eq. 8's physics: humidity buoyancy 146 w
 }
 
 TEST_CASE("reconcile: 95 % intervals cover the truth in 90-100 % of simulated campaigns (humidity buoyancy, wall offset)",
-          "[reconcile][coverage]") {
+          "[reconcile][coverage][proof]") {
     for (const auto& m : std::vector<Magnitude>{{"humidity_buoyancy", "gamma", "", 100.0}, {"wall_offset", "delta_c", "", 1.0}}) {
         const auto lib = rc::candidate_library({});
         const auto it = std::find_if(lib.begin(), lib.end(), [&](const auto& c) { return c.term == m.term; });
@@ -175,7 +175,7 @@ TEST_CASE("reconcile: 95 % intervals cover the truth in 90-100 % of simulated ca
     }
 }
 
-TEST_CASE("reconcile: locate names vapour concentration among the drivers of a missing humidity term", "[reconcile]") {
+TEST_CASE("reconcile: locate names vapour concentration among the drivers of a missing humidity term", "[reconcile][proof]") {
     const auto rep = reconcile_world(world_with("humidity_buoyancy", "gamma", 120.0), 7);
     bool named = false;
     for (const auto& l : rep.located) named = named || l.driver == "vapour concentration difference";
@@ -185,7 +185,7 @@ TEST_CASE("reconcile: locate names vapour concentration among the drivers of a m
 }
 
 TEST_CASE("reconcile: two zones whose flux sensors read 8 % high are located as gains on exactly those zones at 3 "
-          "replicates, no physics", "[reconcile][gain]") {
+          "replicates, no physics", "[reconcile][gain][proof]") {
     for (unsigned seed : {31u, 32u}) {
         test::SyntheticOptions o;
         o.seed = seed;
@@ -207,7 +207,7 @@ TEST_CASE("reconcile: two zones whose flux sensors read 8 % high are located as 
 }
 
 TEST_CASE("reconcile: one replicate per case makes no claim and says why, and the lab's scatter carried from an earlier "
-          "campaign (--noise-from) allows one", "[reconcile][one-replicate]") {
+          "campaign (--noise-from) allows one", "[reconcile][one-replicate][proof]") {
     test::SyntheticOptions one;
     one.seed = 41;
     one.replicates = 1;
@@ -242,7 +242,7 @@ TEST_CASE("reconcile: one replicate per case makes no claim and says why, and th
                     std::invalid_argument);
 }
 
-TEST_CASE("reconcile: one replicate with carried scatter, 10 null campaigns: no claim", "[reconcile][one-replicate][null]") {
+TEST_CASE("reconcile: one replicate with carried scatter, 10 null campaigns: no claim", "[reconcile][one-replicate][null][proof]") {
     test::SyntheticOptions earlier;
     earlier.seed = 43;
     const auto source = rc::make_twin_model(test::make_campaign(tw::TwinVersion{"world", {}}, earlier), tw::TwinVersion{});
@@ -259,7 +259,7 @@ TEST_CASE("reconcile: one replicate with carried scatter, 10 null campaigns: no 
     CHECK(claims <= 1);
 }
 
-TEST_CASE("reconcile: a textile skin of 0.025 m2K/W worn in the wet trials (Fig. 1A inset) is named", "[reconcile][textile]") {
+TEST_CASE("reconcile: a textile skin of 0.025 m2K/W worn in the wet trials (Fig. 1A inset) is named", "[reconcile][textile][proof]") {
     const auto rep = reconcile_world(world_with("textile_resistance", "r_m2k_w", 0.025), 51);
     INFO(rep.statement);
     REQUIRE(rep.explanation.has_value());
@@ -268,7 +268,7 @@ TEST_CASE("reconcile: a textile skin of 0.025 m2K/W worn in the wet trials (Fig.
     CHECK(0.025 <= rep.explanation->interval_hi[0]);
 }
 
-TEST_CASE("reconcile: a claim's interval excludes no effect, and the report leads with the answer", "[reconcile]") {
+TEST_CASE("reconcile: a claim's interval excludes no effect, and the report leads with the answer", "[reconcile][proof]") {
     const auto rep = reconcile_world(world_with("humidity_buoyancy", "gamma", 146.0), 61);
     REQUIRE(rep.explanation.has_value());
     CHECK(rep.explanation->interval_lo[0] > 0.0);
@@ -278,7 +278,7 @@ TEST_CASE("reconcile: a claim's interval excludes no effect, and the report lead
 }
 
 TEST_CASE("reconcile: humidity buoyancy and a wall offset concealed together are named together (the pair, or "
-          "'together, not separable'), never nothing", "[reconcile][pair]") {
+          "'together, not separable'), never nothing", "[reconcile][pair][proof]") {
     for (const auto& [gamma, wall, seed] : std::vector<std::tuple<double, double, unsigned>>{{60.0, 1.5, 71u}, {146.0, 1.0, 72u}}) {
         const tw::TwinVersion world{"world", {{"humidity_buoyancy", {{"gamma", gamma}}, "", {}},
                                               {"wall_offset", {{"delta_c", wall}}, "", {}}}};
