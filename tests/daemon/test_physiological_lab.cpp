@@ -72,7 +72,7 @@ double wobble(const std::vector<ph::Point>& p, double (*value)(const ph::Point&)
 
 TEST_CASE("physiological trial on the simulated lab: 2 h at 41 C, 20 % RH reproduce the offline coupled model within "
           "0.2 C core and 0.3 C mean skin, and end closer to it than to temperature-only convection",
-          "[daemon][physiological]") {
+          "[daemon][physiological][proof]") {
     manikind::test::DaemonFixture f;
     const auto plan = physiological_plan(1);
     auto& db = run_without_fallback(f, plan);
@@ -160,7 +160,7 @@ TEST_CASE("physiological trial on the simulated lab: 2 h at 41 C, 20 % RH reprod
 
 TEST_CASE("physiological trial on the simulated lab: a step from 41 C to 25 C mid-trial is followed without "
           "oscillation beyond the stated bound, and the model stays within 0.3 C of itself run alone in the same "
-          "recorded conditions", "[daemon][physiological]") {
+          "recorded conditions", "[daemon][physiological][proof]") {
     manikind::test::DaemonFixture f;
     const auto plan = physiological_plan(2);
     auto& db = run_without_fallback(f, plan);
@@ -205,7 +205,7 @@ TEST_CASE("physiological trial on the simulated lab: a step from 41 C to 25 C mi
 
 TEST_CASE("physiological trial on the simulated lab: a zone whose heater fails mid-trial is flagged by the manikin, the "
           "loop falls back to constant skin temperature with an alarm naming it, and the trial is flagged",
-          "[daemon][physiological]") {
+          "[daemon][physiological][proof]") {
     manikind::test::DaemonFixture f([](manikind::config::Config& c) {
         c.simulation.faults = {"manikin:heater_fail=12@5400"};  // during the model's first hour
     });

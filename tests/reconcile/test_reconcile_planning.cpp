@@ -60,7 +60,7 @@ TEST_CASE("planning: a simulated campaign has the recorded design, the asked-for
 }
 
 TEST_CASE("planning: an effect concealed in simulated campaigns shows in them (a large humidity buoyancy is named) and "
-          "none is claimed without one", "[reconcile][power]") {
+          "none is claimed without one", "[reconcile][power][proof]") {
     const auto model = recorded(12);
     rc::Options opt;
     opt.null_simulations = 400;
