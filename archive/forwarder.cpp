@@ -23,7 +23,7 @@
 namespace manikind::archive {
 namespace {
 
-// The recorder's schema version that gave trials their UUID (store/database.cpp).
+// The recorder's schema version that gave trials their UUID (store/database_schema.cpp).
 constexpr int first_sqlite_version_with_uuid = 6;
 
 // The SQLite side, read-only through the C API: the recorder's Database would migrate (write) on open.

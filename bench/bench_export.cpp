@@ -91,7 +91,7 @@ Run run_floor(const fs::path& db_path, int trials) {
                            nullptr);
         double sum = 0;
         long n = 0;
-        for (std::int64_t t = 1; t <= trials; ++t) {  // ids are (trial << 36) + n (store/database.cpp, version 8)
+        for (std::int64_t t = 1; t <= trials; ++t) {  // ids are (trial << 36) + n (store/database_schema.cpp, version 8)
             sqlite3_bind_int64(q, 1, t << 36);
             sqlite3_bind_int64(q, 2, (t + 1) << 36);
             while (sqlite3_step(q) == SQLITE_ROW) {
