@@ -109,7 +109,7 @@ public:
     //   isothermal wet cases' secant is a fraction of their slope at the trial's scale, and the
     //   scatter estimate made up for it: 0.1-0.25 °C of per-trial air error (and 0-4.5 % RH)
     //   fitted to the generator's 0.05 °C (0.5 % RH), which the planner's draws then pushed
-    //   through every case, hiding humidity buoyancy and the air bias (docs/reconcile.md).
+    //   through every case, hiding humidity buoyancy and the air bias (docs/notes/reconcile-history.md, fifth pass).
     enum class Span { calibration, trial };
     static Eigen::MatrixXd case_loadings(const tw::TwinVersion& physics, const CaseInput& in,
                                          const std::vector<tw::ZoneFlux>& twin_case, const Instruments& instruments, Span span) {

@@ -184,7 +184,7 @@ FactorTerms factor_terms(const std::vector<FactorStats>& cases, const Eigen::Vec
 // Minimises f over t >= 0 by Fisher scoring projected on the bound (Bertsekas' projected Newton:
 // a variance at zero whose gradient pushes outward stays there, the others take the Newton step,
 // halved until f decreases). Where the likelihood's maximum is at zero this reaches it exactly;
-// EM only creeps toward it (docs/reconcile.md, "Noise model").
+// EM only creeps toward it (docs/notes/reconcile-history.md, "Noise model").
 void maximise_factors(const std::vector<FactorStats>& cases, Eigen::VectorXd& t) {
     const Eigen::Index k = t.size();
     if (k == 0 || cases.empty()) return;

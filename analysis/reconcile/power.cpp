@@ -347,7 +347,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     // beside a concealed effect (the air bias beside the textile term), and the
                     // pair that names both is a true answer (names_concealed). Counting only the
                     // term alone, without pairs, the textile term never reached 80 % planning from
-                    // the bench's labs 78 and 80 (docs/reconcile.md, "Detection limits").
+                    // the bench's labs 78 and 80 (docs/notes/reconcile-history.md, fourth pass).
                     const auto truth = to_twin_terms({library[k]}, {theta});
                     PowerPoint pt;
                     pt.value = theta;
@@ -393,7 +393,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                 // ends, or its upper end named in all) is read coarsely by a line through its ends: the
                 // wall's 27/40 at 1.125 °C and 40/40 at 1.406 °C read 1.17 °C, where the
                 // generator's campaigns named 26 of 40 at 1.19 °C. Its geometric middle is tried
-                // once before the curve is read (docs/reconcile.md, "Detection limits").
+                // once before the curve is read (docs/notes/reconcile-history.md, fifth pass).
                 if (const auto mid = bracketed ? coarse_bracket_middle(d.tried, p.null_value, power) : std::nullopt) {
                     d.tried.push_back(run(*mid));
                     by_effect();

@@ -167,7 +167,7 @@ struct CalibrationSensitivity {
 // Where the planner tries once more before reading its power curve: the geometric middle of the
 // bracket around `power` (values sorted by distance from `null_value`) when that bracket climbs
 // steeply (more than a quarter of the campaigns between its ends, or its upper end named in all);
-// none when the bracket is fine enough or there is none (docs/reconcile.md, "Detection limits").
+// none when the bracket is fine enough or there is none (docs/notes/reconcile-history.md, fifth pass).
 std::optional<double> coarse_bracket_middle(const std::vector<PowerPoint>& tried, double null_value, double power);
 struct DetectionLimit {
     std::string label;
@@ -200,7 +200,8 @@ struct PowerOptions {
 // Fills `d.calibration` from the whole decision's per-lab verdicts (`tried[].draw_named`, values
 // sorted by distance from "no effect", as detection_limits leaves them) and each drawn lab's
 // calibration errors (`labs`, in the same order); leaves it empty when they do not line up or
-// there are fewer than 4 labs (docs/reconcile.md, "Detection limits", eleventh pass).
+// there are fewer than 4 labs (docs/reconcile.md, "Detection limits"; checked: docs/notes/reconcile-history.md,
+// eleventh pass).
 void calibration_sensitivity(DetectionLimit& d, const std::vector<std::vector<DrawnCalibrationError>>& labs, double power,
                              std::uint64_t seed);
 PowerReport detection_limits(const ForwardModel& model, const Options& options, const std::vector<int>& replicates,

@@ -307,7 +307,7 @@ SyntheticPlan synthetic_plan(std::uint64_t seed, double air_weight) {
 
 TEST_CASE("planning: a limit that hangs on the air probe's calibration is flagged with the limit a probe calibrated to "
           "half its spec would reach and calibrations it does not hang on are not", "[planning][power]") {
-    // As textile does in the bench's design (docs/reconcile.md, tenth pass): labs whose air probe
+    // As textile does in the bench's design (docs/notes/reconcile-history.md, tenth pass): labs whose air probe
     // erred by more than half its limit name it far less often.
     auto s = synthetic_plan(3, 6.0);
     rc::calibration_sensitivity(s.limit, s.labs, 0.8, 11);
