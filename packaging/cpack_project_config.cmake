@@ -1,0 +1,5 @@
+# Read by cpack when it runs: the version can be set for one run, without reconfiguring.
+if(DEFINED ENV{MANIKIND_PACKAGE_VERSION} AND NOT "$ENV{MANIKIND_PACKAGE_VERSION}" STREQUAL "")
+  set(CPACK_PACKAGE_VERSION "$ENV{MANIKIND_PACKAGE_VERSION}")
+  set(CPACK_DEBIAN_PACKAGE_VERSION "$ENV{MANIKIND_PACKAGE_VERSION}")
+endif()
