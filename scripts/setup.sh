@@ -50,6 +50,9 @@ if [ "$with_tests" = yes ]; then
     postgresql
     # The load generator of the daemon's soak under load (tests/soak/).
     stress-ng
+    # A clean Debian 12 root to install, upgrade and purge the package in (tests/package/);
+    # dpkg-dev (dpkg-shlibdeps, for scripts/package.sh) comes with build-essential.
+    debootstrap
   )
 fi
 if [ "$with_tests" = yes ] || [ "$preset" = asan ]; then
