@@ -60,6 +60,8 @@ cleanup() {
   else
     rm -rf --one-file-system "$work"
   fi
+  # The upgrade's .deb is the test's own: no one should install it from build/ by mistake.
+  [ -n "${deb2:-}" ] && rm -f "$deb2"
   step "done"
   exit "$status"
 }
