@@ -52,7 +52,9 @@ struct Conn {
 };
 
 void add_conn_options(CLI::App* cmd, Conn& c, bool mutating) {
-    cmd->add_option("--socket", c.socket, "The daemon's control socket ([api] socket)")->capture_default_str();
+    cmd->add_option("--socket", c.socket, "The daemon's control socket ([api] socket; where ./manikind.sock is absent, the "
+                                          "packaged service's /run/manikind/manikind.sock)")
+        ->capture_default_str();
     if (mutating) cmd->add_option("--token", c.token, "API token (default: read from <socket>.token, or $MANIKIND_TOKEN)");
     cmd->add_option("--timeout", c.timeout_s, "Seconds to wait for the daemon's answer before saying what it waited for")
         ->capture_default_str()
@@ -60,15 +62,27 @@ void add_conn_options(CLI::App* cmd, Conn& c, bool mutating) {
     cmd->add_flag("--json", c.json, "Print the daemon's JSON reply");
 }
 
+// The socket asked for; left at its default (./manikind.sock) where there is none, the packaged
+// service's (docs/daemon.md, "The Debian package") when it is there: on a lab PC `manikin status`
+// answers without --socket.
+std::string socket_of(const Conn& c) {
+    constexpr const char* packaged = "/run/manikind/manikind.sock";
+    std::error_code ec;
+    if (c.socket == "manikind.sock" && !std::filesystem::exists(c.socket, ec) && std::filesystem::exists(packaged, ec))
+        return packaged;
+    return c.socket;
+}
+
 nlohmann::json call(const Conn& c, nlohmann::json req, bool mutating) {
+    const std::string socket = socket_of(c);
     if (mutating) {
         std::string token = c.token;
         if (token.empty())
             if (const char* env = std::getenv("MANIKIND_TOKEN")) token = env;
-        if (token.empty()) token = read_token_file(c.socket);
+        if (token.empty()) token = read_token_file(socket);
         req["token"] = token;
     }
-    auto reply = call_daemon(c.socket, req, c.timeout_s);
+    auto reply = call_daemon(socket, req, c.timeout_s);
     if (!reply.value("ok", false))
         throw UserError::refused("the daemon refused: " + reply.value("error", std::string("?")));
     return reply;

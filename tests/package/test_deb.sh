@@ -132,7 +132,10 @@ start_daemon() {
     sh -c "umask $umask_value && cd $workdir && exec $exec_start" >>"$work/daemon.log" 2>&1 &
   daemon_pid=$!
   local waited_s=0
-  until in_root manikin status --socket "$1" >"$work/status.txt" 2>&1; do
+  # The packaged socket is the CLI's own fallback (no ./manikind.sock here): asked without --socket.
+  local where=(--socket "$1")
+  [ "$1" = /run/manikind/manikind.sock ] && where=()
+  until in_root manikin status "${where[@]}" >"$work/status.txt" 2>&1; do
     kill -0 "$daemon_pid" 2>/dev/null || { cat "$work/daemon.log"; fail "the daemon exited"; }
     [ "$waited_s" -lt 120 ] || { cat "$work/daemon.log" "$work/status.txt"; fail "no answer on $1 in 120 s"; }
     sleep 1; waited_s=$((waited_s + 1))
