@@ -580,6 +580,7 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
         rep.null_p = (static_cast<double>(beyond) + 1.0) / (static_cast<double>(st.null_max.size()) + 1.0);
     }
     if (lower_bound) st.threshold = std::numeric_limits<double>::infinity();
+    rep.noise_lower_bound = lower_bound;
     auto best_passing = [&](const Stage& x) -> std::optional<std::size_t> {
         std::optional<std::size_t> best;
         for (std::size_t k = 0; k < x.singles.size(); ++k)
@@ -848,8 +849,10 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
                 "No claim can be made: every case has one replicate, so the scatter between replicates cannot be "
                 "estimated, and each point's own U/k is only a lower bound on it (a false claim could not be held at "
                 "{:g} %). Run at least two replicates of some cases, or carry the lab's scatter from an earlier "
-                "campaign with replicates (--noise-from <campaign>). The best candidate evidence is {:.1f}; the mismatch "
-                "is at {}.", 100.0 * opt.alpha, rep.family_evidence, where);
+                "campaign with replicates (--noise-from <campaign>). Nor can it say whether the twin fits or where it "
+                "does not: a goodness of fit, a place and a ± on a candidate would all rest on that lower bound (on "
+                "campaigns with nothing missing it calls the twin failed and \"locates\" noise), so none is given.",
+                100.0 * opt.alpha);
         } else if (!anomaly_text.empty()) {
             rep.statement = anomaly_text + (why_not.empty() ? " No physics term is needed for the rest." : " " + why_not + ".");
         } else if (!why_not.empty()) {

@@ -84,6 +84,10 @@ struct Report {
     FitStats before;
     bool consistent_before = false;          // nothing to explain: no claim, no anomaly, fit within the noise
     double gof_p_before = 1.0;               // P(chi2 >= observed) for the twin as given
+    // One replicate per case and no scatter carried: the noise is each point's own U/k, a lower
+    // bound, so no verdict rests on it: no goodness of fit, no locating, no ± on a candidate
+    // (issue 61: on 10 nulls the twin "failed" at p <= 0.008 and the mismatch was "located").
+    bool noise_lower_bound = false;
     NoiseModel noise;                        // the covariance the fits were judged against
     double null_threshold = 0.0;             // (1 - alpha) quantile of the family's best evidence under the twin
     int null_simulations = 0;

@@ -53,7 +53,12 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
     j["twin"] = r.twin_name;
     j["before"] = stats_json(r.before);
     j["consistent_before"] = r.consistent_before;
-    j["gof_p_before"] = r.gof_p_before;
+    // Not judged on a lower-bound noise (one replicate, nothing carried): null, with the reason.
+    j["gof_p_before"] = r.noise_lower_bound ? nlohmann::json() : nlohmann::json(r.gof_p_before);
+    j["not_judged"] = r.noise_lower_bound
+                          ? nlohmann::json("goodness of fit, locating and candidates' uncertainties: one replicate per case "
+                                           "and no scatter carried (--noise-from), so the noise is only a lower bound")
+                          : nlohmann::json();
     const auto& n = r.noise;
     nlohmann::json zone_sd = nlohmann::json::object();
     for (const auto& [zone, sd] : n.zone_sd_w_m2) zone_sd[std::to_string(zone)] = sd;
@@ -76,7 +81,8 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
                                   {"u_w_m2", a.u_w_m2}, {"z", a.z}, {"cases_outside_ci", a.cases_outside}, {"cases", a.cases}});
     j["ambiguous_with"] = r.ambiguous_with;
     j["located"] = nlohmann::json::array();
-    for (const auto& l : r.located) j["located"].push_back({{"where", l.where}, {"driver", l.driver}, {"strength", l.strength}});
+    if (!r.noise_lower_bound)
+        for (const auto& l : r.located) j["located"].push_back({{"where", l.where}, {"driver", l.driver}, {"strength", l.strength}});
     if (r.explanation) {
         auto e = candidate_json(*r.explanation);
         e["statement"] = r.statement;
@@ -86,7 +92,15 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
     }
     j["statement"] = r.statement;
     j["candidates"] = nlohmann::json::array();
-    for (const auto& c : r.candidates) j["candidates"].push_back(candidate_json(c));
+    for (const auto& c : r.candidates) {
+        auto cj = candidate_json(c);
+        if (r.noise_lower_bound)
+            for (auto& [name, u] : cj["parameter_u"].items()) {
+                (void)name;
+                u = nullptr;
+            }
+        j["candidates"].push_back(std::move(cj));
+    }
     j["after"] = stats_json(r.after);
     j["by_region"] = nlohmann::json::array();
     for (const auto& b : r.by_region)
@@ -223,7 +237,8 @@ std::string report_to_text(const Report& r) {
     o << "Twin: " << r.twin_name << "\n";
     // The answer first; the evidence behind it follows.
     o << (r.explanation ? "Explanation: " + r.explanation->label : std::string("Explanation: none")) << "\n  " << r.statement << "\n\n";
-    o << "Before: " << stats_line(r.before) << "\n";
+    o << "Before: " << stats_line(r.before)
+      << (r.noise_lower_bound ? "   (against each point's own U: a lower bound, not a verdict)" : "") << "\n";
     const auto& n = r.noise;
     std::string factors;
     for (const auto& [name, sd] : n.trial_factor_sd) factors += fmt::format("{}{} {:.3g}", factors.empty() ? "" : ", ", name, sd);
@@ -251,14 +266,21 @@ std::string report_to_text(const Report& r) {
     else
         o << "Claim:  none possible (one replicate per case, no scatter carried: --noise-from)\n\n";
     o << "Located:\n";
-    for (const auto& l : r.located) o << fmt::format("  {}  (driver: {}, |r| = {:.2f})\n", l.where, l.driver, l.strength);
+    if (r.noise_lower_bound)
+        o << "  not judged: on one replicate per case the noise is a lower bound, and where the twin departs from it\n"
+             "  is noise as often as physics (two replicates of a few cases, or --noise-from, let it be judged)\n";
+    else
+        for (const auto& l : r.located) o << fmt::format("  {}  (driver: {}, |r| = {:.2f})\n", l.where, l.driver, l.strength);
     o << "\nCandidates (best first):\n";
-    o << fmt::format("  {:<44} {:>9} {:>9} {:>9}  {}\n", "term (± standard uncertainty)", "evidence", "LOO RMSE", "chi2/dof", "verdict");
+    o << fmt::format("  {:<44} {:>9} {:>9} {:>9}  {}\n",
+                     r.noise_lower_bound ? "term (best fit; ± not judged)" : "term (± standard uncertainty)", "evidence",
+                     "LOO RMSE", "chi2/dof", "verdict");
     for (std::size_t i = 0; i < r.candidates.size() && i < 12; ++i) {
         const auto& c = r.candidates[i];
         std::string params;
         for (std::size_t k = 0; k < c.values.size(); ++k)
-            params += fmt::format(" {}={:.4g}±{:.2g}", c.parameter_names[k], c.values[k], c.uncertainties[k]);
+            params += r.noise_lower_bound ? fmt::format(" {}={:.4g}", c.parameter_names[k], c.values[k])
+                                          : fmt::format(" {}={:.4g}±{:.2g}", c.parameter_names[k], c.values[k], c.uncertainties[k]);
         o << fmt::format("  {:<44} {:>9.1f} {:>9} {:>9.2f}  {}\n", c.label + params, c.evidence,
                          c.loo_rmse ? fmt::format("{:.2f}", *c.loo_rmse) : "-", c.after.chi2_per_dof, c.reason);
     }

@@ -164,12 +164,30 @@ TEST_CASE("cli: reconcile of a one-replicate campaign claims nothing and says wh
     CHECK(j["explanation"].is_null());
     CHECK(j["claim_rule"]["null_threshold_chi2"].is_null());
     CHECK_THAT(j["statement"].get<std::string>(), Catch::Contains("--noise-from"));
+    // Nothing else rests on the lower-bound noise either (issue 61): no goodness-of-fit verdict,
+    // no place, no ± on a candidate; said as not judged.
+    CHECK(j["gof_p_before"].is_null());
+    CHECK(j["located"].empty());
+    CHECK(j["not_judged"].is_string());
+    REQUIRE_FALSE(j["candidates"].empty());
+    for (const auto& c : j["candidates"])
+        for (const auto& [name, u] : c["parameter_u"].items()) {
+            INFO(c["term"] << " " << name);
+            CHECK(u.is_null());
+        }
+    const auto text = run_manikin("reconcile " + one);
+    CHECK_THAT(text.out, Catch::Contains("Located:\n  not judged") && Catch::Contains("± not judged"));
+    CHECK(text.out.find("the mismatch is at") == std::string::npos);
+    CHECK(text.out.find("(driver:") == std::string::npos);
     r = run_manikin("reconcile " + one + " --json --noise-from " + earlier);
     REQUIRE(r.exit_code == 0);
     j = nlohmann::json::parse(r.out);
     CHECK_FALSE(j["noise_model"]["carried_from"].get<std::string>().empty());
     CHECK(j["noise_model"]["scatter_converged"].is_null());  // nothing of this campaign's estimated
     CHECK(j["claim_rule"]["covariance_draws"].get<int>() > 0);
+    CHECK(j["gof_p_before"].is_number());  // with scatter carried, all of it is judged again
+    CHECK_FALSE(j["located"].empty());
+    CHECK(j["not_judged"].is_null());
     REQUIRE(j["explanation"].is_object());
     CHECK(j["explanation"]["term"] == "humidity_buoyancy");
     // A campaign without replicates has no scatter to lend.
