@@ -23,13 +23,13 @@ using manikind::test::run_manikin;
 
 namespace {
 
-struct TempDir {
-    explicit TempDir(const std::string& name)
+struct GuardDir {
+    explicit GuardDir(const std::string& name)
         : path(fs::temp_directory_path() / ("manikind-guard-" + name + "-" + std::to_string(::getpid()))) {
         fs::remove_all(path);
     }
     fs::path path;
-    ~TempDir() { fs::remove_all(path); }
+    ~GuardDir() { fs::remove_all(path); }
 };
 
 struct Lab {
@@ -40,7 +40,7 @@ struct Lab {
 
 // One demo campaign per test process, its database and its CSV export.
 const Lab& lab() {
-    static TempDir dir("lab");
+    static GuardDir dir("lab");
     static const Lab l = [] {
         REQUIRE(run_manikin("demo --cases 1 --replicates 1 --out " + (dir.path / "demo").string() + " > /dev/null").exit_code == 0);
         Lab out;
@@ -114,7 +114,7 @@ void refused(const std::string& args, const fs::path& target, const std::string&
 
 TEST_CASE("output guard: --force export report clothing --report and physio --plot never write over a crashed daemon's -wal",
           "[cli][export][hostile]") {
-    TempDir dir("case");
+    GuardDir dir("case");
     const fs::path crashed = crashed_database(dir.path / "crashed");
     const fs::path wal = crashed.string() + "-wal";
     const std::string db = " --db " + lab().db.string() + " ";
@@ -142,7 +142,7 @@ TEST_CASE("output guard: --force export report clothing --report and physio --pl
 
 TEST_CASE("output guard: report through a symlinked --db never writes over the real database's -wal",
           "[cli][export][hostile]") {
-    TempDir dir("case");
+    GuardDir dir("case");
     const fs::path crashed = crashed_database(dir.path / "real");
     fs::create_symlink(crashed, dir.path / "lab.db");
     const fs::path wal = crashed.string() + "-wal";
@@ -155,7 +155,7 @@ TEST_CASE("output guard: report through a symlinked --db never writes over the r
 }
 
 TEST_CASE("output guard: export --archive refuses a -wal before it connects", "[cli][export][hostile]") {
-    TempDir dir("case");
+    GuardDir dir("case");
     const fs::path wal = crashed_database(dir.path / "crashed").string() + "-wal";
     // Port 1 on the loopback: nothing answers, so only a refusal made before connecting is output_refused.
     refused("export --archive 'host=127.0.0.1 port=1 connect_timeout=2' --lab lab-1 " + lab().name + " " + wal.string() +
@@ -168,7 +168,7 @@ TEST_CASE("output guard: physio and clothing never write into the campaign folde
     refused("physio " + lab().folder.string() + " --plot " + json.string() + " --force", json, "inside the campaign folder");
     refused("clothing " + lab().folder.string() + " --report " + json.string() + " --force", json, "inside the campaign folder");
     // Through a link to the folder.
-    TempDir dir("case");
+    GuardDir dir("case");
     fs::create_directories(dir.path);
     fs::create_directory_symlink(lab().folder, dir.path / "linked");
     refused("physio " + (dir.path / "linked").string() + " --plot " + json.string() + " --force", json,
@@ -177,7 +177,7 @@ TEST_CASE("output guard: physio and clothing never write into the campaign folde
 
 TEST_CASE("output guard: analyze thermoreg and reconcile never write over a database or the recording they read",
           "[cli][hostile]") {
-    TempDir dir("case");
+    GuardDir dir("case");
     const fs::path crashed = crashed_database(dir.path / "crashed");
     const fs::path wal = crashed.string() + "-wal";
     const std::string folder = lab().folder.string();
