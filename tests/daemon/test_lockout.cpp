@@ -64,42 +64,30 @@ struct CliRun {
 // The CLI as an operator runs it: its own process, the token from <socket>.token (never from the
 // test's environment), timed from spawn to exit.
 CliRun run_cli(const std::vector<std::string>& args) {
-    std::vector<std::string> argv_strings{lockout_cli_bin};
-    argv_strings.insert(argv_strings.end(), args.begin(), args.end());
-    std::vector<char*> argv;
-    for (auto& a : argv_strings) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    std::vector<std::string> env_strings;
-    for (char** e = environ; *e; ++e)
-        if (std::string(*e).rfind("MANIKIND_TOKEN=", 0) != 0) env_strings.push_back(*e);
-    std::vector<char*> envp;
-    for (auto& e : env_strings) envp.push_back(e.data());
-    envp.push_back(nullptr);
-    int fds[2];
-    REQUIRE(::pipe(fds) == 0);
+    std::vector<std::string> argv{lockout_cli_bin};
+    argv.insert(argv.end(), args.begin(), args.end());
+    DaemonProcess::Options options;
+    options.env["MANIKIND_TOKEN"] = "";  // empty: the CLI reads <socket>.token
     const auto t0 = steady::now();
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-        ::dup2(fds[1], STDOUT_FILENO);
-        ::dup2(fds[1], STDERR_FILENO);
-        ::close(fds[0]);
-        ::close(fds[1]);
-        ::execve(argv[0], argv.data(), envp.data());
-        ::_exit(127);
-    }
-    ::close(fds[1]);
+    auto cli = DaemonProcess::spawn(argv, options);
+    REQUIRE(cli.started());
+    const int status = cli.wait();
     CliRun r;
-    char buf[4096];
-    for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) != 0;)
-        if (n > 0) r.output.append(buf, static_cast<std::size_t>(n));
-        else if (errno != EINTR) break;
-    ::close(fds[0]);
-    int status = 0;
-    ::waitpid(pid, &status, 0);
     r.seconds = seconds_since(t0);
+    r.output = cli.output();
     r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return r;
 }
+
+// Stops an attacker thread and joins it when the test leaves its scope, whichever way.
+struct StopAndJoin {
+    std::atomic<bool>& stop;
+    std::thread& t;
+    ~StopAndJoin() {
+        stop = true;
+        t.join();
+    }
+};
 
 int connect_unix_socket(const fs::path& path) {
     const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
@@ -189,14 +177,7 @@ TEST_CASE("control: one tokenless process holding max_clients half-written reque
         for (auto& p : fds)
             if (p.fd >= 0) ::close(p.fd);
     });
-    struct Join {
-        std::atomic<bool>& stop;
-        std::thread& t;
-        ~Join() {
-            stop = true;
-            t.join();
-        }
-    } join{stop, attacker};
+    StopAndJoin join{stop, attacker};
     while (!holding) std::this_thread::yield();
 
     // The issue's reproduction: six status calls, then the abort, each through the CLI.
@@ -314,14 +295,7 @@ TEST_CASE("console: a tokenless connection flood keeps neither the live view off
         }
         for (int fd : held) ::close(fd);
     });
-    struct Join {
-        std::atomic<bool>& stop;
-        std::thread& t;
-        ~Join() {
-            stop = true;
-            t.join();
-        }
-    } join{stop, flood};
+    StopAndJoin join{stop, flood};
 
     // Ten seconds of flood from when it has filled the console's places (32) several times over.
     while (opened < 200) std::this_thread::yield();
