@@ -3,14 +3,17 @@
 // for other numbers of replicates (the random part of the noise scales as 1/replicates; the
 // systematic parts do not).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <exception>
 #include <functional>
 #include <map>
-#include <future>
+#include <mutex>
 #include <numeric>
 #include <optional>
 #include <random>
 #include <set>
+#include <thread>
 
 #include <boost/math/distributions/non_central_chi_squared.hpp>
 
@@ -210,8 +213,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                              const PowerOptions& po) {
     const double power = po.power;
     const int campaigns = po.campaigns;
-    const auto& progress = po.progress;
-    int checks_done = 0;
+    const int threads = std::max(1, std::min(campaigns, po.threads > 0 ? po.threads : static_cast<int>(std::thread::hardware_concurrency())));
     // Campaigns of this design drawn anew (none without replicate scatter). A lab's probes: each
     // off by one calibration error, the same in every case (shared fraction 1). The noise model's
     // 0.5 is a cautious covariance for the claims; drawn per case, errors at the isothermal cases'
@@ -253,6 +255,197 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
     // How far the whole decision moved each candidate's limit from the fast model's, at this
     // campaign's replicates (checked first); the other replicate counts are scaled by it.
     std::map<std::string, double> whole_scale;
+    struct Planned {
+        DetectionLimit d;
+        std::size_t k = 0;                  // in library
+        double far = 0.0;                   // the bound on the side the values walk to
+        std::optional<double> fast;         // the fast model's limit, where the walk starts
+    };
+    // The whole decision (reconcile itself) on campaigns of this design drawn anew with the effect
+    // concealed, the same draws at every value tried (common random numbers). Each term walks its
+    // own values (below); the terms walk together in rounds: in a round every term not yet settled
+    // tries its next value, and each drawn lab is reconciled at all of them, its grids made once
+    // for the round (a lab's recorded conditions come from its seed alone, whatever is concealed:
+    // the same grids at every value and term). The drawn labs are shared out over `threads`; each
+    // verdict is kept in its lab's place, so the answer does not depend on the thread count.
+    auto whole_decision = [&](std::vector<Planned>& terms, int n, double threshold) {
+        struct Walk {
+            Planned* t = nullptr;
+            std::vector<std::vector<DrawnCalibrationError>> labs;  // each drawn lab's, from its first draw
+            int stage = 0;                  // 0: the fast value next; 1: stepping out; 2: the bracket's middle; 3: done
+            int steps = 0;
+            bool up = false;
+            double theta = 0.0;
+            bool settled = false;
+        };
+        std::vector<Walk> walks;
+        for (auto& t : terms)
+            if (t.fast) {
+                Walk w;
+                w.t = &t;
+                w.labs.resize(static_cast<std::size_t>(campaigns));
+                walks.push_back(std::move(w));
+            }
+        auto by_effect = [](DetectionLimit& d) {
+            std::sort(d.tried.begin(), d.tried.end(),
+                      [&](const auto& a, const auto& b) { return std::abs(a.value - d.null_value) < std::abs(b.value - d.null_value); });
+        };
+        // The next value a term tries, none once it is settled: steps of 25 % of the effect from the
+        // fast model's value until the 80 % share is bracketed (a value named less often and one
+        // named at least that often). A bracket that climbs steeply (more than a quarter of the
+        // campaigns between its ends, or its upper end named in all) is read coarsely by a line
+        // through its ends: the wall's 27/40 at 1.125 °C and 40/40 at 1.406 °C read 1.17 °C, where
+        // the generator's campaigns named 26 of 40 at 1.19 °C. Its geometric middle is tried once
+        // before the curve is read (docs/notes/reconcile-history.md, fifth pass).
+        auto next_value = [&](Walk& w) -> std::optional<double> {
+            DetectionLimit& d = w.t->d;
+            const auto& p = library[w.t->k].parameters[0];
+            constexpr double kStep = 1.25;
+            if (w.stage == 0) {
+                w.stage = 1;
+                w.theta = *w.t->fast;
+                return w.theta;
+            }
+            if (w.stage == 1) {
+                if (w.steps == 0) w.up = share(d.tried.front()) < power;
+                const bool below = std::any_of(d.tried.begin(), d.tried.end(), [&](const auto& t) { return share(t) < power; });
+                const bool above = std::any_of(d.tried.begin(), d.tried.end(), [&](const auto& t) { return share(t) >= power; });
+                const double next = p.null_value + (w.theta - p.null_value) * (w.up ? kStep : 1.0 / kStep);
+                if (w.steps < 10 && !(below && above) && (w.t->far - next) * (w.t->far - p.null_value) >= 0.0) {
+                    ++w.steps;
+                    w.theta = next;
+                    return next;
+                }
+                w.stage = 2;
+            }
+            if (w.stage == 2) {
+                w.stage = 3;
+                by_effect(d);
+                const bool bracketed = share(d.tried.front()) < power && share(d.tried.back()) >= power;
+                if (const auto mid = bracketed ? coarse_bracket_middle(d.tried, p.null_value, power) : std::nullopt) return *mid;
+            }
+            return std::nullopt;
+        };
+        // Progress: drawn campaigns reconciled, against the values tried so far and, for each term
+        // not settled, the mean count the settled ones took (4 before any has).
+        PowerProgress progress;
+        progress.terms = static_cast<int>(walks.size());
+        progress.replicates = n;
+        std::mutex progress_mutex;
+        auto expect = [&] {
+            int settled_values = 0, settled = 0;
+            for (const auto& w : walks)
+                if (w.settled) settled_values += static_cast<int>(w.t->d.tried.size()), ++settled;
+            const double per_term = settled > 0 ? static_cast<double>(settled_values) / settled : 4.0;
+            double values = 0.0;
+            for (const auto& w : walks)
+                values += w.settled ? static_cast<double>(w.t->d.tried.size())
+                                    : std::max(per_term, static_cast<double>(w.t->d.tried.size()) + 1.0);
+            progress.terms_done = settled;
+            progress.campaigns_expected = std::max(progress.campaigns_done, static_cast<int>(std::lround(campaigns * values)));
+        };
+        auto settle_walk = [&](Walk& w) {
+            DetectionLimit& d = w.t->d;
+            const auto& p = library[w.t->k].parameters[0];
+            by_effect(d);
+            // The power curve read at 80 % between the values that bracket it (interpolated,
+            // where a pass/fail ladder would keep the luckiest value).
+            d.value = read_limit(d.tried, p.null_value, w.t->far, power).value;
+            int total = 0;
+            for (const auto& t : d.tried) total += t.campaigns;
+            d.campaigns = total;
+            // Reported: the share named at the first value tried at or beyond the limit.
+            const PowerPoint* reported = at_limit(d);
+            d.simulated_power = reported ? share(*reported) : 0.0;
+            d.method = "whole decision";
+            calibration_sensitivity(d, w.labs, power, opt.seed + 104729u * (w.t->k + 1));
+            whole_scale[d.label] = d.value ? (*d.value - p.null_value) / (*w.t->fast - p.null_value) : 0.0;
+            w.settled = true;
+        };
+        Options o = opt;
+        o.null_threshold = threshold;
+        for (;;) {
+            struct Job {
+                Walk* w;
+                double theta;
+                std::vector<physics::twin::Term> truth;
+            };
+            std::vector<Job> jobs;
+            for (auto& w : walks) {
+                if (w.settled) continue;
+                if (const auto v = next_value(w))
+                    jobs.push_back({&w, *v, to_twin_terms({library[w.t->k]}, {*v})});
+                else
+                    settle_walk(w);
+            }
+            {
+                const std::lock_guard lock(progress_mutex);
+                expect();
+            }
+            if (jobs.empty()) break;
+            // reconcile's own grid (opt.grid_steps): on a coarser one a term whose "no effect" is
+            // the grid's end (the head's wet fraction 1, h0 0, textile 0) lost its evidence between
+            // the end and the next step, where the parabola cannot refine (40 steps: 5 of 20 named
+            // at fraction 0.9875, 19 of 20 at 0.988 on reconcile's 120).
+            // Pairs are tried, as reconcile tries them: a drawn lab's probe error can show beside a
+            // concealed effect (the air bias beside the textile term), and the pair that names both
+            // is a true answer (names_concealed). Counting only the term alone, without pairs, the
+            // textile term never reached 80 % planning from the bench's labs 78 and 80
+            // (docs/notes/reconcile-history.md, fourth pass).
+            std::vector<std::vector<char>> hit(jobs.size(), std::vector<char>(static_cast<std::size_t>(campaigns), 0));
+            std::vector<std::vector<char>> alone = hit;
+            std::atomic<int> next{0};
+            std::exception_ptr failed;
+            auto work = [&] {
+                try {
+                    for (int i = next++; i < campaigns; i = next++) {
+                        const auto at_i = static_cast<std::size_t>(i);
+                        std::shared_ptr<const std::vector<ev::Grid>> lab_grids;
+                        for (std::size_t j = 0; j < jobs.size(); ++j) {
+                            std::vector<physics::twin::Term> calibration;
+                            auto& lab = jobs[j].w->labs[at_i];
+                            const auto sim = simulator->draw(jobs[j].truth, n, opt.seed + 7919u * static_cast<std::uint64_t>(i + 1),
+                                                             &calibration, lab.empty() ? &lab : nullptr);
+                            if (!lab_grids)
+                                lab_grids = std::make_shared<const std::vector<ev::Grid>>(
+                                    ev::make_grids(*sim, ev::single_library(*sim), std::max(12, opt.grid_steps)));
+                            Options mine = o;
+                            mine.grids = lab_grids;
+                            const Report r = reconcile(*sim, mine);
+                            const bool named = names_concealed(r, jobs[j].w->t->d.label, calibration);
+                            hit[j][at_i] = named ? 1 : 0;
+                            alone[j][at_i] = named && r.explanation->terms.size() == 1 ? 1 : 0;
+                            const std::lock_guard lock(progress_mutex);
+                            ++progress.campaigns_done;
+                            progress.label = jobs[j].w->t->d.label;
+                            if (po.progress) po.progress(progress);
+                        }
+                    }
+                } catch (...) {
+                    const std::lock_guard lock(progress_mutex);
+                    if (!failed) failed = std::current_exception();
+                    next = campaigns;  // the others stop at their next lab
+                }
+            };
+            std::vector<std::thread> pool;
+            for (int t = 1; t < threads; ++t) pool.emplace_back(work);
+            work();
+            for (auto& t : pool) t.join();
+            if (failed) std::rethrow_exception(failed);
+            for (std::size_t j = 0; j < jobs.size(); ++j) {
+                PowerPoint pt;
+                pt.value = jobs[j].theta;
+                for (int i = 0; i < campaigns; ++i) {
+                    const auto at_i = static_cast<std::size_t>(i);
+                    pt.named += hit[j][at_i];
+                    pt.named_alone += alone[j][at_i];
+                    pt.draw_named.push_back(hit[j][at_i]);
+                    ++pt.campaigns;
+                }
+                jobs[j].w->t->d.tried.push_back(std::move(pt));
+            }
+        }
+    };
     std::vector<int> order = rep.replicates;
     std::stable_partition(order.begin(), order.end(), [&](int n) { return n == rep.campaign_replicates; });
     for (int n : order) {
@@ -276,6 +469,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
             ev::upper_quantile(ev::family_null(s, wg, local, draw, opt.null_simulations, opt.seed).max_evidence, opt.alpha);
         rep.claim_threshold[n] = threshold;
 
+        std::vector<Planned> planned_here;  // the limits at n, in library order
         for (std::size_t k = 0; k < library.size(); ++k) {
             if (!planned[k]) continue;
             const auto& p = library[k].parameters[0];
@@ -331,88 +525,10 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
             d.simulated_power = fast_power;
             d.method = "fast model";
             d.value = fast;
-            if (whole && n == rep.campaign_replicates && fast) {
-                // Each drawn lab's calibration errors, filled by its first draw (the same at every value).
-                std::vector<std::vector<DrawnCalibrationError>> labs(static_cast<std::size_t>(campaigns));
-                // The whole decision (reconcile itself) on campaigns of this design drawn anew with
-                // the effect concealed, the same draws at every value tried (common random numbers).
-                auto run = [&](double theta) {
-                    Options o = opt;
-                    o.null_threshold = threshold;
-                    // reconcile's own grid (opt.grid_steps): on a coarser one a term whose "no effect"
-                    // is the grid's end (the head's wet fraction 1, h0 0, textile 0) lost its evidence
-                    // between the end and the next step, where the parabola cannot refine (40 steps: 5
-                    // of 20 named at fraction 0.9875, 19 of 20 at 0.988 on reconcile's 120).
-                    // Pairs are tried, as reconcile tries them: a drawn lab's probe error can show
-                    // beside a concealed effect (the air bias beside the textile term), and the
-                    // pair that names both is a true answer (names_concealed). Counting only the
-                    // term alone, without pairs, the textile term never reached 80 % planning from
-                    // the bench's labs 78 and 80 (docs/notes/reconcile-history.md, fourth pass).
-                    const auto truth = to_twin_terms({library[k]}, {theta});
-                    PowerPoint pt;
-                    pt.value = theta;
-                    for (int i = 0; i < campaigns; ++i) {
-                        std::vector<physics::twin::Term> calibration;
-                        auto& lab = labs[static_cast<std::size_t>(i)];
-                        const auto sim = simulator->draw(truth, n, opt.seed + 7919u * static_cast<std::uint64_t>(i + 1), &calibration,
-                                                         lab.empty() ? &lab : nullptr);
-                        const Report r = reconcile(*sim, o);
-                        const bool hit = names_concealed(r, d.label, calibration);
-                        if (hit) {
-                            ++pt.named;
-                            pt.named_alone += r.explanation->terms.size() == 1 ? 1 : 0;
-                        }
-                        pt.draw_named.push_back(hit ? 1 : 0);
-                        ++pt.campaigns;
-                    }
-                    if (progress) progress(++checks_done, d.label, n);
-                    return pt;
-                };
-                // Steps of 25 % of the effect from the fast model's value until the 80 % share is
-                // bracketed (a value named less often and one named at least that often).
-                constexpr double kStep = 1.25;
-                double theta = *fast;
-                d.tried.push_back(run(theta));
-                const bool up = share(d.tried.front()) < power;
-                for (int i = 0; i < 10; ++i) {
-                    const bool below = std::any_of(d.tried.begin(), d.tried.end(), [&](const auto& t) { return share(t) < power; });
-                    const bool above = std::any_of(d.tried.begin(), d.tried.end(), [&](const auto& t) { return share(t) >= power; });
-                    if (below && above) break;
-                    const double next = p.null_value + (theta - p.null_value) * (up ? kStep : 1.0 / kStep);
-                    if ((far - next) * (far - p.null_value) < 0.0) break;
-                    theta = next;
-                    d.tried.push_back(run(theta));
-                }
-                auto by_effect = [&] {
-                    std::sort(d.tried.begin(), d.tried.end(),
-                              [&](const auto& a, const auto& b) { return std::abs(a.value - p.null_value) < std::abs(b.value - p.null_value); });
-                };
-                by_effect();
-                const bool bracketed = share(d.tried.front()) < power && share(d.tried.back()) >= power;
-                // A bracket that climbs steeply (more than a quarter of the campaigns between its
-                // ends, or its upper end named in all) is read coarsely by a line through its ends: the
-                // wall's 27/40 at 1.125 °C and 40/40 at 1.406 °C read 1.17 °C, where the
-                // generator's campaigns named 26 of 40 at 1.19 °C. Its geometric middle is tried
-                // once before the curve is read (docs/notes/reconcile-history.md, fifth pass).
-                if (const auto mid = bracketed ? coarse_bracket_middle(d.tried, p.null_value, power) : std::nullopt) {
-                    d.tried.push_back(run(*mid));
-                    by_effect();
-                }
-                // The power curve read at 80 % between the values that bracket it (interpolated,
-                // where a pass/fail ladder would keep the luckiest value).
-                d.value = read_limit(d.tried, p.null_value, far, power).value;
-                int total = 0;
-                for (const auto& t : d.tried) total += t.campaigns;
-                d.campaigns = total;
-                // Reported: the share named at the first value tried at or beyond the limit.
-                const PowerPoint* reported = at_limit(d);
-                d.simulated_power = reported ? share(*reported) : 0.0;
-                d.method = "whole decision";
-                calibration_sensitivity(d, labs, power, opt.seed + 104729u * (k + 1));
-                whole_scale[d.label] = d.value ? (*d.value - p.null_value) / (*fast - p.null_value) : 0.0;
-            }
-            rep.limits.push_back(std::move(d));
+            planned_here.push_back({std::move(d), k, far, fast});
         }
+        if (whole && n == rep.campaign_replicates) whole_decision(planned_here, n, threshold);
+        for (auto& t : planned_here) rep.limits.push_back(std::move(t.d));
     }
     std::stable_sort(rep.limits.begin(), rep.limits.end(), [](const auto& a, const auto& b) { return a.replicates < b.replicates; });
     for (auto& d : rep.limits) {

@@ -555,7 +555,21 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
 
     // The library and its grids (computed once; a subset only re-whitens them).
     const std::vector<CandidateTerm> library = ev::single_library(model);
-    const std::vector<ev::Grid> grids = ev::make_grids(model, library, std::max(12, opt.grid_steps));
+    const int grid_steps = std::max(12, opt.grid_steps);
+    // The planner's grids, made once per drawn lab, when they are this model's candidates'.
+    auto given = [&] {
+        if (!opt.grids || opt.grids->size() != library.size()) return false;
+        for (std::size_t k = 0; k < library.size(); ++k) {
+            const ev::Grid& g = (*opt.grids)[k];
+            if (g.term.label() != library[k].label() || g.theta.size() != static_cast<std::size_t>(grid_steps) + 1 ||
+                (!g.raw.empty() && g.raw.front().size() != pts.size()))
+                return false;
+        }
+        return true;
+    };
+    const std::shared_ptr<const std::vector<ev::Grid>> grids_held =
+        given() ? opt.grids : std::make_shared<const std::vector<ev::Grid>>(ev::make_grids(model, library, grid_steps));
+    const std::vector<ev::Grid>& grids = *grids_held;
 
     // Without replicates (and no scatter carried from an earlier campaign) the random part is each
     // point's U/k: a lower bound on the real scatter, so nothing can be claimed at alpha on it.

@@ -29,6 +29,10 @@
 
 namespace manikind::analysis::reconcile {
 
+namespace evidence {
+struct Grid;
+}
+
 struct FitStats {
     double rmse = 0.0;           // of Q_exp - Q_sim, the observation's unit
     double chi2_per_dof = 0.0;   // generalised: r' Sigma^-1 r / (n - p) with the noise model
@@ -124,6 +128,12 @@ struct Options {
     // Planning only (`--power`): the family's claim threshold given, computed once for the design
     // and replicates, instead of the bootstrap null of each simulated campaign.
     std::optional<double> null_threshold;
+    // Planning only: the candidates' grids for this model (evidence::make_grids over
+    // evidence::single_library, grid_steps), made once per drawn lab and shared by every effect and
+    // term tried there. A grid holds predictions at the recorded conditions, which a drawn lab's
+    // seed fixes whatever effect is concealed, so sharing it changes no answer. Ignored (made
+    // anew) when its candidates are not this model's.
+    std::shared_ptr<const std::vector<evidence::Grid>> grids;
 };
 
 Report reconcile(const ForwardModel& model, const Options& options = {});
@@ -194,12 +204,25 @@ struct PowerReport {
     // candidate and each zone's offset and gain) bootstrap null, as reconcile computes it.
     std::map<int, double> claim_threshold;
 };
+// How far the whole decision has come (PowerOptions::progress), in drawn campaigns reconciled.
+struct PowerProgress {
+    int campaigns_done = 0;
+    // All it is expected to take: the values tried so far, and for each term not yet settled the
+    // mean count of values the settled ones took (4 before any has); it grows or shrinks as they do.
+    int campaigns_expected = 0;
+    int terms_done = 0, terms = 0;           // terms checked by the whole decision: settled, and all
+    std::string label;                       // the term of the campaign just reconciled
+    int replicates = 0;
+};
 struct PowerOptions {
     double power = 0.8;
     int campaigns = 40;                      // whole-decision campaigns per value tried (0: fast model only)
     std::vector<std::string> terms;          // plan only these (a term, or term:region); empty: every candidate
-    // Called after each value tried: checks done so far, the candidate, the replicates.
-    std::function<void(int, const std::string&, int)> progress;
+    // Threads the drawn campaigns are reconciled on (0: the hardware's). The answer does not depend
+    // on it: each campaign's draws come from its own seed and the verdicts are gathered in order.
+    int threads = 0;
+    // Called after each drawn campaign reconciled (from the thread that did it, one call at a time).
+    std::function<void(const PowerProgress&)> progress;
 };
 // Fills `d.calibration` from the whole decision's per-lab verdicts (`tried[].draw_named`, values
 // sorted by distance from "no effect", as detection_limits leaves them) and each drawn lab's

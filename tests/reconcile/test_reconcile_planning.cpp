@@ -9,12 +9,14 @@
 #include <cmath>
 #include <random>
 
+#include "analysis/reconcile/evidence.hpp"
 #include "analysis/reconcile/report_output.hpp"
 #include "tests/reconcile/synthetic_campaign.hpp"
 
 using namespace manikind;
 namespace rc = manikind::analysis::reconcile;
 namespace tw = manikind::physics::twin;
+namespace ev = manikind::analysis::reconcile::evidence;
 
 namespace {
 
@@ -390,4 +392,91 @@ TEST_CASE("planning: where no calibration matters a term is flagged in at most 5
     CHECK(flagged <= 20);             // P(Binomial(200, 0.05) > 20) < 0.01
     CHECK(p_low <= 72);               // 1000 tests at 5 %: mean 50, and 72 is 3.2 sd above
     CHECK(p_low >= 30);               // a test that never rejects would pass the first checks too
+}
+
+TEST_CASE("planning: a drawn lab's grids are the same whatever effect is concealed (its recorded conditions come from "
+          "its seed alone) and reconcile given them reports what it reports with its own",
+          "[planning][power]") {
+    // The planner makes each drawn lab's grids once and shares them across the values and terms
+    // tried there: that changes no answer only if a lab's conditions do not depend on the effect.
+    const auto model = recorded(15);
+    rc::Options opt;
+    opt.null_simulations = 400;
+    const auto simulator = model->campaign_simulator(opt.instruments, 1.0);
+    REQUIRE(simulator);
+    const tw::Term gamma{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}};
+    const auto none = simulator->draw({}, 3, 99);
+    const auto with = simulator->draw({gamma}, 3, 99);
+    const auto library = ev::single_library(*none);
+    const auto shared = std::make_shared<const std::vector<ev::Grid>>(ev::make_grids(*none, library, opt.grid_steps));
+    const auto own = ev::make_grids(*with, ev::single_library(*with), opt.grid_steps);
+    REQUIRE(own.size() == shared->size());
+    for (std::size_t k = 0; k < own.size(); ++k) {
+        CHECK(own[k].term.label() == (*shared)[k].term.label());
+        CHECK(own[k].raw == (*shared)[k].raw);
+        CHECK(own[k].valid == (*shared)[k].valid);
+    }
+    const rc::Report mine = rc::reconcile(*with, opt);
+    rc::Options given = opt;
+    given.grids = shared;
+    const rc::Report theirs = rc::reconcile(*with, given);
+    REQUIRE(mine.explanation);
+    REQUIRE(theirs.explanation);
+    CHECK(theirs.explanation->label == mine.explanation->label);
+    CHECK(theirs.explanation->values == mine.explanation->values);
+    CHECK(theirs.explanation->interval_lo == mine.explanation->interval_lo);
+    CHECK(theirs.statement == mine.statement);
+    // Grids of other candidates (another model's) are not used: reconcile makes its own.
+    const auto other = recorded(16, 2);
+    rc::Options wrong = opt;
+    wrong.grids = std::make_shared<const std::vector<ev::Grid>>(ev::make_grids(*other, ev::single_library(*other), 12));
+    CHECK(rc::reconcile(*with, wrong).statement == mine.statement);
+}
+
+TEST_CASE("planning: the plan is the same on one thread and on two (each drawn campaign from its own seed and its "
+          "verdict gathered in order) and its progress counts every drawn campaign once",
+          "[planning][power]") {
+    const auto model = recorded(17);
+    rc::Options opt;
+    opt.null_simulations = 400;
+    rc::PowerOptions po;
+    po.campaigns = 5;
+    po.terms = {"humidity_buoyancy"};
+    std::vector<rc::PowerProgress> seen;
+    po.progress = [&](const rc::PowerProgress& p) { seen.push_back(p); };  // one call at a time
+    po.threads = 1;
+    const auto one = rc::detection_limits(*model, opt, {3}, po);
+    const auto calls_one = seen;
+    seen.clear();
+    po.threads = 2;
+    const auto two = rc::detection_limits(*model, opt, {3}, po);
+    REQUIRE(one.limits.size() == two.limits.size());
+    int whole = 0;
+    for (std::size_t i = 0; i < one.limits.size(); ++i) {
+        const auto& a = one.limits[i];
+        const auto& b = two.limits[i];
+        CHECK(a.label == b.label);
+        CHECK(a.method == b.method);
+        CHECK(a.value == b.value);
+        CHECK(a.simulated_power == b.simulated_power);
+        REQUIRE(a.tried.size() == b.tried.size());
+        for (std::size_t t = 0; t < a.tried.size(); ++t) {
+            CHECK(a.tried[t].value == b.tried[t].value);
+            CHECK(a.tried[t].draw_named == b.tried[t].draw_named);
+            CHECK(a.tried[t].named_alone == b.tried[t].named_alone);
+        }
+        REQUIRE(a.calibration.size() == b.calibration.size());
+        for (std::size_t c = 0; c < a.calibration.size(); ++c) CHECK(a.calibration[c].p_value == b.calibration[c].p_value);
+        if (a.method == "whole decision") whole += a.campaigns;
+    }
+    REQUIRE(whole > 0);
+    for (const std::vector<rc::PowerProgress>* calls : {&calls_one, static_cast<const std::vector<rc::PowerProgress>*>(&seen)}) {
+        REQUIRE(static_cast<int>(calls->size()) == whole);
+        for (std::size_t i = 0; i < calls->size(); ++i) {
+            CHECK((*calls)[i].campaigns_done == static_cast<int>(i) + 1);
+            CHECK((*calls)[i].campaigns_expected >= (*calls)[i].campaigns_done);
+            CHECK((*calls)[i].terms == 1);
+            CHECK((*calls)[i].label == "humidity_buoyancy");
+        }
+    }
 }
