@@ -30,8 +30,10 @@ inline ChildRun wait_child(pid_t pid, std::chrono::steady_clock::time_point t0) 
     return r;
 }
 
-// `program args...`, its standard output (and, when `quiet_stderr`, its errors) to /dev/null.
-inline ChildRun run_program(const std::string& program, std::vector<std::string> args, bool quiet_stderr = false) {
+// `program args...`, its standard output (and, when `quiet_stderr`, its errors) to /dev/null, or
+// its standard output to the file `stdout_to` when given.
+inline ChildRun run_program(const std::string& program, std::vector<std::string> args, bool quiet_stderr = false,
+                            const std::string& stdout_to = "") {
     std::fflush(stdout);  // or the child would print this process's buffer again
     std::vector<char*> argv{const_cast<char*>(program.c_str())};
     for (auto& a : args) argv.push_back(a.data());
@@ -39,7 +41,7 @@ inline ChildRun run_program(const std::string& program, std::vector<std::string>
     const auto t0 = std::chrono::steady_clock::now();
     const pid_t pid = fork();
     if (pid == 0) {
-        std::freopen("/dev/null", "w", stdout);
+        std::freopen(stdout_to.empty() ? "/dev/null" : stdout_to.c_str(), "w", stdout);
         if (quiet_stderr) std::freopen("/dev/null", "w", stderr);
         execv(program.c_str(), argv.data());
         _exit(127);

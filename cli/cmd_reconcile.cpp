@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
@@ -20,6 +22,7 @@
 #include "analysis/reconcile/report_output.hpp"
 #include "cli/campaign_source.hpp"
 #include "cli/commands.hpp"
+#include "cli/power_progress.hpp"
 #include "analysis/reconcile/twin_store.hpp"
 #include "base/user_error.hpp"
 #include "physics/sign_convention.hpp"
@@ -40,6 +43,7 @@ void add_reconcile_command(CLI::App& app) {
         double alpha = 0.01;
         int simulations = 2000;
         int power_campaigns = 40;
+        int threads = 0;
         std::vector<int> power_replicates = {3, 5, 10};
         std::vector<std::string> power_terms;
         std::uint64_t seed = 20261123;
@@ -81,6 +85,11 @@ void add_reconcile_command(CLI::App& app) {
                     "Simulated campaigns through the whole decision per effect size tried (with --power); 0: the fast "
                     "model's check only")
         ->check(CLI::Range(0, 1000))
+        ->capture_default_str();
+    cmd->add_option("--threads", o->threads,
+                    "Threads the drawn campaigns are reconciled on (with --power; 0: one per core); the answer does not "
+                    "depend on it")
+        ->check(CLI::Range(0, 256))
         ->capture_default_str();
     cmd->add_option("--power-terms", o->power_terms,
                     "Plan only these candidates (a term such as humidity_buoyancy, or term:region), comma-separated "
@@ -160,16 +169,20 @@ void add_reconcile_command(CLI::App& app) {
         if (o->power) {
             rc::PowerOptions po;
             po.campaigns = o->power_campaigns;
-            po.progress = [](int done, const std::string& label, int n) {
-                spdlog::info("power: {} checks done ({} at {} replicates)", done, label, n);
-            };
+            po.threads = o->threads;
+            // On stderr, so --json's stdout stays one document: a bar with the time left on a
+            // terminal, a line every 10 s in a log.
+            auto meter = std::make_shared<PowerProgressMeter>(stderr, ::isatty(STDERR_FILENO) != 0);
+            po.progress = [meter](const rc::PowerProgress& p) { meter->update(p); };
             po.terms = o->power_terms;
             rc::PowerReport plan;
             try {
                 plan = rc::detection_limits(*model, opt, o->power_replicates, po);
             } catch (const std::invalid_argument& e) {
+                meter->finish();
                 throw UserError(fmt::format("--power-terms: {}", e.what()));
             }
+            meter->finish();
             const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             if (o->json) {
                 nlohmann::json j = rc::power_to_json(plan);

@@ -7,6 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli/power_progress.hpp"
 #include "tests/cli/run_cli.hpp"
 
 using manikind::test::run_manikin;
@@ -196,4 +197,26 @@ TEST_CASE("cli: reconcile of a one-replicate campaign claims nothing and says wh
     CHECK_THAT(r.out, Catch::Contains("--noise-from") && Catch::Contains("no case has two replicates"));
     std::filesystem::remove_all(one);
     std::filesystem::remove_all(earlier);
+}
+
+TEST_CASE("cli: reconcile --power's progress says the share of drawn campaigns done and the time left at the rate so "
+          "far (a bar on a terminal and a plain line in a log)",
+          "[cli][reconcile]") {
+    manikind::analysis::reconcile::PowerProgress p;
+    p.campaigns_done = 70;
+    p.campaigns_expected = 280;
+    p.terms_done = 2;
+    p.terms = 7;
+    p.label = "wall_offset";
+    p.replicates = 3;
+    // 0.5 s per campaign and 210 to go: 105 s.
+    const std::string line = manikind::cli::format_power_progress(p, 0.5, false);
+    CHECK(line == "power:  25 %, about 1 min 45 s left (70 of ~280 drawn campaigns at 3 replicates; 2 of 7 terms settled; last: wall_offset)");
+    const std::string bar = manikind::cli::format_power_progress(p, std::nullopt, true, 8);
+    CHECK(bar.rfind("[##......]  25 % (70 of ~280", 0) == 0);
+    CHECK(manikind::cli::format_time_left(44.6) == "45 s");
+    CHECK(manikind::cli::format_time_left(3725.0) == "1 h 02 min");
+    // An estimate overtaken (a term took more values than the others): never past 100 %.
+    p.campaigns_expected = 60;
+    CHECK_THAT(manikind::cli::format_power_progress(p, 0.5, false), Catch::StartsWith("power: 100 %, about 0 s left (70 of ~70"));
 }
