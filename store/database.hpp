@@ -167,9 +167,6 @@ enum class Durability { process, power };
 // WAL's 2.3x), but a commit waits for running reads and a read for a running commit.
 enum class Journal { wal, rollback };
 
-// True when the file at `path` begins with SQLite's 16-byte header ("SQLite format 3\0").
-bool is_sqlite_file(const std::filesystem::path& path);
-
 // Opens an SQLite file read-only for a caller that reads it through the C API (archive push),
 // as Database::open_read_only does: SQLITE_OPEN_READONLY, and for a WAL-mode file that SQLite
 // cannot open so (its -shm cannot be made: read-only media, a folder this user cannot write)

@@ -8,8 +8,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <array>
-#include <cstdio>
 #include <cstring>
 #include <system_error>
 #include <utility>
@@ -164,15 +162,6 @@ int open_sqlite_read_only(const std::filesystem::path& path, sqlite3** db) {
     sqlite3_close_v2(*db);
     *db = nullptr;
     return sqlite3_open_v2(uri.c_str(), db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX | SQLITE_OPEN_URI, nullptr);
-}
-
-bool is_sqlite_file(const std::filesystem::path& path) {
-    std::FILE* f = std::fopen(path.c_str(), "rb");
-    if (!f) return false;
-    std::array<char, 16> header{};
-    const bool full = std::fread(header.data(), 1, header.size(), f) == header.size();
-    std::fclose(f);
-    return full && std::memcmp(header.data(), "SQLite format 3", 16) == 0;
 }
 
 Database Database::open_read_only(const std::filesystem::path& path) {
