@@ -539,6 +539,10 @@ ZoneMap parse_inline_zone_map(const json& arr, const CampaignJson& cj) {
         z.side = e.contains("side") ? cj.string(e, "side", path, at) : "c";
         z.area_m2 = cj.number(e, "area_m2", path, at);
         z.centroid_height_m = e.contains("centroid_height_m") ? cj.number(e, "centroid_height_m", path, at) : 0.0;
+        if (e.contains("facing")) {
+            z.facing = cj.string(e, "facing", path, at);
+            if (!valid_facing(z.facing)) cj.fail(path + "facing", "expected front, back, up, down or none", at);
+        }
         map.zones.push_back(std::move(z));
     }
     std::sort(map.zones.begin(), map.zones.end(), [](const Zone& a, const Zone& b) { return a.zone < b.zone; });

@@ -189,9 +189,11 @@ void write_campaign_json(const std::filesystem::path& folder, const Campaign& ca
     doc["name"] = campaign.name;
     if (campaign.zone_map_inline || campaign.zone_map.name != "andi35") {
         json zones = json::array();
-        for (const auto& z : campaign.zone_map.zones)
+        for (const auto& z : campaign.zone_map.zones) {
             zones.push_back({{"zone", z.zone}, {"name", z.name}, {"region", z.region}, {"segment", z.segment},
                              {"side", z.side}, {"area_m2", z.area_m2}, {"centroid_height_m", z.centroid_height_m}});
+            if (!z.facing.empty()) zones.back()["facing"] = z.facing;
+        }
         doc["zone_map"] = zones;
     } else {
         doc["zone_map"] = "andi35";

@@ -17,7 +17,13 @@ struct Zone {
     std::string side;              // l, r, c
     double area_m2 = 0.0;
     double centroid_height_m = 0.0;
+    // Which way the zone's surface faces: front, back, up, down, none (hands, neck); empty where
+    // the map does not say (maps written before issue 61). Reconcile's front/back patterns use it.
+    std::string facing{};
 };
+
+// front, back, up, down, none, or empty (not given).
+bool valid_facing(const std::string& facing);
 
 struct ZoneMap {
     std::string name;              // "andi35" or "inline"
@@ -39,7 +45,7 @@ const ZoneMap& andi35_zone_map();
 // `manikin physio` spreads a zone's sensor error over.
 const std::map<std::string, std::vector<std::string>>& default_model_segments();
 
-// Parses the CSV form (header zone,name,region,segment,side,area_m2,centroid_height_m).
+// Parses the CSV form (header zone,name,region,segment,side,area_m2,centroid_height_m[,facing]).
 // Throws InputError naming `source_name`, line and column.
 ZoneMap parse_zone_map_csv(std::istream& in, const std::string& source_name);
 

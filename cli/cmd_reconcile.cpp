@@ -46,6 +46,7 @@ void add_reconcile_command(CLI::App& app) {
         int threads = 0;
         std::vector<int> power_replicates = {3, 5, 10};
         std::vector<std::string> power_terms;
+        std::string hypotheses = "default";
         std::uint64_t seed = 20261123;
     };
     auto o = std::make_shared<Opts>();
@@ -58,6 +59,13 @@ void add_reconcile_command(CLI::App& app) {
     cmd->add_option("--plots", o->plots, "Write parity.svg and residual_vs_driver.svg into this folder");
     cmd->add_option("--write-twin", o->write_twin, "Write the new twin version (TOML) here when a term is found");
     cmd->add_flag("--no-pairs", o->no_pairs, "Fit single terms only");
+    cmd->add_option("--hypotheses", o->hypotheses,
+                    "Hypotheses generated from the twin's inputs and the body's geometry, beside the named terms: "
+                    "'default' (a vertical air gradient, radiant asymmetry front/back/left/right and floor to ceiling, "
+                    "the humidity probe and humidity by height, one side drier), 'all' (every input x pattern: a larger "
+                    "family, a higher claim threshold) or 'none'")
+        ->check(CLI::IsMember({"default", "all", "none"}))
+        ->capture_default_str();
     cmd->add_option("--alpha", o->alpha, "False-claim rate: a term is claimed only when its evidence exceeds what "
                                           "noise alone reaches in this fraction of simulated campaigns")
         ->check(CLI::Range(0.0001, 0.2))
@@ -93,7 +101,8 @@ void add_reconcile_command(CLI::App& app) {
         ->capture_default_str();
     cmd->add_option("--power-terms", o->power_terms,
                     "Plan only these candidates (a term such as humidity_buoyancy, or term:region), comma-separated "
-                    "(with --power; default: every candidate)")
+                    "(with --power; default: every named candidate; a generated one such as input_pattern:air_temp_c/height "
+                    "only when named here)")
         ->delimiter(',');
     cmd->footer("The twin sees only the campaign's recorded conditions. The noise of every case mean comes from the\n"
                 "recordings: replicate scatter pooled per zone, the manikin's calibration shared by all points, each\n"
@@ -162,6 +171,7 @@ void add_reconcile_command(CLI::App& app) {
         const auto model = rc::make_twin_model(std::move(cases), base, std::move(carried));
         rc::Options opt;
         opt.try_pairs = !o->no_pairs;
+        opt.hypotheses = o->hypotheses;
         opt.alpha = o->alpha;
         opt.null_simulations = o->simulations;
         opt.seed = o->seed;

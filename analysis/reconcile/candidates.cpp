@@ -4,6 +4,8 @@
 
 #include <fmt/core.h>
 
+#include "physics/twin/twin.hpp"
+
 namespace manikind::analysis::reconcile {
 
 std::vector<physics::twin::Term> to_twin_terms(const std::vector<CandidateTerm>& terms, const std::vector<double>& values) {
@@ -14,6 +16,8 @@ std::vector<physics::twin::Term> to_twin_terms(const std::vector<CandidateTerm>&
         t.name = c.term;
         t.region = c.region;
         t.zones = c.zones;
+        t.input = c.input;
+        t.pattern = c.pattern;
         for (const auto& p : c.parameters) t.parameters[p.name] = values.at(k++);
         out.push_back(std::move(t));
     }
@@ -46,6 +50,93 @@ std::vector<CandidateTerm> candidate_library(const std::vector<std::string>& wet
                        "part of this region is dry (e.g. clogged sweat pores): w -> f w there (Text S3.4)",
                        {{"fraction", "", 0.0, 1.0, 0.7, 1.0, std::nullopt, 0.02, 1.0}}, {}});
     return lib;
+}
+
+namespace {
+
+struct InputInfo {
+    const char* input;
+    const char* unit;         // of the input
+    const char* noun;         // what is off
+    double span, start, plausible;  // fit bound, first guess, plausible bound (in the unit; per metre for height)
+};
+
+// Fit bounds: far beyond any chamber (a wall 15 K off, 1.5 kPa of vapour), so the fit is never
+// held at a bound; plausible bounds are where a lab would start checking the set-up.
+const std::vector<InputInfo>& input_info() {
+    static const std::vector<InputInfo> info = {
+        {"air_temp_c", "K", "air temperature", 10.0, 0.5, 3.0},
+        {"wall_temp_c", "K", "radiant (wall) temperature", 15.0, 1.0, 8.0},
+        {"vapour_pressure_pa", "Pa", "water-vapour pressure of the air", 1500.0, 100.0, 400.0},
+        {"wettedness", "", "skin wettedness", 1.0, 0.2, 1.0},
+        {"heat_flux_w_m2", "W/m2", "heat flux the sensors read", 30.0, 2.0, 10.0},
+    };
+    return info;
+}
+
+const InputInfo& info_of(const std::string& input) {
+    for (const auto& i : input_info())
+        if (input == i.input) return i;
+    return input_info().front();
+}
+
+}  // namespace
+
+std::vector<CandidateTerm> generated_hypotheses(const GeometryKnown& g, bool all) {
+    // The default pairings: the air stratifies with height; the surfaces the body sees differ
+    // front, back, left, right and floor to ceiling (radiant asymmetry); the humidity probe
+    // can be off, and humidity can stratify; one side of the skin can be drier. The rest of the
+    // cross product (e.g. air temperature front to back, a flux offset by height) only with `all`.
+    static const std::vector<std::pair<const char*, const char*>> pairings = {
+        {"air_temp_c", "height"},         {"wall_temp_c", "front"},     {"wall_temp_c", "back"},
+        {"wall_temp_c", "left"},          {"wall_temp_c", "right"},     {"wall_temp_c", "height"},
+        {"vapour_pressure_pa", "uniform"}, {"vapour_pressure_pa", "height"}, {"wettedness", "left"},
+        {"wettedness", "right"},
+    };
+    auto offered = [&](const std::string& input, const std::string& pattern) {
+        if (pattern == "height" && !g.height) return false;
+        if ((pattern == "front" || pattern == "back") && !g.facing) return false;
+        if ((pattern == "left" || pattern == "right") && !g.sides) return false;
+        if ((input == "vapour_pressure_pa" || input == "wettedness") && !g.wet) return false;
+        // Uniform shifts of these are the named terms (air_temp_bias, wall_offset, partial
+        // wettedness, a heat leak): the named one is offered, not its generated twin.
+        if (pattern == "uniform" && input != "vapour_pressure_pa") return false;
+        if (all) return true;
+        for (const auto& [i, p] : pairings)
+            if (input == i && pattern == p) return true;
+        return false;
+    };
+    std::vector<CandidateTerm> out;
+    for (const auto& info : input_info())
+        for (const auto& pattern : physics::twin::pattern_names()) {
+            if (!offered(info.input, pattern)) continue;
+            const bool per_m = pattern == "height";
+            CandidateTerm c;
+            c.term = "input_pattern";
+            c.input = info.input;
+            c.pattern = pattern;
+            c.rationale = fmt::format("the {} the zones meet differs {} from what the probes say", info.noun,
+                                      per_m ? "with the zone's height" : pattern == "uniform" ? "uniformly" : "on the body's " + pattern);
+            const std::string unit = std::string(info.unit) + (per_m ? "/m" : "");
+            // Wettedness can only fall where the case is wet (1): its pattern runs -1..+0.5.
+            const double lo = info.input == std::string("wettedness") ? -1.0 : -info.span;
+            const double hi = info.input == std::string("wettedness") ? 0.5 : info.span;
+            const double start = info.input == std::string("wettedness") ? -info.start : info.start;
+            c.parameters = {{"value", unit, lo, hi, start, 0.0, std::nullopt, -info.plausible, info.plausible}};
+            out.push_back(std::move(c));
+        }
+    return out;
+}
+
+std::string pattern_phrase(const CandidateTerm& c) {
+    const bool wall = c.input == "wall_temp_c", air = c.input == "air_temp_c";
+    if (c.pattern == "height")
+        return air ? "a vertical air-temperature gradient" : wall ? "a floor-to-ceiling radiant gradient"
+               : c.input == "vapour_pressure_pa" ? "humidity stratified with height" : "a pattern with height";
+    if (wall) return "radiant asymmetry (" + c.pattern + ")";
+    if (c.input == "vapour_pressure_pa" && c.pattern == "uniform") return "the humidity probe off";
+    if (c.input == "wettedness") return "one side of the skin drier (" + c.pattern + ")";
+    return c.input + " by " + c.pattern;
 }
 
 std::vector<std::string> plausibility_advice(const CandidateTerm& c, const std::vector<double>& v,
@@ -98,6 +189,31 @@ std::string plain_statement(const CandidateTerm& c, const std::vector<double>& v
     if (c.term == "partial_wettedness")
         return fmt::format("Only {:.0f} % (±{:.0f} %) of the {} region is wet (e.g. clogged pores); the rest "
                            "evaporates nothing.", 100.0 * v[0], 100.0 * u[0], c.region);
+    if (c.generated()) {
+        const auto& info = info_of(c.input);
+        const std::string pm = info.unit;  // "per metre of height" is said in words
+        const double ref_m = 1.1;  // the twin term's ref_height_m default: the probes' height
+        const std::string size = c.input == "wettedness"
+                                     ? fmt::format("{:+.2f} (±{:.2f})", v[0], u[0])
+                                     : fmt::format("{:+.3g} (±{:.2g}) {}", v[0], u[0], pm);
+        if (c.pattern == "height")
+        {
+            const bool temperature = std::string(info.unit) == "K";
+            const char* floor_word = temperature ? (v[0] > 0 ? "colder" : "warmer") : (v[0] > 0 ? "less" : "more");
+            return fmt::format("The {} rises by {} per metre of height about what the probe at {:.1f} m says ({}): "
+                               "at the floor it is {:.3g} {} {}.",
+                               info.noun, size, ref_m, pattern_phrase(c), std::abs(v[0]) * ref_m, info.unit, floor_word);
+        }
+        if (c.pattern == "uniform")
+            return fmt::format("The {} is {} from what the probe says ({}).", info.noun, size, pattern_phrase(c));
+        const std::string where = c.pattern == "front" ? "the front of the body faces" : c.pattern == "back" ? "the back of the body faces"
+                                  : "the " + c.pattern + " side of the body meets";
+        if (c.input == "wall_temp_c")
+            return fmt::format("The surfaces {} radiate {} from the probed wall temperature ({}).", where, size, pattern_phrase(c));
+        return fmt::format("The {} {} is {} from what the case's record says ({}).", info.noun,
+                           c.pattern == "front" || c.pattern == "back" ? "on the body's " + c.pattern : "on the body's " + c.pattern + " side",
+                           size, pattern_phrase(c));
+    }
     return c.label();
 }
 

@@ -92,15 +92,29 @@ Grid make_grid(const ForwardModel& model, const CandidateTerm& term, int steps) 
     return g;
 }
 
-std::vector<CandidateTerm> single_library(const ForwardModel& model) {
+std::vector<CandidateTerm> single_library(const ForwardModel& model, const std::string& generated) {
     std::set<std::string> wet_regions;
+    // What the zones' geometry can show (the drivers TwinModel gives each point).
+    std::set<double> heights;
+    std::set<double> sides, facings;
     for (const auto& p : model.points()) {
         const auto it = p.drivers.find("wettedness");
         if (it != p.drivers.end() && it->second > 0.0) wet_regions.insert(p.region);
+        if (const auto h = p.drivers.find("zone height"); h != p.drivers.end()) heights.insert(h->second);
+        if (const auto sd = p.drivers.find("side (left -1, right +1)"); sd != p.drivers.end()) sides.insert(sd->second);
+        if (const auto f = p.drivers.find("facing (back -1, front +1)"); f != p.drivers.end()) facings.insert(f->second);
     }
     std::vector<CandidateTerm> library;
     for (auto& c : candidate_library({wet_regions.begin(), wet_regions.end()}))
         if (model.supports(c.term) && c.parameters.size() == 1) library.push_back(std::move(c));
+    if (generated != "none" && model.supports("input_pattern")) {
+        GeometryKnown g;
+        g.height = heights.size() > 1;
+        g.sides = sides.count(-1.0) && sides.count(1.0);
+        g.facing = facings.count(-1.0) && facings.count(1.0);
+        g.wet = !wet_regions.empty();
+        for (auto& c : generated_hypotheses(g, generated == "all")) library.push_back(std::move(c));
+    }
     return library;
 }
 

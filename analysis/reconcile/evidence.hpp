@@ -49,7 +49,9 @@ Grid make_grid(const ForwardModel& model, const CandidateTerm& term, int steps);
 
 // The single-parameter candidates the model supports (partial wettedness for each region that is
 // wet in some case), and their grids (computed on two threads).
-std::vector<CandidateTerm> single_library(const ForwardModel& model);
+// The named terms the model supports, then the hypotheses generated from its inputs and the
+// zones' geometry (`generated`: "default", "all" or "none"; candidates.hpp).
+std::vector<CandidateTerm> single_library(const ForwardModel& model, const std::string& generated = "default");
 std::vector<Grid> make_grids(const ForwardModel& model, const std::vector<CandidateTerm>& library, int steps);
 
 // The grid whitened for one subset.

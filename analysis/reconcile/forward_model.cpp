@@ -29,6 +29,9 @@ double spec_limit(const Instruments& instruments, const std::string& channel, do
 class TwinModel final : public ForwardModel {
 public:
     TwinModel(std::vector<CaseInput> cases, tw::TwinVersion base) : cases_(std::move(cases)), base_(std::move(base)) {
+        bool facing_known = false;
+        for (const auto& in : cases_)
+            for (const auto& zi : in.conditions.zones) facing_known = facing_known || zi.facing != 0;
         for (std::size_t c = 0; c < cases_.size(); ++c) {
             const CaseInput& in = cases_[c];
             const auto& cond = in.conditions;
@@ -56,6 +59,7 @@ public:
                 p.drivers["wettedness"] = cond.wettedness;
                 if (z < in.heights_m.size()) p.drivers["zone height"] = in.heights_m[z];
                 if (z < in.sides.size()) p.drivers["side (left -1, right +1)"] = in.sides[z] == "l" ? -1.0 : in.sides[z] == "r" ? 1.0 : 0.0;
+                if (facing_known) p.drivers["facing (back -1, front +1)"] = cond.zones[z].facing;
                 points_.push_back(std::move(p));
                 index_.emplace_back(c, z);
             }

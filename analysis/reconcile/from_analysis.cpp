@@ -13,6 +13,8 @@ double case_condition(const CaseResult& c, const std::string& channel) {
 std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, const ZoneMap& map,
                                                 std::vector<int>* skipped) {
     std::vector<CaseInput> out;
+    bool heights_known = false;
+    for (const auto& z : map.zones) heights_known = heights_known || z.centroid_height_m != map.zones.front().centroid_height_m;
     for (const auto& c : result.cases) {
         CaseInput in;
         in.case_id = c.case_id;
@@ -39,7 +41,13 @@ std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, co
         for (std::size_t z = 0; z < map.size() && z < c.zones.size(); ++z) {
             const auto& zone = map.zones[z];
             const double skin = used > 0 ? skin_sum[z] / used : c.skin_setpoint_c.value_or(35.0);
-            cond.zones.push_back({zone.zone, zone.segment, zone.region, zone.area_m2, skin});
+            physics::twin::ZoneInput zi{zone.zone, zone.segment, zone.region, zone.area_m2, skin};
+            // Geometry for the generated hypotheses (input_pattern): a height only where the map
+            // gives heights (an inline map without them has every zone at 0).
+            if (heights_known) zi.height_m = zone.centroid_height_m;
+            zi.facing = zone.facing == "front" ? 1 : zone.facing == "back" ? -1 : 0;
+            zi.side = zone.side == "l" ? -1 : zone.side == "r" ? 1 : 0;
+            cond.zones.push_back(std::move(zi));
             in.q_exp_w_m2.push_back(c.zones[z].q.value);
             in.expanded_u_w_m2.push_back(c.zones[z].q.U);
             in.coverage_k.push_back(c.zones[z].q.k);

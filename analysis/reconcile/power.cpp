@@ -236,8 +236,13 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
     // Every candidate stays in the family: the claim threshold and the rivals are reconcile's own
     // whichever candidates are planned (a family of only those planned had a lower threshold, so
     // `--power-terms` printed limits reconcile would not reach). `planned` picks the limits computed.
-    const std::vector<CandidateTerm> library = ev::single_library(model);
-    std::vector<bool> planned(library.size(), po.terms.empty());
+    const std::vector<CandidateTerm> library = ev::single_library(model, opt.hypotheses);
+    // By default the named terms are planned; a generated hypothesis (input_pattern) only when
+    // `--power-terms` names it: it stays in the family (the threshold) either way, and planning
+    // every generated one would double the plan's time (issue 61, part 6).
+    std::vector<bool> planned(library.size(), false);
+    if (po.terms.empty())
+        for (std::size_t k = 0; k < library.size(); ++k) planned[k] = !library[k].generated();
     for (const auto& name : po.terms) {
         bool found = false;
         for (std::size_t k = 0; k < library.size(); ++k)
@@ -408,7 +413,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                                                              &calibration, lab.empty() ? &lab : nullptr);
                             if (!lab_grids)
                                 lab_grids = std::make_shared<const std::vector<ev::Grid>>(
-                                    ev::make_grids(*sim, ev::single_library(*sim), std::max(12, opt.grid_steps)));
+                                    ev::make_grids(*sim, ev::single_library(*sim, opt.hypotheses), std::max(12, opt.grid_steps)));
                             Options mine = o;
                             mine.grids = lab_grids;
                             const Report r = reconcile(*sim, mine);

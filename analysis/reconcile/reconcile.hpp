@@ -83,6 +83,16 @@ struct RegionComparison {
     FitStats after;
 };
 
+// One step of an explanation claimed in steps (issue 61): the term(s) claimed, the evidence
+// against that step's own null, and the fit after it.
+struct ExplanationStep {
+    std::string label;
+    double evidence = 0.0, threshold = 0.0;
+    double chi2_after = 0.0;
+    double gof_p_after = 1.0;
+    bool partial = false;                    // the fit still beyond the noise after this step
+};
+
 struct Report {
     std::string twin_name;
     FitStats before;
@@ -103,7 +113,12 @@ struct Report {
     std::vector<std::string> ambiguous_with; // terms the winner could not be told apart from
     std::vector<Located> located;
     std::vector<CandidateResult> candidates; // sorted by BIC
-    std::optional<CandidateResult> explanation;
+    std::optional<CandidateResult> explanation;   // every term claimed, fitted together
+    bool explanation_partial = false;        // the fit is still beyond the noise after it
+    double gof_p_after = 1.0;                // goodness of fit after the explanation
+    std::vector<ExplanationStep> steps;      // in the order claimed
+    std::string remainder;                   // what is left, where and with what it correlates
+    std::vector<Located> remainder_located;
     std::string statement;                   // plain language; says so when nothing explains
     FitStats after;
     std::vector<RegionComparison> by_region;
@@ -120,6 +135,9 @@ struct Options {
     int selection_simulations = 1000;        // per runner-up, to tell the winner from it
     int max_anomalous_zones = 4;             // more than this is not a local anomaly
     bool try_pairs = true;
+    // Hypotheses generated from the twin's inputs and the zones' geometry beside the named terms
+    // (candidates.hpp, generated_hypotheses): "default", "all" (every input x pattern) or "none".
+    std::string hypotheses = "default";
     std::uint64_t seed = 20261123;           // the simulations are reproducible
     Instruments instruments = default_instrument_specs();
     double probe_shared_fraction = 0.5;      // of a probe's Type B variance, common to every case
@@ -141,7 +159,9 @@ Report reconcile(const ForwardModel& model, const Options& options = {});
 // One candidate (a term or a pair) fitted as reconcile fits its winner: generalised least
 // squares under the noise model re-estimated with the candidate's physics, case-level intervals.
 // For coverage studies and for users who want a term's value whatever the evidence.
-CandidateResult fit_candidate(const ForwardModel& model, const std::vector<CandidateTerm>& terms, const Options& options = {});
+// `also_from`: a further start (one value per parameter), e.g. the values found step by step.
+CandidateResult fit_candidate(const ForwardModel& model, const std::vector<CandidateTerm>& terms, const Options& options = {},
+                              const std::vector<double>& also_from = {});
 
 // Detection limits for planning (`manikin reconcile --power`): per candidate, the smallest
 // effect named with 80 % power for this campaign's design and noise, at several replicate counts.

@@ -41,7 +41,7 @@ std::string driver_axis_label(const std::string& driver) {
     static const std::map<std::string, std::string, std::less<>> units{
         {"skin-air temperature difference", "K"}, {"wall-air temperature difference", "K"},
         {"vapour concentration difference", "kg/m³"}, {"relative humidity", "%"}, {"air speed", "m/s"},
-        {"wettedness", "0-1"}, {"zone height", "m"}};
+        {"wettedness", "0-1"}, {"zone height", "m"}, {"facing (back -1, front +1)", "-1, 0, +1"}};
     const auto it = units.find(driver);
     return it == units.end() ? driver : driver + " (" + it->second + ")";
 }
@@ -86,11 +86,25 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
     if (r.explanation) {
         auto e = candidate_json(*r.explanation);
         e["statement"] = r.statement;
+        e["partial"] = r.explanation_partial;
+        e["gof_p_after"] = r.gof_p_after;
+        // The terms in the order claimed, each step's evidence against its own null and the fit after it.
+        e["steps"] = nlohmann::json::array();
+        for (const auto& st : r.steps)
+            e["steps"].push_back({{"label", st.label}, {"evidence", st.evidence}, {"threshold", st.threshold},
+                                  {"chi2_after", st.chi2_after}, {"gof_p_after", st.gof_p_after}, {"partial", st.partial}});
         j["explanation"] = e;
     } else {
         j["explanation"] = nullptr;
     }
     j["statement"] = r.statement;
+    if (r.remainder.empty()) {
+        j["remainder"] = nullptr;
+    } else {
+        nlohmann::json located = nlohmann::json::array();
+        for (const auto& l : r.remainder_located) located.push_back({{"where", l.where}, {"driver", l.driver}, {"strength", l.strength}});
+        j["remainder"] = {{"statement", r.remainder}, {"located", located}};
+    }
     j["candidates"] = nlohmann::json::array();
     for (const auto& c : r.candidates) {
         auto cj = candidate_json(c);
@@ -236,7 +250,15 @@ std::string report_to_text(const Report& r) {
     };
     o << "Twin: " << r.twin_name << "\n";
     // The answer first; the evidence behind it follows.
-    o << (r.explanation ? "Explanation: " + r.explanation->label : std::string("Explanation: none")) << "\n  " << r.statement << "\n\n";
+    o << (r.explanation ? "Explanation: " + r.explanation->label : std::string("Explanation: none")) << "\n  " << r.statement << "\n";
+    if (r.steps.size() > 1 || r.explanation_partial) {
+        o << "  Claimed in steps (each against the null of the twin with the steps before it held):\n";
+        for (std::size_t i = 0; i < r.steps.size(); ++i)
+            o << fmt::format("    {}. {}: evidence {:.1f} beyond {:.1f}; fit after it p = {:.2g}{}\n", i + 1, r.steps[i].label,
+                             r.steps[i].evidence, r.steps[i].threshold, r.steps[i].gof_p_after,
+                             r.steps[i].partial ? " (still beyond the noise)" : "");
+    }
+    o << "\n";
     o << "Before: " << stats_line(r.before)
       << (r.noise_lower_bound ? "   (against each point's own U: a lower bound, not a verdict)" : "") << "\n";
     const auto& n = r.noise;

@@ -29,9 +29,9 @@ tw::TwinVersion parse_twin_version(const std::string& text, const std::string& s
             for (const auto& [key, value] : t) {
                 const std::string k(key.str());
                 if (k == "name") continue;
-                if (k == "region") {
-                    if (!value.is_string()) throw UserError(fmt::format("{}: terms.region: expected a string", where(value)));
-                    term.region = value.as_string()->get();
+                if (k == "region" || k == "input" || k == "pattern") {
+                    if (!value.is_string()) throw UserError(fmt::format("{}: terms.{}: expected a string", where(value), k));
+                    (k == "region" ? term.region : k == "input" ? term.input : term.pattern) = value.as_string()->get();
                 } else if (k == "zones") {
                     if (!value.is_array()) throw UserError(fmt::format("{}: terms.zones: expected an array of zone numbers", where(value)));
                     for (const auto& z : *value.as_array()) {
@@ -70,6 +70,7 @@ std::string twin_version_to_toml(const tw::TwinVersion& v, const std::string& ba
     for (const auto& t : v.terms) {
         o << fmt::format("\n[[terms]]\nname = \"{}\"\n", t.name);
         if (!t.region.empty()) o << fmt::format("region = \"{}\"\n", t.region);
+        if (!t.input.empty()) o << fmt::format("input = \"{}\"\npattern = \"{}\"\n", t.input, t.pattern);
         if (!t.zones.empty()) {
             o << "zones = [";
             for (std::size_t i = 0; i < t.zones.size(); ++i) o << (i ? ", " : "") << t.zones[i];

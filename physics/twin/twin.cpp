@@ -32,6 +32,9 @@ const std::vector<TermSpec>& term_specs() {
         // A garment over one region (ISO 9920): intrinsic insulation, intrinsic evaporative
         // resistance and the clothing area factor.
         {"clothing", {{"icl_m2k_w", 0.0}, {"recl_m2kpa_w", 0.0}, {"fcl", 1.0}}},
+        // One input off by a pattern over the body (issue 61): the input's value at a zone is
+        // the recorded one plus value x the pattern's weight there (pattern_weight).
+        {"input_pattern", {{"value", 0.0}, {"ref_height_m", 1.1}}},
     };
     return specs;
 }
@@ -65,6 +68,11 @@ struct Knobs {
         double icl_m2k_w = 0.0, recl_m2kpa_w = 0.0, fcl = 1.0;
     };
     std::vector<Garment> garments;
+    struct Pattern {
+        std::string input, pattern;
+        double value = 0.0, ref_height_m = 1.1;
+    };
+    std::vector<Pattern> patterns;
 };
 
 Knobs resolve(const TwinVersion& v) {
@@ -83,6 +91,8 @@ Knobs resolve(const TwinVersion& v) {
         else if (t.name == "clothing")
             k.garments.push_back({t.region, std::max(0.0, param(t, "icl_m2k_w", 0.0)), std::max(0.0, param(t, "recl_m2kpa_w", 0.0)),
                                   std::clamp(param(t, "fcl", 1.0), 1.0, 3.0)});
+        else if (t.name == "input_pattern")
+            k.patterns.push_back({t.input, t.pattern, param(t, "value", 0.0), param(t, "ref_height_m", 1.1)});
     }
     return k;
 }
@@ -97,6 +107,29 @@ const std::vector<SegmentConstants>& baseline_segments() {
         {"calf", 2.15, 0.80},     {"foot", 1.57, 0.60},
     };
     return segments;
+}
+
+const std::vector<std::string>& input_names() {
+    static const std::vector<std::string> names = {"air_temp_c", "wall_temp_c", "vapour_pressure_pa", "wettedness", "heat_flux_w_m2"};
+    return names;
+}
+
+const std::vector<std::string>& pattern_names() {
+    static const std::vector<std::string> names = {"uniform", "height", "front", "back", "left", "right"};
+    return names;
+}
+
+double pattern_weight(const std::string& pattern, const ZoneInput& zone, double ref_height_m) {
+    if (pattern == "uniform") return 1.0;
+    if (pattern == "height") {
+        if (!zone.height_m) throw std::invalid_argument("zone " + std::to_string(zone.zone) + " has no height for a height pattern");
+        return *zone.height_m - ref_height_m;  // per metre above the probe
+    }
+    if (pattern == "front") return zone.facing > 0 ? 1.0 : 0.0;
+    if (pattern == "back") return zone.facing < 0 ? 1.0 : 0.0;
+    if (pattern == "left") return zone.side < 0 ? 1.0 : 0.0;
+    if (pattern == "right") return zone.side > 0 ? 1.0 : 0.0;
+    throw std::invalid_argument("unknown pattern '" + pattern + "'");
 }
 
 std::optional<SegmentConstants> baseline_segment(const std::string& segment) {
@@ -118,15 +151,26 @@ void validate_term(const Term& term) {
         throw std::invalid_argument("twin term '" + term.name + "' needs a region");
     if ((term.name == "heat_leak" || term.name == "zone_gain") && term.zones.empty())
         throw std::invalid_argument("twin term '" + term.name + "' needs zones");
+    if (term.name == "input_pattern") {
+        auto known = [](const std::vector<std::string>& names, const std::string& x) {
+            return std::find(names.begin(), names.end(), x) != names.end();
+        };
+        if (!known(input_names(), term.input))
+            throw std::invalid_argument("twin term 'input_pattern': unknown input '" + term.input +
+                                        "' (known: air_temp_c, wall_temp_c, vapour_pressure_pa, wettedness, heat_flux_w_m2)");
+        if (!known(pattern_names(), term.pattern))
+            throw std::invalid_argument("twin term 'input_pattern': unknown pattern '" + term.pattern +
+                                        "' (known: uniform, height, front, back, left, right)");
+    }
 }
 
 std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions& trial) {
     const Knobs k = resolve(version);
-    const double air_c = trial.air_temp_c - k.air_bias_c;  // the probe read air + bias
-    const double wall_c = trial.wall_temp_c.value_or(trial.air_temp_c) + k.wall_offset_c;
+    const double air_trial_c = trial.air_temp_c - k.air_bias_c;  // the probe read air + bias
+    const double wall_trial_c = trial.wall_temp_c.value_or(trial.air_temp_c) + k.wall_offset_c;
     const double speed_m_s = std::max(0.0, trial.air_speed_m_s.value_or(0.0));
-    const double p_air_pa = vapour_pressure_pa(air_c, trial.air_rh_pct);
-    const double c_air_kg_m3 = vapour_concentration_kg_m3(p_air_pa, air_c);
+    const double p_air_trial_pa = vapour_pressure_pa(air_trial_c, trial.air_rh_pct);
+    const double c_air_trial_kg_m3 = vapour_concentration_kg_m3(p_air_trial_pa, air_trial_c);
     const double h_forced_w_m2k = k.forced_scale > 0.0 ? k.forced_scale * h_forced_de_dear_w_m2k(speed_m_s) : 0.0;
 
     std::vector<ZoneFlux> out;
@@ -143,6 +187,20 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
         double leak_w_m2 = 0.0;
         for (const auto& [zones, q] : k.leaks)
             if (std::find(zones.begin(), zones.end(), z.zone) != zones.end()) leak_w_m2 += q;
+        // The inputs as this zone meets them: the trial's, unless an input_pattern moves them
+        // here (the air's absolute humidity stays the probe's unless vapour pressure is moved).
+        double air_c = air_trial_c, wall_c = wall_trial_c, p_air_pa = p_air_trial_pa, c_air_kg_m3 = c_air_trial_kg_m3;
+        if (!k.patterns.empty()) {
+            for (const auto& pt : k.patterns) {
+                const double d = pt.value * pattern_weight(pt.pattern, z, pt.ref_height_m);
+                if (pt.input == "air_temp_c") air_c += d;
+                else if (pt.input == "wall_temp_c") wall_c += d;
+                else if (pt.input == "vapour_pressure_pa") p_air_pa = std::max(0.0, p_air_pa + d);
+                else if (pt.input == "wettedness") wettedness = wettedness > 0.0 ? std::clamp(wettedness + d, 0.0, 1.0) : 0.0;
+                else if (pt.input == "heat_flux_w_m2") leak_w_m2 += d;  // what the sensor adds
+            }
+            c_air_kg_m3 = vapour_concentration_kg_m3(p_air_pa, air_c);
+        }
 
         // Fluxes from an exchange surface at surface_c (the textile, when it has resistance).
         auto fluxes_at = [&](double surface_c) {

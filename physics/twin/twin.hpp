@@ -28,6 +28,11 @@ struct ZoneInput {
     std::string region;         // zone map region (head, chest, upper_arm_l, ...)
     double area_m2 = 0.0;
     double skin_temp_c = 35.0;
+    // Geometry (zone map), for the input_pattern term: centroid height above the floor, which
+    // way the zone faces (+1 front, -1 back, 0 neither) and its side (-1 left, +1 right, 0 centre).
+    std::optional<double> height_m{};
+    int facing = 0;
+    int side = 0;
 };
 
 struct TrialConditions {
@@ -49,7 +54,19 @@ struct Term {
     std::map<std::string, double> parameters;
     std::string region;            // partial_wettedness: the zone-map region it applies to
     std::vector<int> zones;        // heat_leak: the zones it applies to
+    // input_pattern: which input the twin takes is off (input_names()) and by which pattern over
+    // the body (pattern_names()); its parameter `value` is the size, in the input's unit (per
+    // metre for "height", relative to the probe's height `ref_height_m`).
+    std::string input{};
+    std::string pattern{};
 };
+
+// The inputs and patterns an input_pattern term may name.
+const std::vector<std::string>& input_names();    // air_temp_c, wall_temp_c, vapour_pressure_pa, wettedness, heat_flux_w_m2
+const std::vector<std::string>& pattern_names();  // uniform, height, front, back, left, right
+// The weight of a pattern at one zone (0 where the pattern does not reach it); throws
+// std::invalid_argument for "height" on a zone without a height.
+double pattern_weight(const std::string& pattern, const ZoneInput& zone, double ref_height_m);
 
 struct TwinVersion {
     std::string name = "baseline";

@@ -66,6 +66,7 @@ TEST_CASE("embedded andi35 map equals config/andi35_zone_map.csv") {
         CHECK(a.side == b.side);
         CHECK(a.area_m2 == b.area_m2);
         CHECK(a.centroid_height_m == b.centroid_height_m);
+        CHECK(a.facing == b.facing);
     }
 }
 

@@ -5,6 +5,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "physics/psychrometrics.hpp"
 #include "physics/twin/twin.hpp"
 
 using namespace manikind::physics::twin;
@@ -132,4 +133,53 @@ TEST_CASE("twin: unknown terms, parameters and segments are refused by name", "[
                       Catch::Contains("no parameter 'g'"));
     trial.zones[0].segment = "tail";
     CHECK_THROWS_AS(predict(TwinVersion{}, trial), std::invalid_argument);
+}
+
+TEST_CASE("twin: an input_pattern moves its input at each zone by value x the pattern's weight, as the baseline at "
+          "those conditions would see it",
+          "[twin][input_pattern]") {
+    // Two zones: a face (front, 1.62 m) and an upper back (back, 1.35 m), wet, in warm humid air.
+    TrialConditions trial;
+    trial.air_temp_c = 36.0;
+    trial.air_rh_pct = 50.0;
+    trial.wall_temp_c = 35.5;
+    trial.wettedness = 1.0;
+    ZoneInput face{1, "head", "head", 0.0571, 35.0};
+    face.height_m = 1.62;
+    face.facing = 1;
+    ZoneInput back{6, "back", "back", 0.1146, 35.0};
+    back.height_m = 1.35;
+    back.facing = -1;
+    trial.zones = {face, back};
+    auto one_zone_at = [&](const ZoneInput& z, double air_c, double wall_c) {
+        TrialConditions t = trial;
+        // The same vapour pressure in air at another temperature: RH at that temperature.
+        const double p_pa = manikind::physics::vapour_pressure_pa(trial.air_temp_c, trial.air_rh_pct);
+        t.air_temp_c = air_c;
+        t.air_rh_pct = 100.0 * p_pa / manikind::physics::saturation_vapour_pressure_pa(air_c);
+        t.wall_temp_c = wall_c;
+        t.zones = {z};
+        return predict(TwinVersion{}, t).at(0).q_total_w_m2;
+    };
+    SECTION("air temperature by height, 2 K/m above the probe at 1.1 m") {
+        Term t{"input_pattern", {{"value", 2.0}}, "", {}, "air_temp_c", "height"};
+        const auto q = predict(TwinVersion{"v", {t}}, trial);
+        CHECK(q[0].q_total_w_m2 == Approx(one_zone_at(face, 36.0 + 2.0 * (1.62 - 1.1), 35.5)).epsilon(1e-9));
+        CHECK(q[1].q_total_w_m2 == Approx(one_zone_at(back, 36.0 + 2.0 * (1.35 - 1.1), 35.5)).epsilon(1e-9));
+    }
+    SECTION("the walls the front faces 3 K warmer: the back zone unchanged") {
+        Term t{"input_pattern", {{"value", 3.0}}, "", {}, "wall_temp_c", "front"};
+        const auto q = predict(TwinVersion{"v", {t}}, trial);
+        const auto plain = predict(TwinVersion{}, trial);
+        CHECK(q[0].q_total_w_m2 == Approx(one_zone_at(face, 36.0, 38.5)).epsilon(1e-9));
+        CHECK(q[1].q_total_w_m2 == plain[1].q_total_w_m2);
+        CHECK(q[0].q_total_w_m2 < plain[0].q_total_w_m2);  // warmer surroundings: less heat lost
+    }
+    SECTION("a height pattern on a zone without a height, or an unknown input, is refused") {
+        TrialConditions no_height = trial;
+        no_height.zones[0].height_m.reset();
+        CHECK_THROWS_AS(predict(TwinVersion{"v", {Term{"input_pattern", {{"value", 1.0}}, "", {}, "air_temp_c", "height"}}}, no_height),
+                        std::invalid_argument);
+        CHECK_THROWS_AS(validate_term(Term{"input_pattern", {{"value", 1.0}}, "", {}, "air_speed", "height"}), std::invalid_argument);
+    }
 }

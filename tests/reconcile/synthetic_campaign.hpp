@@ -4,7 +4,9 @@
 // only the CaseInput list (conditions, Q_exp, U, k): never the world's terms.
 #include <cmath>
 #include <fstream>
+#include <algorithm>
 #include <map>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -13,6 +15,7 @@
 #include <boost/math/distributions/students_t.hpp>
 
 #include "analysis/reconcile/reconcile.hpp"
+#include "physics/psychrometrics.hpp"
 #include "physics/twin/twin.hpp"
 
 namespace manikind::test {
@@ -21,6 +24,7 @@ struct ZoneRow {
     int zone;
     std::string name, region, segment, side;
     double area_m2, height_m;
+    std::string facing{};
 };
 
 inline std::vector<ZoneRow> zone_map() {
@@ -30,9 +34,9 @@ inline std::vector<ZoneRow> zone_map() {
     std::vector<ZoneRow> rows;
     while (std::getline(in, line)) {
         std::stringstream ss(line);
-        std::string f[7];
+        std::string f[8];
         for (auto& x : f) std::getline(ss, x, ',');
-        rows.push_back({std::stoi(f[0]), f[1], f[2], f[3], f[4], std::stod(f[5]), std::stod(f[6])});
+        rows.push_back({std::stoi(f[0]), f[1], f[2], f[3], f[4], std::stod(f[5]), std::stod(f[6]), f[7]});
     }
     return rows;
 }
@@ -68,7 +72,31 @@ struct SyntheticOptions {
     // Zones whose flux sensors read (1 + gain) times the truth: applied to the readings here,
     // outside the twin's code (its zone_gain term is what reconcile fits).
     std::map<int, double> sensor_gain;
+    // Effects no candidate names (issue 61), made here zone by zone from the baseline's own
+    // inputs, not through the twin's input_pattern term: the air warmer by this much per metre
+    // above the probe's height (1.1 m); the surfaces the front of the body faces warmer than the
+    // probed wall by this much; one leg (thigh, calf and foot on the left) with this wettedness.
+    double air_gradient_k_per_m = 0.0;
+    double front_wall_offset_c = 0.0;
+    std::optional<double> left_leg_wettedness;
 };
+
+// One zone's truth where the world varies over the body: the zone alone, at its own conditions.
+inline physics::twin::ZoneFlux zone_truth(const physics::twin::TwinVersion& world, const physics::twin::TrialConditions& actual,
+                                          std::size_t z, const ZoneRow& row, const SyntheticOptions& o) {
+    physics::twin::TrialConditions one = actual;
+    one.zones = {actual.zones[z]};
+    one.zone_wettedness.clear();
+    const double p_air_pa = physics::vapour_pressure_pa(actual.air_temp_c, actual.air_rh_pct);
+    one.air_temp_c += o.air_gradient_k_per_m * (row.height_m - 1.1);
+    // The same vapour in warmer or colder air: RH at the zone's own temperature.
+    one.air_rh_pct = std::clamp(100.0 * p_air_pa / physics::saturation_vapour_pressure_pa(one.air_temp_c), 0.0, 100.0);
+    if (row.facing == "front") *one.wall_temp_c += o.front_wall_offset_c;
+    const bool leg = row.side == "l" && (row.segment == "thigh" || row.segment == "calf" || row.segment == "foot");
+    if (leg && o.left_leg_wettedness && actual.wettedness > 0.0) one.zone_wettedness = {*o.left_leg_wettedness};
+    else if (actual.wettedness > 0.0 && o.left_leg_wettedness) one.zone_wettedness = {actual.wettedness};
+    return physics::twin::predict(world, one).at(0);
+}
 
 inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::twin::TwinVersion& world,
                                                                  const SyntheticOptions& o = {}) {
@@ -90,7 +118,11 @@ inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::
         nominal.wall_temp_c = c.air_temp_c - 0.4 - 0.1 * (index % 3);          // walls a little cooler (Text S3.3)
         nominal.air_speed_m_s = o.vary_air_speed ? 0.02 + 0.02 * index : 0.01;  // 0.02 .. 0.30 m/s
         for (const auto& z : zones) {
-            nominal.zones.push_back({z.zone, z.segment, z.region, z.area_m2, c.skin_temp_c});
+            physics::twin::ZoneInput zi{z.zone, z.segment, z.region, z.area_m2, c.skin_temp_c};
+            zi.height_m = z.height_m;
+            zi.facing = z.facing == "front" ? 1 : z.facing == "back" ? -1 : 0;
+            zi.side = z.side == "l" ? -1 : z.side == "r" ? 1 : 0;
+            nominal.zones.push_back(std::move(zi));
             in.zone_names.push_back(z.name);
             in.sides.push_back(z.side);
             in.heights_m.push_back(z.height_m);
@@ -103,7 +135,9 @@ inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::
             actual.air_temp_c += o.setpoint_air_sd_c * noise(rng);
             actual.air_rh_pct += o.setpoint_rh_sd_pct * noise(rng);
             *actual.wall_temp_c += actual.air_temp_c - nominal.air_temp_c;
-            const auto truth = physics::twin::predict(world, actual);
+            auto truth = physics::twin::predict(world, actual);
+            if (o.air_gradient_k_per_m != 0.0 || o.front_wall_offset_c != 0.0 || o.left_leg_wettedness)
+                for (std::size_t z = 0; z < zones.size(); ++z) truth[z] = zone_truth(world, actual, z, zones[z], o);
             physics::twin::TrialConditions recorded = actual;
             recorded.air_temp_c += o.probe_air_halfwidth_c * uniform(rng);
             recorded.air_rh_pct += o.probe_rh_halfwidth_pct * uniform(rng);

@@ -121,6 +121,10 @@ TEST_CASE("planning: where evidence is beyond the null but no term passes and to
     const auto model = recorded(12);
     rc::Options opt;
     opt.null_simulations = 400;
+    // The named list only: with the generated hypotheses (issue 61) one of them passes the null in
+    // these draws (a vertical gradient, a drier side), ambiguous with the buoyancy, so the
+    // statement under test is not reached; the statement's logic is the same with either family.
+    opt.hypotheses = "none";
     const tw::Term gamma{"humidity_buoyancy", {{"gamma", 20.0}}, "", {}};
     const auto simulator = model->campaign_simulator(opt.instruments, 1.0);
     int unexplained = 0;
