@@ -255,6 +255,7 @@ private:
     std::int64_t stage_start_ns_ = 0;
     bool paused_ = false;
     std::int64_t paused_at_ns_ = 0;
+    std::int64_t paused_total_ns_ = 0;  // every pause's length, summed: the physiological loop's clock stands still by it
     bool safety_tripped_ = false;
     bool device_retry_logged_ = false;  // this stage's setpoint refusal was logged once
     bool storage_full_ = false;

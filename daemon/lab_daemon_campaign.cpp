@@ -160,7 +160,9 @@ std::string LabDaemon::pause() {
 std::string LabDaemon::resume() {
     std::lock_guard lk(lock_);
     if (!paused_) return "not paused";
-    stage_start_ns_ += clock_->mono_ns() - paused_at_ns_;  // the stage's clock stood still
+    const std::int64_t paused_ns = clock_->mono_ns() - paused_at_ns_;
+    stage_start_ns_ += paused_ns;   // the stage's clock stood still
+    paused_total_ns_ += paused_ns;  // and a physiological model's with it
     paused_ = false;
     event("info", "campaign", "resumed");
     return {};

@@ -473,6 +473,7 @@ void LabDaemon::physiological_tick_locked(std::int64_t now) {
     const auto& zones = analysis::andi35_zone_map().zones;
     LoopInputs in;
     in.now_ns = now;
+    in.paused_total_ns = paused_total_ns_;
     in.zones.resize(zones.size());
     for (std::size_t z = 0; z < zones.size(); ++z) {
         const std::string prefix = fmt::format("manikin/z{:02d}.", zones[z].zone);

@@ -179,8 +179,12 @@ int main(int argc, char** argv) {
                 console = std::make_unique<WebServer>(daemon, api, parse_listen(cfg.http.listen, "http.listen"));
                 console->start();
             }
-            std::printf("manikind: %s lab, %s clock; database %s; control socket %s%s\n", cfg.mode.c_str(),
-                        virtual_clock ? "virtual" : "real", daemon.database_path().c_str(), api.socket_path.c_str(),
+            // A paced simulated lab says its pace: at --speed 10 a minute of the lab takes 6 s.
+            const std::string clock_name = virtual_clock                           ? std::string("virtual clock")
+                                           : cfg.mode == "simulated" && speed != 1.0 ? fmt::format("real clock x{:g}", speed)
+                                                                                     : std::string("real clock");
+            std::printf("manikind: %s lab, %s; database %s; control socket %s%s\n", cfg.mode.c_str(), clock_name.c_str(),
+                        daemon.database_path().c_str(), api.socket_path.c_str(),
                         api.tcp_port ? fmt::format(" and 127.0.0.1:{}", api.tcp_port).c_str() : "");
             if (console) std::printf("manikind: console %s\n", console->url().c_str());
             std::fflush(stdout);

@@ -17,8 +17,9 @@ namespace {
 // temperature for this long (the model then starts from the state the manikin is in).
 constexpr double precondition_band_c = 0.2;
 constexpr double precondition_hold_s = 120.0;
-// The daemon ticks every second; a gap longer than this is time the trial stood still (a pause).
-constexpr std::int64_t max_tick_gap_ns = 5'000'000'000LL;
+// Preconditioning that has not reached the model's start after follow_timeout_s plus this much
+// unpaused lab time falls back.
+constexpr double precondition_limit_extra_s = 3600.0;
 
 int model_segment_index(const std::string& name) {
     const auto& names = tr::segment_names();
@@ -72,7 +73,10 @@ PhysiologicalLoop::PhysiologicalLoop(const PhysiologicalModel& model, const conf
 
 void PhysiologicalLoop::command_towards(const std::vector<double>& target_c, const std::vector<double>& sweat_g_m2_h,
                                         double dt_s, LoopOutput& out) {
-    const double max_step_c = cfg_.max_setpoint_rate_c_min / 60.0 * dt_s;
+    // At the allowed rate over the lab time since the last command, but never more than two
+    // coupling periods' worth at once: after a long stall of the daemon (the zones held their
+    // setpoints meanwhile) the setpoints go on at the rate, they do not jump to the model.
+    const double max_step_c = cfg_.max_setpoint_rate_c_min / 60.0 * std::min(dt_s, 2.0 * cfg_.coupling_period_s);
     for (std::size_t z = 0; z < map_.size(); ++z) {
         const double target = std::clamp(target_c[z], cfg_.min_skin_setpoint_c, cfg_.max_skin_setpoint_c);
         setpoint_c_[z] += std::clamp(target - setpoint_c_[z], -max_step_c, max_step_c);
@@ -146,18 +150,20 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
     const auto period_ns = static_cast<std::int64_t>(cfg_.coupling_period_s * 1e9);
     const std::vector<double>& initial_c = initial_skin_c_;
 
-    // A gap between ticks (the campaign paused, the daemon stalled): the model's clock stood still
-    // with the stage clock, so every reference time moves by the gap; otherwise the model would
-    // catch up on the old losses and the setpoints step by the rate times the gap.
-    if (last_tick_ns_ && now - *last_tick_ns_ > max_tick_gap_ns) {
-        const std::int64_t gap = now - *last_tick_ns_;
+    // Time the campaign stood paused (the daemon's state says so, not the gap's length): the
+    // model's clock stood still with the stage clock, so every reference time moves by it;
+    // otherwise the model would catch up on the old losses and the setpoints step by the rate
+    // times the pause. Any other gap between ticks (10 lab-seconds at --speed 10, a daemon that
+    // stalled) is lab time that passed: the manikin kept losing heat, and the model integrates it.
+    if (paused_seen_ns_ && in.paused_total_ns > *paused_seen_ns_) {
+        const std::int64_t paused = in.paused_total_ns - *paused_seen_ns_;
         for (auto* t : {&started_ns_, &last_command_ns_, &running_since_ns_})
-            if (*t) **t += gap;
+            if (*t) **t += paused;
         for (auto& t : off_since_ns_)
-            if (t) *t += gap;
+            if (t) *t += paused;
         on_target_since_ns_.reset();
     }
-    last_tick_ns_ = now;
+    paused_seen_ns_ = in.paused_total_ns;
     if (!started_ns_) {
         // The setpoints start where each zone is (never a jump) and move at the allowed rate.
         started_ns_ = now;
@@ -227,8 +233,12 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
                                                       "coupled every {} s)",
                                                       model_.name, model_.metabolic_met, model_.duration_s / 60,
                                                       cfg_.coupling_period_s)});
-        } else if (static_cast<double>(now - *started_ns_) * 1e-9 > cfg_.follow_timeout_s + 3600.0) {
-            fall_back("the zones did not reach the model's initial skin temperatures within an hour", out);
+        } else if (const double limit_s = cfg_.follow_timeout_s + precondition_limit_extra_s;
+                   static_cast<double>(now - *started_ns_) * 1e-9 > limit_s) {
+            fall_back(fmt::format("the zones did not reach the model's initial skin temperatures within {:.0f} min "
+                                  "(physiological.follow_timeout_s + {:.0f} min of preconditioning)",
+                                  limit_s / 60, precondition_limit_extra_s / 60),
+                      out);
         }
         return out;
     }

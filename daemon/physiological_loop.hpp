@@ -31,7 +31,11 @@ struct LoopZoneReading {
 };
 
 struct LoopInputs {
-    std::int64_t now_ns = 0;
+    std::int64_t now_ns = 0;             // the lab's clock: virtual, real, or paced at --speed
+    // How long the campaign has stood paused, in all, by the daemon's campaign state (never
+    // guessed from a gap between ticks: a daemon that stalls, or ticks every 10 lab-seconds at
+    // --speed 10, is not paused). The loop takes its increase between two ticks as paused time.
+    std::int64_t paused_total_ns = 0;
     std::vector<LoopZoneReading> zones;  // zone 1 at index 0
     double air_temp_c = 0.0;             // the enclosure's measured air, RH, wall (the model's MRT), air speed
     double rh_pct = 0.0;
@@ -94,7 +98,7 @@ private:
     physics::thermoreg::Body body_;
     Phase phase_ = Phase::preconditioning;
     std::optional<std::int64_t> started_ns_;        // first tick
-    std::optional<std::int64_t> last_tick_ns_;      // a longer gap (a pause) stops the model's clock
+    std::optional<std::int64_t> paused_seen_ns_;    // LoopInputs::paused_total_ns at the last tick
     std::optional<std::int64_t> last_command_ns_;
     std::optional<std::int64_t> running_since_ns_;  // the model's t = 0
     std::optional<std::int64_t> on_target_since_ns_;

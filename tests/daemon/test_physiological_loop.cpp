@@ -30,11 +30,13 @@ struct PerfectManikin {
     std::vector<double> skin_c;
     double flux_w_m2 = 40.0;
     std::int64_t now_ns = 0;
+    std::int64_t paused_total_ns = 0;  // the daemon's campaign state: paused this long in all
     bool report_flux = true;
     std::int64_t last_flux_ns = -1;
     LoopInputs inputs() {
         LoopInputs in;
         in.now_ns = now_ns;
+        in.paused_total_ns = paused_total_ns;
         if (report_flux) last_flux_ns = now_ns;
         for (double s : skin_c) in.zones.push_back({s, flux_w_m2, last_flux_ns, true});
         in.air_temp_c = 30.0;
@@ -234,7 +236,9 @@ TEST_CASE("physiological loop: a pause stops the model's clock: on resume the mo
     REQUIRE(loop.phase() == PhysiologicalLoop::Phase::running);
     const double model_before_s = loop.model_time_s();
     const std::vector<double> before = m.skin_c;
-    m.now_ns = static_cast<std::int64_t>(t + 1800) * 1'000'000'000;  // 30 min paused
+    // 30 min paused: the daemon does not tick while paused, and says so at the next tick.
+    m.now_ns = static_cast<std::int64_t>(t + 1800) * 1'000'000'000;
+    m.paused_total_ns += 1800LL * 1'000'000'000;
     for (int i = 0; i < 2 * static_cast<int>(cfg.coupling_period_s); ++i) {
         m.now_ns += 1'000'000'000;
         const auto out = loop.tick(m.inputs());
@@ -245,4 +249,141 @@ TEST_CASE("physiological loop: a pause stops the model's clock: on resume the mo
     }
     CHECK(loop.model_time_s() <= model_before_s + 2 * cfg.coupling_period_s + 1.0);
     CHECK(loop.phase() == PhysiologicalLoop::Phase::running);
+}
+
+namespace {
+constexpr std::int64_t ns_per_s = 1'000'000'000;
+
+// Ticks `loop` every `tick_s` of lab time until it runs, returning the lab time (ns) it started at.
+std::int64_t run_until_running(PhysiologicalLoop& loop, PerfectManikin& m, int tick_s) {
+    for (int i = 0; i < 3 * 3600 / tick_s && loop.phase() == PhysiologicalLoop::Phase::preconditioning; ++i) {
+        m.apply(loop.tick(m.inputs()));
+        if (loop.phase() == PhysiologicalLoop::Phase::running) return m.now_ns;
+        m.now_ns += tick_s * ns_per_s;
+    }
+    return -1;
+}
+}  // namespace
+
+TEST_CASE("physiological loop: ticks 10 lab-seconds apart (--speed 10) precondition and run the model to its end "
+          "with its clock on the lab's", "[daemon][physiological]") {
+    const auto& map = manikind::analysis::andi35_zone_map();
+    manikind::config::PhysiologicalConfig cfg;
+    PhysiologicalLoop loop(model_of(30), cfg, map);
+    PerfectManikin m;
+    m.skin_c.assign(map.size(), 38.0);
+    const std::int64_t running_at_ns = run_until_running(loop, m, 10);
+    REQUIRE(running_at_ns > 0);  // before the fix: preconditioning forever, every 10-s gap taken for a pause
+    // 38 -> ~34.5 °C at 0.5 °C/min is about 7 min, then 2 min on target (as with 1-s ticks).
+    CHECK(running_at_ns >= 8 * 60 * ns_per_s);
+    CHECK(running_at_ns <= 12 * 60 * ns_per_s);
+    int commands = 0;
+    std::vector<double> last = loop.zone_setpoints_c();
+    while (loop.phase() == PhysiologicalLoop::Phase::running && m.now_ns < running_at_ns + 3600 * ns_per_s) {
+        m.now_ns += 10 * ns_per_s;
+        const auto out = loop.tick(m.inputs());
+        if (!out.commands.empty()) ++commands;
+        for (const auto& c : out.commands) {
+            const auto z = static_cast<std::size_t>(c.zone - 1);
+            CHECK(std::abs(c.skin_setpoint_c - last[z]) <= cfg.max_setpoint_rate_c_min * 2 * cfg.coupling_period_s / 60 + 1e-9);
+            last[z] = c.skin_setpoint_c;
+        }
+        // The model's time is the lab's since it started, to its 1-s step.
+        if (loop.phase() == PhysiologicalLoop::Phase::running && !out.commands.empty())
+            CHECK(loop.model_time_s() == Approx(static_cast<double>(m.now_ns - running_at_ns) / ns_per_s).margin(1.0));
+        m.apply(out);
+    }
+    CHECK(loop.phase() == PhysiologicalLoop::Phase::finished);
+    CHECK(loop.model_time_s() == Approx(1800.0));
+    // A command every coupling period (20 s): every other 10-s tick.
+    CHECK(commands >= static_cast<int>(1800 / cfg.coupling_period_s) - 1);
+    CHECK(m.now_ns - running_at_ns <= static_cast<std::int64_t>(1800 + cfg.coupling_period_s) * ns_per_s);
+}
+
+TEST_CASE("physiological loop: a stall of 8 s between ticks is lab time: the model integrates it and the setpoints "
+          "keep being sent", "[daemon][physiological]") {
+    const auto& map = manikind::analysis::andi35_zone_map();
+    manikind::config::PhysiologicalConfig cfg;
+    PhysiologicalLoop loop(model_of(120), cfg, map);
+    PerfectManikin m;
+    m.skin_c.assign(map.size(), 34.8);
+    const std::int64_t running_at_ns = run_until_running(loop, m, 1);
+    REQUIRE(running_at_ns > 0);
+    auto lab_s = [&] { return static_cast<double>(m.now_ns - running_at_ns) / ns_per_s; };
+    // Run to 10 min of model time, on 1-s ticks.
+    while (loop.model_time_s() < 600.0) {
+        m.now_ns += ns_per_s;
+        m.apply(loop.tick(m.inputs()));
+    }
+    int commands_after_stalls = 0, stalls = 0;
+    for (int i = 0; i < 30; ++i) {
+        // The daemon stalls 8 s (under load), then ticks on; no pause was asked for.
+        m.now_ns += 8 * ns_per_s;
+        ++stalls;
+        const auto out = loop.tick(m.inputs());
+        if (!out.commands.empty()) {
+            ++commands_after_stalls;
+            CHECK(loop.model_time_s() == Approx(lab_s()).margin(1.0));  // before the fix: 8 s behind per stall
+        }
+        m.apply(out);
+    }
+    CHECK(stalls == 30);
+    // 240 s of 8-s ticks at a 20-s coupling period: a command every 24 s or less.
+    CHECK(commands_after_stalls >= 9);
+    CHECK(loop.model_time_s() == Approx(lab_s()).margin(cfg.coupling_period_s + 1.0));
+    CHECK(loop.phase() == PhysiologicalLoop::Phase::running);
+}
+
+TEST_CASE("physiological loop: a 10-min stall of the daemon is integrated in the model's 1-s steps and the setpoints "
+          "go on from where they stood at the allowed rate", "[daemon][physiological]") {
+    const auto& map = manikind::analysis::andi35_zone_map();
+    manikind::config::PhysiologicalConfig cfg;
+    PhysiologicalLoop loop(model_of(120), cfg, map);
+    PerfectManikin m;
+    m.skin_c.assign(map.size(), 34.8);
+    m.flux_w_m2 = 10.0;  // less loss than the body makes: the model's skin warms over the stall
+    const std::int64_t running_at_ns = run_until_running(loop, m, 1);
+    REQUIRE(running_at_ns > 0);
+    while (loop.model_time_s() < 300.0) {
+        m.now_ns += ns_per_s;
+        m.apply(loop.tick(m.inputs()));
+    }
+    const std::vector<double> before = loop.zone_setpoints_c();
+    m.now_ns += 600 * ns_per_s;
+    const auto out = loop.tick(m.inputs());
+    REQUIRE(out.commands.size() == map.size());
+    CHECK(loop.model_time_s() == Approx(static_cast<double>(m.now_ns - running_at_ns) / ns_per_s).margin(1.0));
+    CHECK(loop.phase() == PhysiologicalLoop::Phase::running);
+    for (const auto& c : out.commands)
+        CHECK(std::abs(c.skin_setpoint_c - before[static_cast<std::size_t>(c.zone - 1)]) <=
+              cfg.max_setpoint_rate_c_min * 2 * cfg.coupling_period_s / 60 + 1e-9);
+}
+
+TEST_CASE("physiological loop: preconditioning that never reaches the model's start falls back with an alarm after "
+          "its limit at 1-s and at 10-s ticks", "[daemon][physiological]") {
+    const auto& map = manikind::analysis::andi35_zone_map();
+    manikind::config::PhysiologicalConfig cfg;
+    const double limit_s = cfg.follow_timeout_s + 3600.0;
+    for (const int tick_s : {1, 10}) {
+        INFO("ticks " << tick_s << " s apart");
+        PhysiologicalLoop loop(model_of(60), cfg, map);
+        PerfectManikin m;
+        m.skin_c.assign(map.size(), 36.0);
+        manikind::LoopOutput fell;
+        for (int i = 0; i * tick_s < 3 * 3600 && loop.phase() == PhysiologicalLoop::Phase::preconditioning; ++i) {
+            m.now_ns = static_cast<std::int64_t>(i) * tick_s * ns_per_s;
+            const auto out = loop.tick(m.inputs());
+            if (out.fell_back) fell = out;
+            m.apply(out);
+            // Zone 12 sits 0.5 °C warm of its setpoint: it follows (within 1 °C) but never reaches the band.
+            m.skin_c[11] = loop.zone_setpoints_c()[11] + 0.5;
+        }
+        REQUIRE(fell.fell_back);
+        CHECK(loop.phase() == PhysiologicalLoop::Phase::fallback);
+        REQUIRE_FALSE(fell.alarms.empty());
+        CHECK(fell.alarms.front().severity == "error");
+        CHECK_THAT(fell.alarms.front().message, Catch::Contains("did not reach the model's initial skin temperatures"));
+        CHECK(static_cast<double>(m.now_ns) / ns_per_s > limit_s);
+        CHECK(static_cast<double>(m.now_ns) / ns_per_s <= limit_s + cfg.coupling_period_s + tick_s);
+    }
 }
