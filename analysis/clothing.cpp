@@ -78,7 +78,8 @@ struct Quantities {
     // Per ensemble: the replicates' values of each primary key, and the means and derived keys.
     std::map<std::string, std::map<std::string, std::vector<double>>> replicates;
     std::map<std::string, std::map<std::string, double>> value;
-    std::map<std::string, double> fcl;
+    std::map<std::string, double> fcl;         // NaN: no source
+    std::map<std::string, bool> fcl_capped;    // ISO 9920's estimate stopped at kFclEstimateMaxIcl_clo
 };
 
 double mean_of(const std::vector<double>& v) {
@@ -175,25 +176,34 @@ Quantities evaluate(const std::vector<TestTrial>& trials, const ZoneMap& map, co
         if (std::isfinite(it) && std::isfinite(ret)) v["im"] = it / (kLewisRelation_k_kpa * ret);
         if (ensemble == "nude" || nude == out.value.end()) continue;
         const double ia = get(nude->second, "It_par"), rea = get(nude->second, "Ret_par");
-        double fcl = 1.0;
+        // No fcl source (not given, no It or no Ia to estimate it from): NaN, and nothing that
+        // needs fcl is computed; an assumed 1.0 would put Recl 10-13 % low unsaid.
+        double fcl = kNaN;
         const auto given = given_fcl.find(ensemble);
         if (given != given_fcl.end() && given->second) {
             fcl = *given->second;
         } else if (std::isfinite(it) && std::isfinite(ia)) {
             // ISO 9920's estimate fcl = 1.00 + 0.28 Icl (Icl in clo), with Icl = It - Ia/fcl: a
-            // fixed point that converges in a few steps (the map contracts: 0.28 Ia/0.155 fcl² < 1).
-            for (int i = 0; i < 20; ++i) fcl = 1.0 + 0.28 * std::max(0.0, it - ia / fcl) / kClo_m2k_w;
+            // fixed point that converges in a few steps (the map contracts: 0.28 Ia/0.155 fcl² < 1;
+            // the cap at 2 clo only flattens it).
+            fcl = 1.0;
+            double icl_clo = 0.0;
+            for (int i = 0; i < 20; ++i) {
+                icl_clo = std::max(0.0, it - ia / fcl) / kClo_m2k_w;
+                fcl = 1.0 + 0.28 * std::min(icl_clo, kFclEstimateMaxIcl_clo);
+            }
+            out.fcl_capped[ensemble] = icl_clo > kFclEstimateMaxIcl_clo;
         }
         out.fcl[ensemble] = fcl;
         if (std::isfinite(it) && std::isfinite(ia)) {
             v["Icle_par"] = it - ia;
-            v["Icl_par"] = it - ia / fcl;
+            if (std::isfinite(fcl)) v["Icl_par"] = it - ia / fcl;
             for (const auto& region : regions) {
                 const double a = get(v, "It_par:" + region), b = get(nude->second, "It_par:" + region);
                 if (std::isfinite(a) && std::isfinite(b)) v["Icle_par:" + region] = a - b;
             }
         }
-        if (std::isfinite(ret) && std::isfinite(rea)) v["Recl_par"] = ret - rea / fcl;
+        if (std::isfinite(ret) && std::isfinite(rea) && std::isfinite(fcl)) v["Recl_par"] = ret - rea / fcl;
     }
     return out;
 }
@@ -273,6 +283,52 @@ std::optional<double> cv_of(const std::vector<double>& v) {
     if (!std::isfinite(a.u)) return std::nullopt;
     const double m = mean_of(v);
     return a.u * std::sqrt(static_cast<double>(v.size())) / std::abs(m);
+}
+
+// The standards' conditions (docs/clothing.md, "Acceptance and conditions"). Where a public
+// summary gives a set point but no tolerance, the tolerance is ours and the source says so.
+constexpr double kSkinTolerance_k = 0.5;       // ours
+constexpr double kEvaporativeRhTolerance_pct = 5.0;  // ours
+
+Check make_check(std::string quantity, std::string requirement, double value, std::string unit, std::optional<bool> pass,
+                 std::string source) {
+    Check c{std::move(quantity), std::move(requirement), value, std::move(unit), "", std::move(source)};
+    c.status = !std::isfinite(value) ? "not recorded" : !pass ? "not applicable" : *pass ? "pass" : "out of range";
+    return c;
+}
+
+std::vector<Check> insulation_checks(const Conditions& c) {
+    const double skin = c.mean_skin_temp_c, gap = c.mean_skin_temp_c - c.air_temp_c;
+    const bool astm = std::abs(skin - 35.0) <= kSkinTolerance_k, iso = std::abs(skin - 34.0) <= kSkinTolerance_k;
+    return {
+        make_check("mean skin temperature", "35 ± 0.5 °C (ASTM F1291) or 34 ± 0.5 °C (ISO 15831)", skin, "°C", astm || iso,
+                   "ASTM F1291, ISO 15831 set points; the ±0.5 K is ours"),
+        make_check("air below mean skin", "at least 12 K", gap, "K", gap >= 12.0, "ASTM F1291, ISO 15831"),
+        make_check("relative humidity", "30-70 %", c.air_rh_pct, "%", c.air_rh_pct >= 30.0 && c.air_rh_pct <= 70.0, "ASTM F1291"),
+        make_check("air speed", "0.4 ± 0.1 m/s", c.air_speed_m_s, "m/s", std::abs(c.air_speed_m_s - 0.4) <= 0.1,
+                   "ASTM F1291, ISO 15831 (0.4 m/s)"),
+    };
+}
+
+std::vector<Check> evaporative_checks(const Conditions& c, bool own_it) {
+    const double skin = c.mean_skin_temp_c, gap = c.mean_skin_temp_c - c.air_temp_c;
+    const bool isothermal = std::abs(gap) <= kIsothermalTolerance_k;
+    return {
+        make_check("mean skin temperature", "35 ± 0.5 °C", skin, "°C", std::abs(skin - 35.0) <= kSkinTolerance_k,
+                   "ASTM F2370 set point; the ±0.5 K is ours"),
+        make_check("skin - air", "within ±0.5 K (isothermal), else the non-isothermal option with the ensemble's insulation test", gap,
+                   "K", isothermal || own_it, "ASTM F2370; the 0.5 K is ours"),
+        make_check("relative humidity", "40 ± 5 % in the isothermal test", c.air_rh_pct, "%",
+                   isothermal ? std::optional<bool>(std::abs(c.air_rh_pct - 40.0) <= kEvaporativeRhTolerance_pct) : std::nullopt,
+                   "ASTM F2370 set point; the ±5 % is ours"),
+        make_check("air speed", "0.4 ± 0.1 m/s", c.air_speed_m_s, "m/s", std::abs(c.air_speed_m_s - 0.4) <= 0.1, "ASTM F2370"),
+    };
+}
+
+std::string check_value(const Check& c) {
+    if (!std::isfinite(c.value)) return "not recorded";
+    const int digits = c.unit == "%" ? 0 : c.unit == "m/s" || c.unit == "K" ? 2 : 1;
+    return fmt::format("{:.{}f} {}", c.value, digits, c.unit);
 }
 
 }  // namespace
@@ -359,6 +415,7 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
     if (measured.value.count("nude")) order.push_back("nude");
     for (const auto& [id, v] : measured.value)
         if (id != "nude") order.push_back(id);
+    bool nude_ret_withheld = false;  // "nude" comes first: its Rea feeds every Recl
     for (const auto& id : order) {
         const auto& v = measured.value.at(id);
         const auto& reps = measured.replicates.at(id);
@@ -378,14 +435,41 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         EnsembleResult e;
         e.id = id;
         if (const auto it = campaign.ensembles.find(id); it != campaign.ensembles.end()) e.description = it->second.description;
+        const double ia = measured.value.count("nude") && measured.value.at("nude").count("It_par")
+                              ? measured.value.at("nude").at("It_par") : kNaN;
+        const double rea = measured.value.count("nude") && measured.value.at("nude").count("Ret_par")
+                               ? measured.value.at("nude").at("Ret_par") : kNaN;
         if (id == "nude") {
             e.description = e.description.empty() ? "the bare manikin" : e.description;
+            e.fcl = 1.0;
             e.fcl_source = "nude";
-        } else if (measured.fcl.count(id)) {
+            e.fcl_reason = "the bare manikin";
+        } else if (given_fcl.count(id) && given_fcl.at(id)) {
+            e.fcl = *given_fcl.at(id);
+            e.fcl_source = "given";
+            e.fcl_reason = "given in campaign.json (measured by the lab; its uncertainty is not in campaign.json and is left out of U)";
+        } else if (measured.fcl.count(id) && std::isfinite(measured.fcl.at(id))) {
             e.fcl = measured.fcl.at(id);
-            e.fcl_source = given_fcl.count(id) && given_fcl.at(id) ? "given" : "ISO 9920 estimate fcl = 1.00 + 0.28 Icl (clo)";
+            e.fcl_source = "ISO 9920 estimate";
+            e.fcl_capped = measured.fcl_capped.count(id) && measured.fcl_capped.at(id);
+            e.fcl_u = e.fcl_capped ? kFclEstimateCappedU : kFclEstimateU;
+            e.fcl_reason = e.fcl_capped
+                               ? fmt::format("ISO 9920 estimate 1.00 + 0.28 Icl (clo) from this ensemble's It, capped at Icl = {:.0f} clo "
+                                             "(the estimate is for ordinary ensembles and overestimates fcl above it); u(fcl) = {:.2f}",
+                                             kFclEstimateMaxIcl_clo, e.fcl_u)
+                               : fmt::format("ISO 9920 estimate 1.00 + 0.28 Icl (clo) from this ensemble's It; u(fcl) = {:.2f}", e.fcl_u);
+        } else {
+            e.fcl_source = "none";
+            e.fcl_reason = !std::isfinite(value_of("It_par"))
+                               ? "not given in campaign.json and no insulation test of the ensemble to estimate it from"
+                               : "not given in campaign.json and no nude insulation test to estimate it from";
         }
         const double conf = options.confidence;
+        // An estimated fcl's own uncertainty (the regression's, independent of the instruments)
+        // joins Type B: Icl = It - Ia/fcl and Recl = Ret - Rea/fcl move by Ia/fcl² and Rea/fcl² per unit fcl.
+        auto with_fcl = [&](double ub, double nude_value) {
+            return e.fcl_u > 0.0 && std::isfinite(nude_value) ? std::hypot(ub, nude_value / (e.fcl * e.fcl) * e.fcl_u) : ub;
+        };
         if (std::isfinite(value_of("It_par"))) {
             e.insulation_conditions = conditions_of(trials, id, "insulation");
             e.insulation_replicates = reps_of("It_par");
@@ -397,32 +481,75 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
                 const TypeA it_a = type_a(reps_of("It_par")), ia_a = nude_a("It_par");
                 e.insulation_effective_parallel =
                     make_value(value_of("Icle_par"), combine({{1.0, it_a}, {1.0, ia_a}}), u_b(id, "Icle_par"), "m2K/W", conf);
-                e.insulation_intrinsic_parallel = make_value(value_of("Icl_par"), combine({{1.0, it_a}, {1.0 / e.fcl, ia_a}}),
-                                                             u_b(id, "Icl_par"), "m2K/W", conf);
+                if (std::isfinite(value_of("Icl_par")))
+                    e.insulation_intrinsic_parallel = make_value(value_of("Icl_par"), combine({{1.0, it_a}, {1.0 / e.fcl, ia_a}}),
+                                                                 with_fcl(u_b(id, "Icl_par"), ia), "m2K/W", conf);
             }
         }
+        bool ret_withheld = false;
         if (std::isfinite(value_of("Ret_par"))) {
             e.evaporative_conditions = conditions_of(trials, id, "evaporative");
-            const double gap = e.evaporative_conditions->mean_skin_temp_c - e.evaporative_conditions->air_temp_c;
-            e.evaporative_method = std::abs(gap) <= 1.0 ? "isothermal"
-                                   : e.insulation_total_parallel
-                                       ? "non-isothermal: dry part from the ensemble's It per zone"
-                                       : "non-isothermal without an insulation test of the ensemble: dry part not removed";
-            if (std::abs(gap) > 1.0 && !e.insulation_total_parallel)
-                out.warnings.push_back(fmt::format("{}: evaporative test {:.1f} K from isothermal with no insulation test of the "
-                                                   "same ensemble: Ret includes dry heat loss (run the insulation test too)",
-                                                   id, gap));
-            e.evaporative_replicates = reps_of("Ret_par");
-            e.evaporative_total_parallel = make_value(value_of("Ret_par"), type_a(reps_of("Ret_par")), u_b(id, "Ret_par"), "m2kPa/W", conf);
-            e.evaporative_total_serial = make_value(value_of("Ret_ser"), type_a(reps_of("Ret_ser")), u_b(id, "Ret_ser"), "m2kPa/W", conf);
-            e.evaporative_cv = cv_of(e.evaporative_replicates);
-            if (e.evaporative_cv) e.evaporative_cv_pass = *e.evaporative_cv <= options.cv_limit_evaporative;
-            if (std::isfinite(value_of("Recl_par")))
-                e.evaporative_intrinsic_parallel =
-                    make_value(value_of("Recl_par"), combine({{1.0, type_a(reps_of("Ret_par"))}, {1.0 / e.fcl, nude_a("Ret_par")}}),
-                               u_b(id, "Recl_par"), "m2kPa/W", conf);
+            const auto& c = *e.evaporative_conditions;
+            const double gap = c.mean_skin_temp_c - c.air_temp_c;
+            const bool isothermal = std::abs(gap) <= kIsothermalTolerance_k;
+            const bool own_it = e.insulation_total_parallel.has_value();
+            // With the ensemble's It the dry part (T_z - T_a)/It_z is always removed, inside the
+            // tolerance too; without it, a gap inside the tolerance is reported with its bias
+            // bound and a gap beyond it withholds Ret (the measured flux is not evaporative alone).
+            e.evaporative_method =
+                fmt::format("{} (skin - air {:+.2f} K, tolerance {:.1f} K): {}", isothermal ? "isothermal" : "non-isothermal", gap,
+                            kIsothermalTolerance_k,
+                            own_it ? "dry part removed with the ensemble's It per zone"
+                                   : "dry part not removed (no insulation test of the ensemble)");
+            if (!isothermal && !own_it) {
+                ret_withheld = true;
+                e.evaporative_withheld_reason = fmt::format(
+                    "skin - air {:+.2f} K is beyond the isothermal tolerance {:.1f} K and the ensemble has no insulation test: "
+                    "the measured heat loss includes dry heat that cannot be removed, so Ret is not a result (run the "
+                    "insulation test of the ensemble too, or the wet test isothermal)",
+                    gap, kIsothermalTolerance_k);
+                out.warnings.push_back(fmt::format("{}: Ret withheld: {}", id, e.evaporative_withheld_reason));
+            } else if (!own_it && gap != 0.0) {
+                const double dp_kpa = (physics::saturation_vapour_pressure_pa(c.mean_skin_temp_c) -
+                                       physics::vapour_pressure_pa(c.air_temp_c, c.air_rh_pct)) / 1000.0;
+                // Ret_measured / Ret - 1 = -(gap/It) Ret_measured / dp; It >= Ia bounds it.
+                if (std::isfinite(ia) && ia > 0.0 && dp_kpa > 0.0) {
+                    e.evaporative_dry_bias_bound = -gap / ia * value_of("Ret_par") / dp_kpa;
+                    out.warnings.push_back(fmt::format(
+                        "{}: evaporative test isothermal within {:.1f} K (skin - air {:+.2f} K) without an insulation test of "
+                        "the ensemble: the dry heat stays in Ret, which is up to {:.1f} % {} (bound from the nude Ia; not in U)",
+                        id, kIsothermalTolerance_k, gap, 100.0 * std::abs(*e.evaporative_dry_bias_bound),
+                        gap > 0.0 ? "low" : "high"));
+                } else {
+                    e.evaporative_dry_bias_bound = kNaN;
+                    out.warnings.push_back(fmt::format(
+                        "{}: evaporative test isothermal within {:.1f} K (skin - air {:+.2f} K) without an insulation test of "
+                        "the ensemble or of the nude manikin: the dry heat stays in Ret, by an amount not estimable here",
+                        id, kIsothermalTolerance_k, gap));
+                }
+            }
+            if (!ret_withheld) {
+                e.evaporative_replicates = reps_of("Ret_par");
+                e.evaporative_total_parallel = make_value(value_of("Ret_par"), type_a(reps_of("Ret_par")), u_b(id, "Ret_par"), "m2kPa/W", conf);
+                e.evaporative_total_serial = make_value(value_of("Ret_ser"), type_a(reps_of("Ret_ser")), u_b(id, "Ret_ser"), "m2kPa/W", conf);
+                e.evaporative_cv = cv_of(e.evaporative_replicates);
+                if (e.evaporative_cv) e.evaporative_cv_pass = *e.evaporative_cv <= options.cv_limit_evaporative;
+            }
+            if (id == "nude") nude_ret_withheld = ret_withheld;
+            const bool nude_ret = std::isfinite(rea) && !nude_ret_withheld;
+            if (id != "nude" && !ret_withheld && nude_ret) {
+                if (std::isfinite(value_of("Recl_par")))
+                    e.evaporative_intrinsic_parallel =
+                        make_value(value_of("Recl_par"), combine({{1.0, type_a(reps_of("Ret_par"))}, {1.0 / e.fcl, nude_a("Ret_par")}}),
+                                   with_fcl(u_b(id, "Recl_par"), rea), "m2kPa/W", conf);
+                else
+                    e.intrinsic_evaporative_withheld_reason = "Recl = Ret - Rea/fcl needs fcl: " + e.fcl_reason +
+                                                              " (give the measured fcl in campaign.json `ensembles`)";
+            } else if (id != "nude" && !ret_withheld && std::isfinite(rea) && nude_ret_withheld) {
+                e.intrinsic_evaporative_withheld_reason = "the nude manikin's Rea is withheld (see its entry)";
+            }
         }
-        if (std::isfinite(value_of("im"))) {
+        if (std::isfinite(value_of("im")) && !ret_withheld) {
             const double it = value_of("It_par"), ret = value_of("Ret_par");
             const TypeA a = combine({{value_of("im") / it, type_a(reps_of("It_par"))}, {value_of("im") / ret, type_a(reps_of("Ret_par"))}});
             e.permeability_index = make_value(value_of("im"), a, u_b(id, "im"), "1", conf);
@@ -439,7 +566,7 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
                 rv.insulation_effective = make_value(value_of("Icle_par:" + region),
                                                      combine({{1.0, type_a(reps_of("It_par:" + region))}, {1.0, nude_a("It_par:" + region)}}),
                                                      u_b(id, "Icle_par:" + region), "m2K/W", conf);
-            if (std::isfinite(value_of("Ret_par:" + region)))
+            if (std::isfinite(value_of("Ret_par:" + region)) && !ret_withheld)
                 rv.evaporative_total = make_value(value_of("Ret_par:" + region), type_a(reps_of("Ret_par:" + region)),
                                                   u_b(id, "Ret_par:" + region), "m2kPa/W", conf);
             if (rv.insulation_total || rv.evaporative_total) e.regions.push_back(std::move(rv));
@@ -448,22 +575,20 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             e.notes.push_back("no nude trials (here or --baseline): effective and intrinsic values need Ia and Rea");
         if (e.insulation_replicates.size() == 1 || e.evaporative_replicates.size() == 1)
             e.notes.push_back("one replicate: no Type A, U from the instruments alone with k = 2, no replicate criterion");
+        if (e.insulation_conditions) e.insulation_checks = insulation_checks(*e.insulation_conditions);
+        if (e.evaporative_conditions)
+            e.evaporative_checks = evaporative_checks(*e.evaporative_conditions, e.insulation_total_parallel.has_value());
         out.ensembles.push_back(std::move(e));
     }
-    // Conditions against the standards (warnings, never a refusal: a lab may test otherwise on purpose).
-    for (const auto& e : out.ensembles) {
-        if (const auto& c = e.insulation_conditions) {
-            if (c->mean_skin_temp_c - c->air_temp_c < 12.0)
-                out.warnings.push_back(fmt::format("{}: insulation test with skin {:.1f} °C and air {:.1f} °C: ASTM F1291 and "
-                                                   "ISO 15831 ask the air at least 12 K below the skin",
-                                                   e.id, c->mean_skin_temp_c, c->air_temp_c));
-            if (std::isfinite(c->air_speed_m_s) && std::abs(c->air_speed_m_s - 0.4) > 0.1)
-                out.warnings.push_back(fmt::format("{}: insulation test at {:.2f} m/s; the standards ask 0.4 ± 0.1 m/s", e.id, c->air_speed_m_s));
-        }
-        if (const auto& c = e.evaporative_conditions)
-            if (std::isfinite(c->air_speed_m_s) && std::abs(c->air_speed_m_s - 0.4) > 0.1)
-                out.warnings.push_back(fmt::format("{}: evaporative test at {:.2f} m/s; ASTM F2370 asks 0.4 ± 0.1 m/s", e.id, c->air_speed_m_s));
-    }
+    // Conditions against the standards: every check is in the result; those out of range are
+    // warnings as well, never a refusal (a lab may test otherwise on purpose).
+    for (const auto& e : out.ensembles)
+        for (const auto* checks : {&e.insulation_checks, &e.evaporative_checks})
+            for (const auto& c : *checks)
+                if (c.status == "out of range")
+                    out.warnings.push_back(fmt::format("{}: {} test: {} {} out of range ({}; {})", e.id,
+                                                       checks == &e.insulation_checks ? "insulation" : "evaporative", c.quantity,
+                                                       check_value(c), c.requirement, c.source));
     return out;
 }
 
@@ -483,6 +608,23 @@ nlohmann::json conditions_json(const std::optional<Conditions>& c) {
     auto num = [](double x) { return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json(); };
     return {{"air_temp_c", num(c->air_temp_c)}, {"air_rh_pct", num(c->air_rh_pct)}, {"air_speed_m_s", num(c->air_speed_m_s)},
             {"mean_skin_temp_c", num(c->mean_skin_temp_c)}, {"trials", c->trials}};
+}
+
+nlohmann::json checks_json(const std::vector<Check>& checks) {
+    nlohmann::json a = nlohmann::json::array();
+    for (const auto& c : checks)
+        a.push_back({{"quantity", c.quantity}, {"requirement", c.requirement},
+                     {"value", std::isfinite(c.value) ? nlohmann::json(c.value) : nlohmann::json()}, {"unit", c.unit},
+                     {"status", c.status}, {"source", c.source}});
+    return a;
+}
+
+nlohmann::json text_or_null(const std::string& s) { return s.empty() ? nlohmann::json() : nlohmann::json(s); }
+
+void checks_text(std::ostringstream& o, const std::vector<Check>& checks) {
+    for (const auto& c : checks)
+        o << fmt::format("    check {} {}: {} ({}; {})\n", c.quantity, check_value(c),
+                         c.status == "out of range" ? "OUT OF RANGE" : c.status, c.requirement, c.source);
 }
 
 std::string fmt_value(const std::optional<Value>& v, bool clo = false) {
@@ -513,8 +655,11 @@ nlohmann::json to_json(const Result& r) {
         nlohmann::json x;
         x["id"] = e.id;
         x["description"] = e.description;
-        x["fcl"] = e.fcl;
+        x["fcl"] = std::isfinite(e.fcl) ? nlohmann::json(e.fcl) : nlohmann::json();
         x["fcl_source"] = e.fcl_source;
+        x["fcl_reason"] = e.fcl_reason;
+        x["fcl_u"] = e.fcl_u > 0.0 ? nlohmann::json(e.fcl_u) : nlohmann::json();
+        x["fcl_capped"] = e.fcl_capped;
         x["insulation"] = {{"total_parallel", value_json(e.insulation_total_parallel)},
                            {"total_serial", value_json(e.insulation_total_serial)},
                            {"effective_parallel", value_json(e.insulation_effective_parallel)},
@@ -522,7 +667,8 @@ nlohmann::json to_json(const Result& r) {
                            {"replicates", e.insulation_replicates},
                            {"cv", e.insulation_cv ? nlohmann::json(*e.insulation_cv) : nlohmann::json()},
                            {"cv_pass", e.insulation_cv_pass ? nlohmann::json(*e.insulation_cv_pass) : nlohmann::json()},
-                           {"conditions", conditions_json(e.insulation_conditions)}};
+                           {"conditions", conditions_json(e.insulation_conditions)},
+                           {"checks", checks_json(e.insulation_checks)}};
         x["evaporative"] = {{"total_parallel", value_json(e.evaporative_total_parallel)},
                             {"total_serial", value_json(e.evaporative_total_serial)},
                             {"intrinsic_parallel", value_json(e.evaporative_intrinsic_parallel)},
@@ -530,7 +676,13 @@ nlohmann::json to_json(const Result& r) {
                             {"cv", e.evaporative_cv ? nlohmann::json(*e.evaporative_cv) : nlohmann::json()},
                             {"cv_pass", e.evaporative_cv_pass ? nlohmann::json(*e.evaporative_cv_pass) : nlohmann::json()},
                             {"method", e.evaporative_method},
-                            {"conditions", conditions_json(e.evaporative_conditions)}};
+                            {"withheld_reason", text_or_null(e.evaporative_withheld_reason)},
+                            {"intrinsic_withheld_reason", text_or_null(e.intrinsic_evaporative_withheld_reason)},
+                            {"dry_bias_bound", e.evaporative_dry_bias_bound && std::isfinite(*e.evaporative_dry_bias_bound)
+                                                   ? nlohmann::json(*e.evaporative_dry_bias_bound)
+                                                   : nlohmann::json()},
+                            {"conditions", conditions_json(e.evaporative_conditions)},
+                            {"checks", checks_json(e.evaporative_checks)}};
         x["permeability_index"] = value_json(e.permeability_index);
         x["regions"] = nlohmann::json::array();
         for (const auto& rv : e.regions)
@@ -552,10 +704,13 @@ std::string to_text(const Result& r) {
                      100.0 * r.options.confidence);
     for (const auto& e : r.ensembles) {
         o << fmt::format("{}{}{}\n", e.id, e.description.empty() ? "" : ": ", e.description);
-        if (e.id != "nude" && e.insulation_effective_parallel) o << fmt::format("  fcl {:.3f} ({})\n", e.fcl, e.fcl_source);
+        if (e.id != "nude")
+            o << (std::isfinite(e.fcl) ? fmt::format("  fcl {:.3f}: {}\n", e.fcl, e.fcl_reason)
+                                       : fmt::format("  fcl none: {}\n", e.fcl_reason));
         if (const auto& c = e.insulation_conditions)
             o << fmt::format("  insulation, {} trial{}: air {:.1f} °C, {:.0f} % RH, {:.2f} m/s, mean skin {:.1f} °C\n", c->trials,
                              c->trials == 1 ? "" : "s", c->air_temp_c, c->air_rh_pct, c->air_speed_m_s, c->mean_skin_temp_c);
+        checks_text(o, e.insulation_checks);
         if (e.insulation_total_parallel) {
             o << "    It  total, parallel    " << fmt_value(e.insulation_total_parallel, true) << "\n";
             o << "    It  total, serial      " << fmt_value(e.insulation_total_serial, true) << "\n";
@@ -569,10 +724,17 @@ std::string to_text(const Result& r) {
             o << fmt::format("  evaporative ({}), {} trial{}: air {:.1f} °C, {:.0f} % RH, {:.2f} m/s, mean skin {:.1f} °C\n",
                              e.evaporative_method, c->trials, c->trials == 1 ? "" : "s", c->air_temp_c, c->air_rh_pct,
                              c->air_speed_m_s, c->mean_skin_temp_c);
+        checks_text(o, e.evaporative_checks);
+        if (!e.evaporative_withheld_reason.empty()) o << "    Ret withheld: " << e.evaporative_withheld_reason << "\n";
         if (e.evaporative_total_parallel) {
             o << "    Ret total, parallel    " << fmt_value(e.evaporative_total_parallel) << "\n";
             o << "    Ret total, serial      " << fmt_value(e.evaporative_total_serial) << "\n";
             if (e.evaporative_intrinsic_parallel) o << "    Recl intrinsic         " << fmt_value(e.evaporative_intrinsic_parallel) << "\n";
+            if (!e.intrinsic_evaporative_withheld_reason.empty())
+                o << "    Recl withheld: " << e.intrinsic_evaporative_withheld_reason << "\n";
+            if (e.evaporative_dry_bias_bound && std::isfinite(*e.evaporative_dry_bias_bound))
+                o << fmt::format("    dry heat left in Ret: up to {:.1f} % {} (not in U)\n", 100.0 * std::abs(*e.evaporative_dry_bias_bound),
+                                 *e.evaporative_dry_bias_bound < 0.0 ? "low" : "high");
             if (e.evaporative_cv)
                 o << fmt::format("    replicates {}: CV {:.1f} % (limit {:.0f} %): {}\n", e.evaporative_replicates.size(),
                                  100 * *e.evaporative_cv, 100 * r.options.cv_limit_evaporative, *e.evaporative_cv_pass ? "pass" : "FAIL");

@@ -27,6 +27,19 @@ namespace manikind::analysis::clothing {
 inline constexpr double kClo_m2k_w = 0.155;        // 1 clo = 0.155 m²K/W (ASTM F1291 3.1, ISO 9920)
 inline constexpr double kLewisRelation_k_kpa = 16.5;  // LR, K/kPa (ISO 9920, Woodcock's im)
 
+// ISO 9920's fcl = 1.00 + 0.28 Icl (clo) is a regression on ordinary ensembles; Kuklane and
+// Toma (Industrial Health 2021) find such equations fair up to about 1.5 clo and overestimating
+// fcl above 2 clo, so the estimate stops at Icl = 2 clo (fcl 1.56) and says so. Its standard
+// uncertainty, 0.05 (0.10 where capped), is our figure, not the standard's (docs/clothing.md).
+inline constexpr double kFclEstimateMaxIcl_clo = 2.0;
+inline constexpr double kFclEstimateU = 0.05;
+inline constexpr double kFclEstimateCappedU = 0.10;
+// A wet test counts as isothermal while |mean skin - air| is within this. Our figure: the public
+// summaries of ASTM F2370 give no tolerance; the gap itself is known to about ±0.2 K from the
+// skin (±0.1 °C) and air (±0.2 °C) probes; at 0.5 K the dry heat left in Ret is 1.4-1.7 % for
+// the unit test's ensembles (docs/clothing.md, "The isothermal judgement").
+inline constexpr double kIsothermalTolerance_k = 0.5;
+
 struct Options {
     // Replicate acceptance: the coefficient of variation of the re-dressed replicates' total
     // (parallel) value may not exceed this (docs/clothing.md, "Acceptance"; configurable because
@@ -66,12 +79,29 @@ struct Conditions {
     int trials = 0;
 };
 
+// One condition a standard sets for a test, against the test's mean over its trials.
+struct Check {
+    std::string quantity;      // "relative humidity"
+    std::string requirement;   // "30-70 %"
+    double value = 0.0;        // NaN when not recorded
+    std::string unit;          // "%", "°C", "K", "m/s"
+    std::string status;        // "pass", "out of range", "not recorded", "not applicable"
+    std::string source;        // "ASTM F1291", "ours (no public figure)", ...
+};
+
 struct EnsembleResult {
     std::string id;
     std::string description;
-    double fcl = 1.0;
-    std::string fcl_source;                      // "given" or "ISO 9920 estimate 1 + 0.28 Icl (clo)" or "nude"
+    // The clothing area factor used for Icl and Recl: NaN when there is none (neither given in
+    // campaign.json nor estimable: no insulation test of the ensemble or no nude one); then
+    // Recl is withheld, never computed with an assumed 1.0.
+    double fcl = kNaN;
+    std::string fcl_source;                      // "given", "ISO 9920 estimate", "none" or "nude"
+    std::string fcl_reason;                      // why, in words (the text and report print it)
+    double fcl_u = 0.0;                          // standard uncertainty put into Icl's and Recl's U (estimate only)
+    bool fcl_capped = false;                     // the estimate stopped at Icl = 2 clo
     std::optional<Conditions> insulation_conditions, evaporative_conditions;
+    std::vector<Check> insulation_checks, evaporative_checks;
     std::optional<Value> insulation_total_parallel, insulation_total_serial, insulation_effective_parallel,
         insulation_intrinsic_parallel;
     std::optional<Value> evaporative_total_parallel, evaporative_total_serial, evaporative_intrinsic_parallel;
@@ -80,7 +110,12 @@ struct EnsembleResult {
     std::vector<double> evaporative_replicates;  // Ret (parallel) per re-dressing, m²kPa/W
     std::optional<double> insulation_cv, evaporative_cv;
     std::optional<bool> insulation_cv_pass, evaporative_cv_pass;
-    std::string evaporative_method;              // "isothermal" or "non-isothermal (dry part from It per zone)"
+    std::string evaporative_method;              // "isothermal ..." or "non-isothermal ...", and whether the dry part was removed
+    std::string evaporative_withheld_reason;     // non-empty: Ret (and Recl, regions) withheld, and why
+    std::string intrinsic_evaporative_withheld_reason;  // non-empty: Recl withheld (no fcl), and why
+    // Isothermal within the tolerance without the ensemble's It: the dry heat is left in Ret;
+    // its largest relative effect, from the nude It (It >= Ia), negative = Ret low. NaN: no Ia.
+    std::optional<double> evaporative_dry_bias_bound;
     std::vector<RegionValues> regions;
     std::vector<std::string> notes;
 };

@@ -121,10 +121,34 @@ std::string to_html(const Result& r, const ZoneMap& map) {
                              what, c->trials, c->trials == 1 ? "" : "s", c->air_temp_c, c->air_rh_pct, c->air_speed_m_s,
                              c->mean_skin_temp_c);
         };
+        // Every condition the standard sets, pass or out of range with the value (docs/clothing.md).
+        auto checks = [&](const std::vector<Check>& cs) {
+            if (cs.empty()) return;
+            o << "<table><tr><th>condition</th><th>value</th><th>status</th><th>requirement</th></tr>\n";
+            for (const auto& c : cs)
+                o << fmt::format("<tr><td>{}</td><td class=num>{}</td><td class={}>{}</td><td>{}<br><span class=small>{}</span></td></tr>\n",
+                                 xml_escape(c.quantity),
+                                 std::isfinite(c.value) ? xml_escape(fmt::format("{:.2f} {}", c.value, c.unit)) : "not recorded",
+                                 c.status == "pass" ? "pass" : c.status == "out of range" ? "fail" : "small",
+                                 xml_escape(c.status), xml_escape(c.requirement), xml_escape(c.source));
+            o << "</table>\n";
+        };
         conditions("Insulation (ASTM F1291 / ISO 15831)", e.insulation_conditions);
+        checks(e.insulation_checks);
         conditions(e.evaporative_method.empty() ? "Evaporative resistance (ASTM F2370)"
                                                 : ("Evaporative resistance (ASTM F2370, " + e.evaporative_method + ")").c_str(),
                    e.evaporative_conditions);
+        checks(e.evaporative_checks);
+        if (!e.evaporative_withheld_reason.empty())
+            o << "<p class=fail>" << xml_escape("Ret withheld: " + e.evaporative_withheld_reason) << "</p>\n";
+        if (!e.intrinsic_evaporative_withheld_reason.empty())
+            o << "<p>" << xml_escape("Recl withheld: " + e.intrinsic_evaporative_withheld_reason) << "</p>\n";
+        if (e.evaporative_dry_bias_bound && std::isfinite(*e.evaporative_dry_bias_bound))
+            o << "<p>" << xml_escape(fmt::format("Dry heat left in Ret (isothermal within {:.1f} K, no insulation test of the ensemble): "
+                                                 "up to {:.1f} % {}, not in U.", kIsothermalTolerance_k,
+                                                 100.0 * std::abs(*e.evaporative_dry_bias_bound),
+                                                 *e.evaporative_dry_bias_bound < 0.0 ? "low" : "high"))
+              << "</p>\n";
         o << "<table><tr><th>quantity</th><th>value ± U95</th><th></th><th>k</th><th>u<sub>A</sub></th></tr>\n";
         o << row("total insulation I<sub>t</sub>, parallel", e.insulation_total_parallel, true);
         o << row("total insulation I<sub>t</sub>, serial", e.insulation_total_serial, true);
@@ -135,8 +159,10 @@ std::string to_html(const Result& r, const ZoneMap& map) {
         o << row("intrinsic evaporative resistance R<sub>ecl</sub>", e.evaporative_intrinsic_parallel, false);
         o << row("permeability index i<sub>m</sub>", e.permeability_index, false);
         o << "</table>\n";
-        if (e.id != "nude" && e.insulation_effective_parallel)
-            o << "<p>" << xml_escape(fmt::format("Clothing area factor fcl = {:.3f} ({}).", e.fcl, e.fcl_source)) << "</p>\n";
+        if (e.id != "nude")
+            o << "<p>" << xml_escape(std::isfinite(e.fcl) ? fmt::format("Clothing area factor fcl = {:.3f}: {}.", e.fcl, e.fcl_reason)
+                                                          : fmt::format("Clothing area factor fcl: none ({}).", e.fcl_reason))
+              << "</p>\n";
         auto criterion = [&](const char* what, const std::optional<double>& cv, const std::optional<bool>& pass, double limit,
                              std::size_t n) {
             if (!cv) return;

@@ -1,6 +1,7 @@
 // Clothing tests (issue 33): the definitions of ASTM F1291 / ISO 15831 / ASTM F2370 / ISO 9920
 // checked on campaigns built here by hand, the Monte Carlo Type B against the GUM's linear
 // propagation, and the recording format's new keys, round trip and hostile input.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -27,7 +28,7 @@ namespace {
 // A steady trial: 35 min at 15 s, every zone at its skin temperature and flux, air constant.
 an::Trial steady_trial(const an::ZoneMap& map, const std::string& id, int case_id, int replicate, const std::string& ensemble,
                        const std::string& test, double air_c, double rh_pct, const std::vector<double>& skin_c,
-                       const std::vector<double>& q_w_m2) {
+                       const std::vector<double>& q_w_m2, double speed_m_s = 0.4) {
     an::Trial t;
     t.info.id = id;
     t.info.case_id = case_id;
@@ -41,7 +42,7 @@ an::Trial steady_trial(const an::ZoneMap& map, const std::string& id, int case_i
         t.data.t_s.push_back(15.0 * static_cast<double>(k));
         t.data.air_temp_c.push_back(air_c);
         t.data.air_rh_pct.push_back(rh_pct);
-        t.data.air_speed_m_s.push_back(0.4);
+        t.data.air_speed_m_s.push_back(speed_m_s);
     }
     t.data.skin_temp_c.resize(map.size());
     t.data.heat_flux_w_m2.resize(map.size());
@@ -90,6 +91,30 @@ struct Lab {
         }
         return c;
     }
+    // One test of one ensemble at given conditions, every zone at `skin_c`: the insulation test's
+    // flux is dry, the wet test's evaporative (fully wet skin) plus the dry part (skin - air)/It_z
+    // that ASTM F2370's non-isothermal option removes.
+    void add_test(an::Campaign& c, const std::string& ensemble, const std::string& test, int replicates, double skin_c,
+                  double air_c, double rh_pct, double speed_m_s = 0.4) const {
+        const auto& r_dry = ensemble == "nude" ? ia : it;
+        const auto& r_wet = ensemble == "nude" ? rea : ret;
+        const double dp_kpa = (manikind::physics::saturation_vapour_pressure_pa(skin_c) -
+                               manikind::physics::vapour_pressure_pa(air_c, rh_pct)) / 1000.0;
+        std::vector<double> skin(map.size(), skin_c), q;
+        for (std::size_t z = 0; z < map.size(); ++z)
+            q.push_back((test == "evaporative" ? dp_kpa / r_wet[z] : 0.0) + (skin_c - air_c) / r_dry[z]);
+        const int case_id = static_cast<int>(c.trials.size()) + 100;
+        for (int r = 1; r <= replicates; ++r)
+            c.trials.push_back(steady_trial(map, fmt("t", case_id, r), case_id, r, ensemble, test, air_c, rh_pct, skin, q, speed_m_s));
+    }
+    an::Campaign empty_campaign(std::optional<double> fcl) const {
+        an::Campaign c;
+        c.name = "clothing-unit";
+        c.zone_map = map;
+        c.instruments = an::default_instrument_specs();
+        c.ensembles["suit"] = {"two-piece suit", fcl};
+        return c;
+    }
     static std::string fmt(const char* p, int c, int r) { return std::string(p) + std::to_string(c) + "-r" + std::to_string(r); }
     // The definitions, computed here from the per-zone resistances.
     double parallel(const std::vector<double>& r) const {
@@ -134,7 +159,7 @@ TEST_CASE("clothing: parallel and serial insulation and evaporative resistance f
     CHECK(suit.insulation_total_serial->value > suit.insulation_total_parallel->value);
     CHECK(suit.evaporative_total_parallel->value == Approx(ret).epsilon(1e-9));
     CHECK(suit.evaporative_total_serial->value == Approx(lab.serial(lab.ret)).epsilon(1e-9));
-    CHECK(suit.evaporative_method == "isothermal");
+    CHECK(suit.evaporative_method.rfind("isothermal (", 0) == 0);
     CHECK(suit.fcl == 1.3);
     CHECK(suit.fcl_source == "given");
     CHECK(suit.insulation_effective_parallel->value == Approx(it - ia).epsilon(1e-9));
@@ -259,4 +284,179 @@ TEST_CASE("clothing: ensembles and each trial's ensemble and test survive a writ
     refused([](auto& d) { d["ensembles"]["suit"]["fcl"] = "big"; }, "ensembles.suit.fcl");
     refused([](auto& d) { d["ensembles"] = {1, 2}; }, "ensembles");
     refused([](auto& d) { d["ensembles"]["suit"] = 3; }, "ensembles.suit");
+}
+
+// Issue 63 (a): fcl is never a silent default.
+TEST_CASE("clothing: a wet test without an insulation test and no given fcl gets no Recl and says fcl has no source",
+          "[clothing]") {
+    const Lab lab;
+    auto campaign = lab.empty_campaign(std::nullopt);
+    lab.add_test(campaign, "nude", "insulation", 2, 35.0, 20.0, 50.0);
+    lab.add_test(campaign, "nude", "evaporative", 2, 35.0, 35.0, 40.0);
+    lab.add_test(campaign, "suit", "evaporative", 2, 35.0, 35.0, 40.0);
+    cl::Options o;
+    o.monte_carlo_draws = 200;
+    const auto r = cl::compute(campaign, an::analyze_campaign(campaign), nullptr, nullptr, o);
+    const auto& suit = ensemble(r, "suit");
+    REQUIRE(suit.evaporative_total_parallel.has_value());
+    CHECK(suit.evaporative_total_parallel->value == Approx(lab.parallel(lab.ret)).epsilon(1e-9));
+    // Before: fcl 1.0 called "ISO 9920 estimate" and Recl = Ret - Rea, 10-13 % low for real ensembles.
+    CHECK_FALSE(suit.evaporative_intrinsic_parallel.has_value());
+    CHECK(suit.fcl_source.find("ISO 9920") == std::string::npos);
+    const auto j = cl::to_json(r);
+    const auto& js = j.at("ensembles").at(1);
+    CHECK(js.at("fcl").is_null());
+    CHECK(js.at("fcl_source") == "none");
+    CHECK_THAT(js.at("fcl_reason").get<std::string>(), Catch::Contains("no insulation test"));
+    CHECK(js.at("evaporative").at("intrinsic_parallel").is_null());
+    CHECK_THAT(js.at("evaporative").at("intrinsic_withheld_reason").get<std::string>(), Catch::Contains("needs fcl"));
+    CHECK_THAT(cl::to_text(r), Catch::Contains("fcl none: not given in campaign.json"));
+    CHECK_THAT(cl::to_text(r), Catch::Contains("Recl withheld"));
+}
+
+TEST_CASE("clothing: ISO 9920's fcl estimate stops at Icl 2 clo and says so and its uncertainty enters U of Icl and Recl",
+          "[clothing]") {
+    cl::Options o;
+    o.monte_carlo_draws = 300;
+    SECTION("an ordinary ensemble: the estimate with u(fcl) 0.05") {
+        const Lab lab;
+        const auto campaign = lab.campaign(2, std::nullopt);
+        const auto r = cl::compute(campaign, an::analyze_campaign(campaign), nullptr, nullptr, o);
+        const auto& suit = ensemble(r, "suit");
+        CHECK(suit.fcl_source == "ISO 9920 estimate");
+        CHECK_FALSE(suit.fcl_capped);
+        CHECK(suit.fcl_u == 0.05);
+        const double ia = lab.parallel(lab.ia), rea = lab.parallel(lab.rea), f = suit.fcl;
+        CHECK(suit.insulation_intrinsic_parallel->u_b >= ia / (f * f) * 0.05);
+        CHECK(suit.evaporative_intrinsic_parallel->u_b >= rea / (f * f) * 0.05);
+        // The given fcl carries none (campaign.json has no uncertainty for it): Icl's u_B is the instruments' alone.
+        const auto given = lab.campaign(2, f);
+        const auto rg = cl::compute(given, an::analyze_campaign(given), nullptr, nullptr, o);
+        CHECK(ensemble(rg, "suit").insulation_intrinsic_parallel->u_b < suit.insulation_intrinsic_parallel->u_b);
+        CHECK(cl::to_json(r).at("ensembles").at(1).at("fcl_u") == 0.05);
+        CHECK(cl::to_json(rg).at("ensembles").at(1).at("fcl_u").is_null());
+    }
+    SECTION("a heavy ensemble beyond 2 clo: fcl 1.56 capped with u(fcl) 0.10") {
+        Lab lab;
+        for (auto& x : lab.it) x += 0.35;
+        const auto campaign = lab.campaign(2, std::nullopt);
+        const auto r = cl::compute(campaign, an::analyze_campaign(campaign), nullptr, nullptr, o);
+        const auto& suit = ensemble(r, "suit");
+        const double it = lab.parallel(lab.it), ia = lab.parallel(lab.ia);
+        REQUIRE((it - ia / 1.56) / 0.155 > 2.0);  // uncapped the estimate would go past 1.56
+        CHECK(suit.fcl == Approx(1.56).epsilon(1e-12));
+        CHECK(suit.fcl_capped);
+        CHECK(suit.fcl_u == 0.10);
+        CHECK_THAT(suit.fcl_reason, Catch::Contains("capped at Icl = 2 clo"));
+        CHECK(suit.insulation_intrinsic_parallel->value == Approx(it - ia / 1.56).epsilon(1e-9));
+        CHECK(suit.insulation_intrinsic_parallel->u_b >= ia / (1.56 * 1.56) * 0.10);
+        CHECK(cl::to_json(r).at("ensembles").at(1).at("fcl_capped") == true);
+    }
+}
+
+// Issue 63 (b): the isothermal judgement. The wet test's flux holds the dry part (skin - air)/It_z.
+TEST_CASE("clothing: a wet test within 0.5 K of isothermal without It warns with its bias bound and beyond it Ret is withheld "
+          "unless the ensemble's It removes the dry heat", "[clothing]") {
+    const Lab lab;
+    cl::Options o;
+    o.monte_carlo_draws = 200;
+    const double ret = lab.parallel(lab.ret), it = lab.parallel(lab.it), ia = lab.parallel(lab.ia);
+    auto run = [&](double gap_k, bool suit_insulation) {
+        auto c = lab.empty_campaign(1.3);
+        lab.add_test(c, "nude", "insulation", 2, 35.0, 20.0, 50.0);
+        lab.add_test(c, "nude", "evaporative", 2, 35.0, 35.0, 40.0);
+        if (suit_insulation) lab.add_test(c, "suit", "insulation", 2, 35.0, 20.0, 50.0);
+        lab.add_test(c, "suit", "evaporative", 2, 35.0, 35.0 - gap_k, 40.0);
+        return cl::compute(c, an::analyze_campaign(c), nullptr, nullptr, o);
+    };
+    auto has_warning = [](const cl::Result& r, const std::string& text) {
+        return std::any_of(r.warnings.begin(), r.warnings.end(), [&](const auto& w) { return w.find(text) != std::string::npos; });
+    };
+    SECTION("0.3 K without It: Ret kept with the dry heat in it and its bound from Ia stated") {
+        const auto r = run(0.3, false);
+        const auto& suit = ensemble(r, "suit");
+        REQUIRE(suit.evaporative_total_parallel.has_value());
+        const double measured = suit.evaporative_total_parallel->value;
+        const double dp_kpa = (manikind::physics::saturation_vapour_pressure_pa(35.0) -
+                               manikind::physics::vapour_pressure_pa(34.7, 40.0)) / 1000.0;
+        // Parallel, uniform gap: Ret_measured/Ret - 1 = -(gap/It) Ret_measured/dp exactly.
+        CHECK(measured / ret - 1.0 == Approx(-0.3 / it * measured / dp_kpa).epsilon(1e-6));
+        REQUIRE(suit.evaporative_dry_bias_bound.has_value());
+        CHECK(*suit.evaporative_dry_bias_bound == Approx(-0.3 / ia * measured / dp_kpa).epsilon(1e-9));
+        CHECK(*suit.evaporative_dry_bias_bound <= measured / ret - 1.0);  // It >= Ia: the bound holds
+        CHECK(has_warning(r, "the dry heat stays in Ret"));
+        CHECK_THAT(suit.evaporative_method, Catch::Contains("dry part not removed"));
+        CHECK(cl::to_json(r).at("ensembles").at(1).at("evaporative").at("dry_bias_bound").is_number());
+    }
+    SECTION("0.8 K without It: no Ret and no interval, the reason in text and JSON") {
+        const auto r = run(0.8, false);
+        const auto& suit = ensemble(r, "suit");
+        CHECK_FALSE(suit.evaporative_total_parallel.has_value());
+        CHECK_FALSE(suit.evaporative_total_serial.has_value());
+        CHECK_FALSE(suit.evaporative_intrinsic_parallel.has_value());
+        for (const auto& rv : suit.regions) CHECK_FALSE(rv.evaporative_total.has_value());
+        CHECK_THAT(suit.evaporative_withheld_reason, Catch::Contains("beyond the isothermal tolerance 0.5 K"));
+        const auto j = cl::to_json(r).at("ensembles").at(1).at("evaporative");
+        CHECK(j.at("total_parallel").is_null());
+        CHECK(j.at("withheld_reason").is_string());
+        CHECK_THAT(cl::to_text(r), Catch::Contains("Ret withheld: skin - air +0.80 K"));
+        CHECK(has_warning(r, "suit: Ret withheld"));
+    }
+    SECTION("0.3 K and 0.8 K with the ensemble's It: the dry part is removed and Ret is the truth") {
+        for (double gap : {0.3, 0.8}) {
+            const auto r = run(gap, true);
+            const auto& suit = ensemble(r, "suit");
+            REQUIRE(suit.evaporative_total_parallel.has_value());
+            CHECK(suit.evaporative_total_parallel->value == Approx(ret).epsilon(1e-9));
+            CHECK_FALSE(suit.evaporative_dry_bias_bound.has_value());
+            CHECK_THAT(suit.evaporative_method, Catch::Contains("dry part removed with the ensemble's It"));
+            CHECK_FALSE(has_warning(r, "Ret"));
+        }
+    }
+}
+
+// Issue 63 (c): every condition the standard sets, per test, pass or out of range with the value.
+TEST_CASE("clothing: each test's conditions are checked against the standard's and shown in text JSON and the report",
+          "[clothing]") {
+    const Lab lab;
+    auto c = lab.empty_campaign(1.3);
+    lab.add_test(c, "nude", "insulation", 2, 34.0, 20.0, 50.0);         // ISO 15831's 34 °C skin: pass
+    lab.add_test(c, "nude", "evaporative", 2, 35.0, 35.0, 40.0);        // F2370 isothermal: pass
+    lab.add_test(c, "suit", "insulation", 2, 35.0, 25.0, 80.0, 0.8);   // 10 K below, 80 % RH, 0.8 m/s
+    lab.add_test(c, "suit", "evaporative", 2, 36.0, 36.0, 55.0);        // skin 36 °C, 55 % RH
+    cl::Options o;
+    o.monte_carlo_draws = 200;
+    const auto r = cl::compute(c, an::analyze_campaign(c), nullptr, nullptr, o);
+    auto status = [&](const std::string& id, const std::string& test, const std::string& quantity) {
+        const auto& e = ensemble(r, id);
+        for (const auto& ch : test == "insulation" ? e.insulation_checks : e.evaporative_checks)
+            if (ch.quantity == quantity) return ch.status;
+        return std::string("missing");
+    };
+    for (const char* q : {"mean skin temperature", "air below mean skin", "relative humidity", "air speed"})
+        CHECK(status("nude", "insulation", q) == "pass");
+    for (const char* q : {"mean skin temperature", "skin - air", "relative humidity", "air speed"})
+        CHECK(status("nude", "evaporative", q) == "pass");
+    CHECK(status("suit", "insulation", "mean skin temperature") == "pass");
+    CHECK(status("suit", "insulation", "air below mean skin") == "out of range");
+    CHECK(status("suit", "insulation", "relative humidity") == "out of range");
+    CHECK(status("suit", "insulation", "air speed") == "out of range");
+    CHECK(status("suit", "evaporative", "mean skin temperature") == "out of range");
+    CHECK(status("suit", "evaporative", "skin - air") == "pass");
+    CHECK(status("suit", "evaporative", "relative humidity") == "out of range");
+    const auto text = cl::to_text(r);
+    CHECK_THAT(text, Catch::Contains("check relative humidity 80 %: OUT OF RANGE (30-70 %"));
+    CHECK_THAT(text, Catch::Contains("check air below mean skin 10.00 K: OUT OF RANGE (at least 12 K"));
+    CHECK_THAT(text, Catch::Contains("check mean skin temperature 34.0 °C: pass"));
+    CHECK_THAT(text, Catch::Contains("check mean skin temperature 36.0 °C: OUT OF RANGE (35 ± 0.5 °C"));
+    const auto j = cl::to_json(r).at("ensembles").at(1);
+    const auto& rh = j.at("insulation").at("checks").at(2);
+    CHECK(rh.at("quantity") == "relative humidity");
+    CHECK(rh.at("value").get<double>() == Approx(80.0));
+    CHECK(rh.at("status") == "out of range");
+    CHECK(j.at("evaporative").at("checks").size() == 4);
+    const auto html = cl::to_html(r, lab.map);
+    CHECK_THAT(html, Catch::Contains("<td class=num>80.00 %</td><td class=fail>out of range</td>"));
+    CHECK(std::count_if(r.warnings.begin(), r.warnings.end(),
+                        [](const auto& w) { return w.find("out of range") != std::string::npos; }) == 5);
 }
