@@ -85,8 +85,8 @@ public:
         const tw::ResolvedVersion resolved = tw::resolve(v);  // the terms read once, not per trial
         // Terms scoped to some zones (a region's wet fraction, 16 of the demo's 22 candidates,
         // 1-4 zones of 35) leave the other zones where the remaining terms put them: those are
-        // taken from the twin as given (kept) or from this thread's last prediction with the same
-        // other terms (a pair's scan and the steps of its fit in the scoped term), and only the
+        // taken from the twin as given (kept) or from this thread's last two predictions with the
+        // same other terms (a pair's scan and the steps of its fit in the scoped term), and only the
         // touched zones are computed. The same numbers: each zone's flux is its own.
         std::vector<tw::Term> global;
         bool scoped = false;

@@ -574,7 +574,9 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     // Without replicates (and no scatter carried from an earlier campaign) the random part is each
     // point's U/k: a lower bound on the real scatter, so nothing can be claimed at alpha on it.
     const bool lower_bound = !rep.noise.from_replicates && rep.noise.carried_from.empty() && model.supports("heat_leak");
-    const std::unique_ptr<NoiseResampler> resampler = model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
+    // With the threshold given (planning) no null is drawn, so no resampler is made for it.
+    const std::unique_ptr<NoiseResampler> resampler =
+        opt.null_threshold ? nullptr : model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
     Stage st = run_stage(model, rep.noise, resampler.get(), grids, all_idx, rep.predicted_before, opt, opt.null_threshold);
     rep.covariance_draws = st.covariance_draws;
     {
@@ -822,6 +824,11 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
                 claim = chosen;
             }
         }
+    }
+    if (opt.verdict_for) {  // the planner reads the claim alone, not the report around it
+        rep.explanation = claim;
+        rep.statement = "verdict only (planning): " + (claim ? claim->label + " claimed" : why_not.empty() ? "no claim" : why_not);
+        return rep;
     }
     for (auto& r : results) {
         if (claim && r.label == claim->label) {
