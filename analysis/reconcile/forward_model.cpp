@@ -85,7 +85,7 @@ public:
         const tw::ResolvedVersion resolved = tw::resolve(v);  // the terms read once, not per trial
         // Terms scoped to some zones (a region's wet fraction, 16 of the demo's 22 candidates,
         // 1-4 zones of 35) leave the other zones where the remaining terms put them: those are
-        // taken from the twin as given (kept) or from this thread's last two predictions with the
+        // taken from the twin as given (kept) or from this thread's last four predictions with the
         // same other terms (a pair's scan and the steps of its fit in the scoped term), and only the
         // touched zones are computed. The same numbers: each zone's flux is its own.
         std::vector<tw::Term> global;
@@ -185,27 +185,30 @@ public:
         return out;
     }
 
-    // This thread's last two trial fluxes under terms that touch every zone, kept by model and
-    // terms (two: a fit's steps in the scoped term come back to its point after a step in another).
+    // This thread's last four trial fluxes under terms that touch every zone, kept by model and
+    // terms (four: a fit's steps in the scoped term come back to its point after steps in another,
+    // up and down for its covariance).
     const TrialFluxes& others(const std::vector<tw::Term>& global) const {
         struct Memo {
             std::uint64_t model = 0;
+            std::uint64_t used = 0;  // when last asked for (the oldest is replaced)
             std::vector<tw::Term> terms;
             TrialFluxes fluxes;
         };
-        thread_local std::array<Memo, 2> memo;
-        thread_local std::size_t older = 0;
-        for (std::size_t i = 0; i < memo.size(); ++i)
-            if (memo[i].model == id_ && same_terms(memo[i].terms, global)) {
-                older = 1 - i;
-                return memo[i].fluxes;
+        thread_local std::array<Memo, 4> memo;
+        thread_local std::uint64_t clock = 0;
+        ++clock;
+        for (auto& m : memo)
+            if (m.model == id_ && same_terms(m.terms, global)) {
+                m.used = clock;
+                return m.fluxes;
             }
-        Memo& m = memo[older];
+        Memo& m = *std::min_element(memo.begin(), memo.end(), [](const Memo& x, const Memo& y) { return x.used < y.used; });
         m.model = 0;  // not valid until filled (trial_fluxes may throw)
         m.fluxes = trial_fluxes(global);
         m.terms = global;
         m.model = id_;
-        older = 1 - older;
+        m.used = clock;
         return m.fluxes;
     }
 
