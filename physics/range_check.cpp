@@ -6,8 +6,7 @@
 
 namespace manikind::physics {
 
-void require_in_range(const char* name, double value, double lo, double hi, const char* unit) {
-    if (std::isfinite(value) && value >= lo && value <= hi) return;
+void throw_out_of_range(const char* name, double value, double lo, double hi, const char* unit) {
     std::ostringstream msg;
     msg << name << " = " << value << ' ' << unit << " is outside " << lo << ".." << hi << ' ' << unit;
     throw std::domain_error(msg.str());

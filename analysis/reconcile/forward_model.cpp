@@ -1,6 +1,8 @@
 // The forward models reconcile fits: the twin over recorded cases (with its noise model built
 // from the replicates and the instruments' specs), and the whole-body h of the paper's CFD table.
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -64,6 +66,13 @@ public:
                 index_.emplace_back(c, z);
             }
         }
+        // The twin as given at each trial (the zones a scoped term leaves alone); none where it
+        // cannot be evaluated (predict then computes every zone and fails as before).
+        try {
+            base_flux_ = trial_fluxes({});
+        } catch (const std::exception&) {
+            base_flux_.clear();
+        }
     }
     const std::vector<Point>& points() const override { return points_; }
     bool supports(const std::string&) const override { return true; }
@@ -77,6 +86,63 @@ public:
     std::vector<double> predict(const std::vector<tw::Term>& extra) const override {
         tw::TwinVersion v = base_;
         v.terms.insert(v.terms.end(), extra.begin(), extra.end());
+        const tw::ResolvedVersion resolved = tw::resolve(v);  // the terms read once, not per trial
+        // Terms scoped to some zones (a region's wet fraction, 16 of the demo's 22 candidates,
+        // 1-4 zones of 35) leave the other zones where the remaining terms put them: those are
+        // taken from the twin as given (kept) or from this thread's last four predictions with the
+        // same other terms (a pair's scan and the steps of its fit in the scoped term), and only the
+        // touched zones are computed. The same numbers: each zone's flux is its own.
+        std::vector<tw::Term> global;
+        bool scoped = false;
+        for (const auto& t : extra) {
+            if (zone_scoped(t)) scoped = true;
+            else global.push_back(t);
+        }
+        if (scoped && !base_flux_.empty()) {
+            try {
+                return average(resolved, extra, global.empty() ? base_flux_ : others(global));
+            } catch (const std::exception&) {
+                // computed in full below, failing as it always did
+            }
+        }
+        return average(resolved, {}, {});
+    }
+
+    // A term that changes only some zones: a region's wet fraction or garment, some zones' leak or gain.
+    static bool zone_scoped(const tw::Term& t) {
+        return t.name == "partial_wettedness" || t.name == "clothing" || t.name == "heat_leak" || t.name == "zone_gain";
+    }
+    static bool touches(const tw::Term& t, const tw::ZoneInput& z) {
+        if (t.name == "partial_wettedness" || t.name == "clothing") return t.region == z.region;
+        return std::find(t.zones.begin(), t.zones.end(), z.zone) != t.zones.end();
+    }
+    static bool same_terms(const std::vector<tw::Term>& a, const std::vector<tw::Term>& b) {
+        if (a.size() != b.size()) return false;
+        for (std::size_t i = 0; i < a.size(); ++i)
+            if (a[i].name != b[i].name || a[i].region != b[i].region || a[i].zones != b[i].zones || a[i].parameters != b[i].parameters ||
+                a[i].input != b[i].input || a[i].pattern != b[i].pattern)
+                return false;
+        return true;
+    }
+
+    // Each case's prediction, the mean over its trials of the twin (its zones' q_total): every
+    // zone computed, or (`rest` given) only those a term of `scoped` touches and the others from `rest`.
+    using TrialFluxes = std::vector<std::vector<std::vector<double>>>;  // [case][trial used][zone], W/m²
+    std::vector<double> average(const tw::ResolvedVersion& resolved, const std::vector<tw::Term>& scoped, const TrialFluxes& rest) const {
+        std::vector<tw::ZoneFlux> f;
+        std::vector<char> touched;
+        auto run = [&](std::size_t c, std::size_t slot, const tw::TrialConditions& cond) {
+            if (rest.empty()) {
+                tw::predict(resolved, cond, f);
+                return;
+            }
+            touched.assign(cond.zones.size(), 0);
+            for (std::size_t z = 0; z < cond.zones.size(); ++z)
+                for (const auto& t : scoped) touched[z] = touched[z] || touches(t, cond.zones[z]);
+            tw::predict(resolved, cond, f, &touched);
+            for (std::size_t z = 0; z < cond.zones.size(); ++z)
+                if (!touched[z]) f[z].q_total_w_m2 = rest.at(c).at(slot).at(z);
+        };
         std::vector<std::vector<double>> per_case(cases_.size());
         for (std::size_t c = 0; c < cases_.size(); ++c) {
             const auto& in = cases_[c];
@@ -86,12 +152,12 @@ public:
             int used = 0;
             for (const auto& t : in.trials) {
                 if (t.conditions.zones.size() != z_count) continue;
-                const auto f = tw::predict(v, t.conditions);
+                run(c, static_cast<std::size_t>(used), t.conditions);
                 for (std::size_t z = 0; z < z_count; ++z) q[z] += f[z].q_total_w_m2;
                 ++used;
             }
             if (used == 0) {
-                const auto f = tw::predict(v, in.conditions);
+                run(c, 0, in.conditions);
                 for (std::size_t z = 0; z < z_count; ++z) q[z] = f[z].q_total_w_m2;
             } else {
                 for (double& x : q) x /= used;
@@ -100,6 +166,55 @@ public:
         std::vector<double> out(points_.size());
         for (std::size_t i = 0; i < points_.size(); ++i) out[i] = per_case[index_[i].first][index_[i].second];
         return out;
+    }
+
+    // Every trial's zones under the twin as given plus `terms` (the slots `average` reads).
+    TrialFluxes trial_fluxes(const std::vector<tw::Term>& terms) const {
+        tw::TwinVersion v = base_;
+        v.terms.insert(v.terms.end(), terms.begin(), terms.end());
+        const tw::ResolvedVersion resolved = tw::resolve(v);
+        std::vector<tw::ZoneFlux> f;
+        TrialFluxes out(cases_.size());
+        auto keep = [&](std::vector<std::vector<double>>& slots, const tw::TrialConditions& cond) {
+            tw::predict(resolved, cond, f);
+            std::vector<double> q(f.size());
+            for (std::size_t z = 0; z < f.size(); ++z) q[z] = f[z].q_total_w_m2;
+            slots.push_back(std::move(q));
+        };
+        for (std::size_t c = 0; c < cases_.size(); ++c) {
+            const auto& in = cases_[c];
+            for (const auto& t : in.trials)
+                if (t.conditions.zones.size() == in.conditions.zones.size()) keep(out[c], t.conditions);
+            if (out[c].empty()) keep(out[c], in.conditions);
+        }
+        return out;
+    }
+
+    // This thread's last four trial fluxes under terms that touch every zone, kept by model and
+    // terms (four: a fit's steps in the scoped term come back to its point after steps in another,
+    // up and down for its covariance).
+    const TrialFluxes& others(const std::vector<tw::Term>& global) const {
+        struct Memo {
+            std::uint64_t model = 0;
+            std::uint64_t used = 0;  // when last asked for (the oldest is replaced)
+            std::vector<tw::Term> terms;
+            TrialFluxes fluxes;
+        };
+        thread_local std::array<Memo, 4> memo;
+        thread_local std::uint64_t clock = 0;
+        ++clock;
+        for (auto& m : memo)
+            if (m.model == id_ && same_terms(m.terms, global)) {
+                m.used = clock;
+                return m.fluxes;
+            }
+        Memo& m = *std::min_element(memo.begin(), memo.end(), [](const Memo& x, const Memo& y) { return x.used < y.used; });
+        m.model = 0;  // not valid until filled (trial_fluxes may throw)
+        m.fluxes = trial_fluxes(global);
+        m.terms = global;
+        m.model = id_;
+        m.used = clock;
+        return m.fluxes;
     }
 
     // Per case: the twin's response (W/m² per zone) to one unit of each shared error: air
@@ -596,6 +711,13 @@ private:
     std::optional<CarriedNoise> carried_;
     std::vector<Point> points_;
     std::vector<std::pair<std::size_t, std::size_t>> index_;
+    TrialFluxes base_flux_;  // the twin as given
+    // Tells this model's kept fluxes from another's (a thread's memo outlives the models it served).
+    std::uint64_t id_ = next_id();
+    static std::uint64_t next_id() {
+        static std::atomic<std::uint64_t> counter{0};
+        return ++counter;
+    }
 };
 
 class WholeBodyHModel final : public ForwardModel {

@@ -416,6 +416,8 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                                     ev::make_grids(*sim, ev::single_library(*sim, opt.hypotheses), std::max(12, opt.grid_steps)));
                             Options mine = o;
                             mine.grids = lab_grids;
+                            // Only the verdict is counted: reconcile may stop once it is settled.
+                            mine.verdict_for = Options::VerdictFor{jobs[j].w->t->d.label, calibration};
                             const Report r = reconcile(*sim, mine);
                             const bool named = names_concealed(r, jobs[j].w->t->d.label, calibration);
                             hit[j][at_i] = named ? 1 : 0;

@@ -609,7 +609,9 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
     // Without replicates (and no scatter carried from an earlier campaign) the random part is each
     // point's U/k: a lower bound on the real scatter, so nothing can be claimed at alpha on it.
     const bool lower_bound = !rep.noise.from_replicates && rep.noise.carried_from.empty() && model.supports("heat_leak");
-    const std::unique_ptr<NoiseResampler> resampler = model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
+    // With the threshold given (planning) no null is drawn, so no resampler is made for it.
+    const std::unique_ptr<NoiseResampler> resampler =
+        opt.null_threshold ? nullptr : model.noise_resampler(opt.instruments, opt.probe_shared_fraction);
     Stage st = run_stage(model, rep.noise, resampler.get(), grids, all_idx, rep.predicted_before, opt, opt.null_threshold);
     rep.covariance_draws = st.covariance_draws;
     {
@@ -701,24 +703,46 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
 
     std::optional<CandidateResult> claim;
     std::string why_not;
+    // Pairs: the winner with every other term, and pairs among the strongest singles. A pair
+    // must beat each of its singles beyond chance (chi2_1 with Bonferroni over the pairs
+    // tried) and the best single out of sample.
+    std::vector<std::pair<std::size_t, std::size_t>> pairs;
+    if (winner_single && opt.try_pairs) {
+        const std::size_t x = *winner_single;
+        std::vector<std::size_t> strong;
+        for (std::size_t k = 0; k < st.singles.size(); ++k)
+            if (st.singles[k].evidence > st.threshold) strong.push_back(k);
+        std::sort(strong.begin(), strong.end(), [&](auto a, auto b) { return st.singles[a].chi2 < st.singles[b].chi2; });
+        if (strong.size() > 4) strong.resize(4);
+        std::set<std::pair<std::size_t, std::size_t>> chosen_pairs;
+        for (std::size_t k = 0; k < library.size(); ++k)
+            if (k != x) chosen_pairs.insert(std::minmax(x, k));
+        for (std::size_t a = 0; a < strong.size(); ++a)
+            for (std::size_t b = a + 1; b < strong.size(); ++b) chosen_pairs.insert(std::minmax(strong[a], strong[b]));
+        pairs.assign(chosen_pairs.begin(), chosen_pairs.end());
+    }
+    // The planner's verdict settled already: the claim can only be the winning single or one of
+    // these pairs, and names_concealed needs the label in it with calibration terms beside it.
+    if (opt.verdict_for && winner_single) {
+        const auto& want = *opt.verdict_for;
+        auto is = [&](std::size_t k) { return library[k].label() == want.label; };
+        auto partner = [&](std::size_t k) {
+            return library[k].zones.empty() && std::any_of(want.calibration.begin(), want.calibration.end(), [&](const auto& c) {
+                       return c.name == library[k].term && c.region == library[k].region;
+                   });
+        };
+        bool could = is(*winner_single);
+        for (const auto& [a, b] : pairs) could = could || (is(a) && partner(b)) || (is(b) && partner(a));
+        if (!could) {
+            rep.statement = "verdict only (planning): " + st.singles[*winner_single].label + " wins, and no pair tried could name " +
+                            want.label + " beside a calibration term";
+            return rep;
+        }
+    }
     if (winner_single) {
         const std::size_t x = *winner_single;
         CandidateResult chosen = st.singles[x];
-        // Pairs: the winner with every other term, and pairs among the strongest singles. A pair
-        // must beat each of its singles beyond chance (chi2_1 with Bonferroni over the pairs
-        // tried) and the best single out of sample.
         if (opt.try_pairs) {
-            std::vector<std::size_t> strong;
-            for (std::size_t k = 0; k < st.singles.size(); ++k)
-                if (st.singles[k].evidence > st.threshold) strong.push_back(k);
-            std::sort(strong.begin(), strong.end(), [&](auto a, auto b) { return st.singles[a].chi2 < st.singles[b].chi2; });
-            if (strong.size() > 4) strong.resize(4);
-            std::set<std::pair<std::size_t, std::size_t>> chosen_pairs;
-            for (std::size_t k = 0; k < library.size(); ++k)
-                if (k != x) chosen_pairs.insert(std::minmax(x, k));
-            for (std::size_t a = 0; a < strong.size(); ++a)
-                for (std::size_t b = a + 1; b < strong.size(); ++b) chosen_pairs.insert(std::minmax(strong[a], strong[b]));
-            std::vector<std::pair<std::size_t, std::size_t>> pairs(chosen_pairs.begin(), chosen_pairs.end());
             std::vector<CandidateResult> pair_results(pairs.size());
             auto work = [&](std::size_t begin) {
                 for (std::size_t i = begin; i < pairs.size(); i += 2) {
@@ -843,6 +867,11 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
                 claim = chosen;
             }
         }
+    }
+    if (opt.verdict_for) {  // the planner reads the claim alone, not the report around it
+        rep.explanation = claim;
+        rep.statement = "verdict only (planning): " + (claim ? claim->label + " claimed" : why_not.empty() ? "no claim" : why_not);
+        return rep;
     }
     for (auto& r : results) {
         if (claim && r.label == claim->label) {

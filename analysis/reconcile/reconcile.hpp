@@ -152,6 +152,16 @@ struct Options {
     // seed fixes whatever effect is concealed, so sharing it changes no answer. Ignored (made
     // anew) when its candidates are not this model's.
     std::shared_ptr<const std::vector<evidence::Grid>> grids;
+    // Planning only: the planner wants the verdict alone, names_concealed(report, label,
+    // calibration). Where the winning single is another term and no pair reconcile tries could
+    // name `label` beside a calibration term, that verdict is "not named" whatever the pairs and
+    // intervals say: the report stops there. Otherwise it stops once the claim is settled. Either
+    // way it holds the claim (`explanation`) and a short statement, no candidates or statistics.
+    struct VerdictFor {
+        std::string label;
+        std::vector<physics::twin::Term> calibration;
+    };
+    std::optional<VerdictFor> verdict_for;
 };
 
 Report reconcile(const ForwardModel& model, const Options& options = {});

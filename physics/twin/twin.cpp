@@ -1,13 +1,18 @@
 #include "physics/twin/twin.hpp"
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <stdexcept>
 
 #include "physics/constants.hpp"
 #include "physics/convection.hpp"
 #include "physics/heat_exchange.hpp"
 #include "physics/psychrometrics.hpp"
+#include "physics/range_check.hpp"
 
 namespace manikind::physics::twin {
 namespace {
@@ -52,49 +57,30 @@ double param(const Term& term, const char* key, double fallback) {
     return it == term.parameters.end() ? fallback : it->second;
 }
 
-// The resolved knobs of one version, looked up once per prediction.
-struct Knobs {
-    double gamma = 0.0;
-    double h0_w_m2k = 0.0;
-    double forced_scale = 0.0;
-    double wall_offset_c = 0.0;
-    double air_bias_c = 0.0;
-    double textile_r_m2k_w = 0.0;
-    std::vector<std::pair<std::string, double>> wettedness_by_region;
-    std::vector<std::pair<std::vector<int>, double>> leaks;
-    std::vector<std::pair<std::vector<int>, double>> gains;
-    struct Garment {
-        std::string region;
-        double icl_m2k_w = 0.0, recl_m2kpa_w = 0.0, fcl = 1.0;
-    };
-    std::vector<Garment> garments;
-    struct Pattern {
-        std::string input, pattern;
-        double value = 0.0, ref_height_m = 1.1;
-    };
-    std::vector<Pattern> patterns;
-};
+// The baseline constants by segment name without copying them (predict looks one up per zone).
+const SegmentConstants* find_segment(const std::string& segment) {
+    for (const auto& s : baseline_segments())
+        if (s.segment == segment) return &s;
+    return nullptr;
+}
 
-Knobs resolve(const TwinVersion& v) {
-    Knobs k;
-    for (const Term& t : v.terms) {
-        validate_term(t);
-        if (t.name == "humidity_buoyancy") k.gamma = param(t, "gamma", 0.0);
-        else if (t.name == "diffusion_floor") k.h0_w_m2k = param(t, "h0", 0.0);
-        else if (t.name == "mixed_convection") k.forced_scale = param(t, "scale", 0.0);
-        else if (t.name == "wall_offset") k.wall_offset_c = param(t, "delta_c", 0.0);
-        else if (t.name == "air_temp_bias") k.air_bias_c = param(t, "bias_c", 0.0);
-        else if (t.name == "textile_resistance") k.textile_r_m2k_w = param(t, "r_m2k_w", 0.0);
-        else if (t.name == "partial_wettedness") k.wettedness_by_region.emplace_back(t.region, param(t, "fraction", 1.0));
-        else if (t.name == "heat_leak") k.leaks.emplace_back(t.zones, param(t, "q_w_m2", 0.0));
-        else if (t.name == "zone_gain") k.gains.emplace_back(t.zones, param(t, "gain", 0.0));
-        else if (t.name == "clothing")
-            k.garments.push_back({t.region, std::max(0.0, param(t, "icl_m2k_w", 0.0)), std::max(0.0, param(t, "recl_m2kpa_w", 0.0)),
-                                  std::clamp(param(t, "fcl", 1.0), 1.0, 3.0)});
-        else if (t.name == "input_pattern")
-            k.patterns.push_back({t.input, t.pattern, param(t, "value", 0.0), param(t, "ref_height_m", 1.1)});
-    }
-    return k;
+// Saturation pressure, remembered per temperature on each thread: a trial's skin and air
+// temperatures recur in every prediction of a campaign (exp and pow were an eighth of reconcile's
+// time). The same function's value, so the same number; a temperature it refuses is not kept.
+double saturation_pa(double temp_c) {
+    struct Slot {
+        double temp_c = std::numeric_limits<double>::quiet_NaN();  // NaN never matches
+        double p_pa = 0.0;
+    };
+    constexpr std::size_t kSlots = 4096;
+    thread_local std::array<Slot, kSlots> cache;
+    const auto bits = std::bit_cast<std::uint64_t>(temp_c);
+    Slot& slot = cache[static_cast<std::size_t>((bits * 0x9E3779B97F4A7C15ull) >> 52) % kSlots];
+    if (slot.temp_c == temp_c) return slot.p_pa;
+    const double p_pa = saturation_vapour_pressure_pa(temp_c);
+    slot.temp_c = temp_c;
+    slot.p_pa = p_pa;
+    return p_pa;
 }
 
 }  // namespace
@@ -164,22 +150,51 @@ void validate_term(const Term& term) {
     }
 }
 
+ResolvedVersion resolve(const TwinVersion& v) {
+    ResolvedVersion k;
+    for (const Term& t : v.terms) {
+        validate_term(t);
+        if (t.name == "humidity_buoyancy") k.gamma = param(t, "gamma", 0.0);
+        else if (t.name == "diffusion_floor") k.h0_w_m2k = param(t, "h0", 0.0);
+        else if (t.name == "mixed_convection") k.forced_scale = param(t, "scale", 0.0);
+        else if (t.name == "wall_offset") k.wall_offset_c = param(t, "delta_c", 0.0);
+        else if (t.name == "air_temp_bias") k.air_bias_c = param(t, "bias_c", 0.0);
+        else if (t.name == "textile_resistance") k.textile_r_m2k_w = param(t, "r_m2k_w", 0.0);
+        else if (t.name == "partial_wettedness") k.wettedness_by_region.emplace_back(t.region, param(t, "fraction", 1.0));
+        else if (t.name == "heat_leak") k.leaks.emplace_back(t.zones, param(t, "q_w_m2", 0.0));
+        else if (t.name == "zone_gain") k.gains.emplace_back(t.zones, param(t, "gain", 0.0));
+        else if (t.name == "clothing")
+            k.garments.push_back({t.region, std::max(0.0, param(t, "icl_m2k_w", 0.0)), std::max(0.0, param(t, "recl_m2kpa_w", 0.0)),
+                                  std::clamp(param(t, "fcl", 1.0), 1.0, 3.0)});
+        else if (t.name == "input_pattern")
+            k.patterns.push_back({t.input, t.pattern, param(t, "value", 0.0), param(t, "ref_height_m", 1.1)});
+    }
+    return k;
+}
+
 std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions& trial) {
-    const Knobs k = resolve(version);
+    std::vector<ZoneFlux> out;
+    predict(resolve(version), trial, out);
+    return out;
+}
+
+void predict(const ResolvedVersion& k, const TrialConditions& trial, std::vector<ZoneFlux>& out, const std::vector<char>* only) {
     const double air_trial_c = trial.air_temp_c - k.air_bias_c;  // the probe read air + bias
     const double wall_trial_c = trial.wall_temp_c.value_or(trial.air_temp_c) + k.wall_offset_c;
     const double speed_m_s = std::max(0.0, trial.air_speed_m_s.value_or(0.0));
-    const double p_air_trial_pa = vapour_pressure_pa(air_trial_c, trial.air_rh_pct);
+    require_in_range("relative humidity", trial.air_rh_pct, 0.0, 100.0, "%");  // as vapour_pressure_pa
+    const double p_air_trial_pa = trial.air_rh_pct / 100.0 * saturation_pa(air_trial_c);
     const double c_air_trial_kg_m3 = vapour_concentration_kg_m3(p_air_trial_pa, air_trial_c);
     const double h_forced_w_m2k = k.forced_scale > 0.0 ? k.forced_scale * h_forced_de_dear_w_m2k(speed_m_s) : 0.0;
 
-    std::vector<ZoneFlux> out;
-    out.reserve(trial.zones.size());
     if (!trial.zone_wettedness.empty() && trial.zone_wettedness.size() != trial.zones.size())
         throw std::invalid_argument("zone_wettedness: one value per zone, or none");
+    if (only && only->size() != trial.zones.size()) throw std::invalid_argument("predict: one flag per zone");
+    out.resize(trial.zones.size());
     for (std::size_t zi = 0; zi < trial.zones.size(); ++zi) {
+        if (only && !(*only)[zi]) continue;
         const ZoneInput& z = trial.zones[zi];
-        const auto seg = baseline_segment(z.segment);
+        const SegmentConstants* seg = find_segment(z.segment);
         if (!seg) throw std::invalid_argument("zone " + std::to_string(z.zone) + ": unknown segment '" + z.segment + "'");
         double wettedness = trial.zone_wettedness.empty() ? trial.wettedness : std::clamp(trial.zone_wettedness[zi], 0.0, 1.0);
         for (const auto& [region, fraction] : k.wettedness_by_region)
@@ -210,7 +225,7 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
             const double dt_c = surface_c - air_c;
             // One saturation pressure per surface temperature serves both the concentration and
             // Eq. 1 (reconcile evaluates this thousands of times per campaign).
-            const double p_surface_pa = saturation_vapour_pressure_pa(surface_c);
+            const double p_surface_pa = saturation_pa(surface_c);
             const double dc_kg_m3 = vapour_concentration_kg_m3(p_surface_pa, surface_c) - c_air_kg_m3;
             const double drive_c = dt_c + k.gamma * wettedness * dc_kg_m3;  // Eq. 7 with omega
             double h = k.h0_w_m2k + seg->wissler_a * std::sqrt(std::sqrt(std::abs(drive_c)));  // |.|^(1/4)
@@ -227,7 +242,7 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
             return f;
         };
 
-        const Knobs::Garment* garment = nullptr;
+        const ResolvedVersion::Garment* garment = nullptr;
         for (const auto& g : k.garments)
             if (g.region == z.region) garment = &g;
         ZoneFlux f = fluxes_at(z.skin_temp_c);
@@ -256,7 +271,7 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
             f.h_c_w_m2k = c.h_c_w_m2k;
             f.q_convection_w_m2 = fcl * c.q_convection_w_m2;
             f.q_radiation_w_m2 = fcl * c.q_radiation_w_m2;
-            const double p_skin_pa = saturation_vapour_pressure_pa(z.skin_temp_c);
+            const double p_skin_pa = saturation_pa(z.skin_temp_c);
             const double h_e = baseline_lewis_k_kpa * std::max(c.h_c_w_m2k, 1e-9);  // W/m²kPa
             f.q_evaporation_w_m2 = p_skin_pa > p_air_pa
                                        ? wettedness * (p_skin_pa - p_air_pa) / 1000.0 / (garment->recl_m2kpa_w + 1.0 / (fcl * h_e))
@@ -292,9 +307,8 @@ std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions&
                 f.q_other_w_m2 *= 1.0 + gain;
                 f.q_total_w_m2 *= 1.0 + gain;
             }
-        out.push_back(f);
+        out[zi] = f;
     }
-    return out;
 }
 
 double area_weighted_mean_w_m2(const std::vector<ZoneFlux>& fluxes, const std::vector<ZoneInput>& zones,

@@ -91,6 +91,39 @@ void validate_term(const Term& term);
 // Predicts every zone of one trial. Throws std::invalid_argument for an unknown segment or term.
 std::vector<ZoneFlux> predict(const TwinVersion& version, const TrialConditions& trial);
 
+// A version's terms read and checked once (validate_term on each), for a caller that predicts many
+// trials with one version: reconcile's forward model does so thousands of times per campaign, and
+// reading the terms' names for every trial was a tenth of its time (issue 62).
+struct ResolvedVersion {
+    double gamma = 0.0;
+    double h0_w_m2k = 0.0;
+    double forced_scale = 0.0;
+    double wall_offset_c = 0.0;
+    double air_bias_c = 0.0;
+    double textile_r_m2k_w = 0.0;
+    std::vector<std::pair<std::string, double>> wettedness_by_region;
+    std::vector<std::pair<std::vector<int>, double>> leaks;
+    std::vector<std::pair<std::vector<int>, double>> gains;
+    struct Garment {
+        std::string region;
+        double icl_m2k_w = 0.0, recl_m2kpa_w = 0.0, fcl = 1.0;
+    };
+    std::vector<Garment> garments;
+    struct Pattern {
+        std::string input, pattern;
+        double value = 0.0, ref_height_m = 1.1;
+    };
+    std::vector<Pattern> patterns;  // input_pattern terms
+};
+ResolvedVersion resolve(const TwinVersion& version);  // throws as predict does for an unknown term
+
+// predict() into `out` (resized to the trial's zones, its storage reused). With `only` (one flag
+// per zone), only the flagged zones are computed and the others left as they were: a zone's flux
+// depends on its own inputs and the version alone, so a flagged zone's value is the same number
+// predict() gives it.
+void predict(const ResolvedVersion& version, const TrialConditions& trial, std::vector<ZoneFlux>& out,
+             const std::vector<char>* only = nullptr);
+
 // Area-weighted mean of the zone totals (regions and whole body, as for measurements).
 double area_weighted_mean_w_m2(const std::vector<ZoneFlux>& fluxes, const std::vector<ZoneInput>& zones,
                                const std::vector<int>& zone_ids);

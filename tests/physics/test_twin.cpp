@@ -183,3 +183,42 @@ TEST_CASE("twin: an input_pattern moves its input at each zone by value x the pa
         CHECK_THROWS_AS(validate_term(Term{"input_pattern", {{"value", 1.0}}, "", {}, "air_speed", "height"}), std::invalid_argument);
     }
 }
+
+TEST_CASE("twin: a version resolved once and only some zones predicted give predict's numbers exactly", "[physics][twin]") {
+    // Reconcile's forward model resolves a version once for all trials, reuses one output and
+    // computes only the zones a scoped term touches: every number must be predict's own, bit for bit.
+    TrialConditions trial;
+    trial.air_temp_c = 35.3;
+    trial.air_rh_pct = 41.0;
+    trial.wettedness = 1.0;
+    trial.air_speed_m_s = 0.2;
+    trial.wall_temp_c = 34.6;
+    trial.zones = andi35_zones(35.0);
+    for (std::size_t i = 0; i < trial.zones.size(); ++i) trial.zones[i].skin_temp_c = 34.2 + 0.05 * static_cast<double>(i);
+    const TwinVersion v{"v", {{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}},
+                             {"textile_resistance", {{"r_m2k_w", 0.0054}}, "", {}},
+                             {"partial_wettedness", {{"fraction", 0.4}}, "head", {}},
+                             {"clothing", {{"icl_m2k_w", 0.1}, {"recl_m2kpa_w", 0.015}, {"fcl", 1.2}}, "chest", {}},
+                             {"mixed_convection", {{"scale", 1.0}}, "", {}}}};
+    const auto full = predict(v, trial);
+    const ResolvedVersion resolved = resolve(v);
+    std::vector<ZoneFlux> out;
+    for (int round = 0; round < 2; ++round) {  // the second reuses the first's storage (and cached pressures)
+        predict(resolved, trial, out);
+        REQUIRE(out.size() == full.size());
+        for (std::size_t i = 0; i < full.size(); ++i) {
+            CHECK(out[i].q_total_w_m2 == full[i].q_total_w_m2);
+            CHECK(out[i].surface_temp_c == full[i].surface_temp_c);
+            CHECK(out[i].h_c_w_m2k == full[i].h_c_w_m2k);
+        }
+    }
+    std::vector<char> only(trial.zones.size(), 0);
+    std::vector<ZoneFlux> some(trial.zones.size());
+    for (auto& f : some) f.q_total_w_m2 = -1.0;
+    for (std::size_t i = 0; i < only.size(); i += 3) only[i] = 1;
+    predict(resolved, trial, some, &only);
+    for (std::size_t i = 0; i < full.size(); ++i)
+        CHECK(some[i].q_total_w_m2 == (only[i] ? full[i].q_total_w_m2 : -1.0));
+    // An unknown term is refused when resolved, as predict refuses it.
+    CHECK_THROWS_AS(resolve(TwinVersion{"x", {{"warp_drive", {}, "", {}}}}), std::invalid_argument);
+}

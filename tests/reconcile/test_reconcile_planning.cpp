@@ -213,6 +213,46 @@ TEST_CASE("planning: the verdict names the concealed term alone or beside the la
     CHECK_FALSE(rc::names_concealed(report({gamma, textile}, {10.0, 0.0008}, {30.0, 0.0012}), "textile_resistance", lab));
 }
 
+TEST_CASE("planning: reconcile asked for the verdict alone gives the verdict the whole report gives, and stops early "
+          "where another term wins and no pair could name the concealed one",
+          "[planning][power]") {
+    const auto model = recorded(15);
+    rc::Options opt;
+    opt.null_simulations = 400;
+    const auto simulator = model->campaign_simulator(opt.instruments, 1.0);
+    REQUIRE(simulator);
+    const tw::Term gamma{"humidity_buoyancy", {{"gamma", 146.0}}, "", {}};
+    int stopped = 0;
+    for (const std::string label : {"humidity_buoyancy", "textile_resistance"}) {
+        for (std::uint64_t seed : {99u, 100u}) {
+            std::vector<tw::Term> calibration;
+            const auto lab = simulator->draw({gamma}, 3, seed, &calibration);
+            const rc::Report whole = rc::reconcile(*lab, opt);
+            rc::Options verdict = opt;
+            verdict.verdict_for = rc::Options::VerdictFor{label, calibration};
+            const rc::Report quick = rc::reconcile(*lab, verdict);
+            INFO(label << " on lab " << seed << ": " << whole.statement);
+            CHECK(rc::names_concealed(quick, label, calibration) == rc::names_concealed(whole, label, calibration));
+            if (quick.statement.find("no pair tried could name") != std::string::npos) {
+                ++stopped;
+                CHECK(label != "humidity_buoyancy");
+                continue;
+            }
+            // Stopped once the claim was settled: the claim itself, as the whole report gives it.
+            REQUIRE(quick.explanation.has_value() == whole.explanation.has_value());
+            if (whole.explanation) {
+                CHECK(quick.explanation->label == whole.explanation->label);
+                CHECK(quick.explanation->values == whole.explanation->values);
+                CHECK(quick.explanation->interval_lo == whole.explanation->interval_lo);
+                CHECK(quick.explanation->interval_hi == whole.explanation->interval_hi);
+            }
+        }
+    }
+    // A large gamma wins in both labs; in one the textile term cannot be named and it stops there
+    // (in the other the textile term and the air bias are both strong: their pair could name it).
+    CHECK(stopped >= 1);
+}
+
 TEST_CASE("planning: a bracket around 80 % that climbs steeply is tried once more at its geometric middle, a fine one "
           "is read as it is",
           "[planning][power]") {
@@ -435,6 +475,33 @@ TEST_CASE("planning: a drawn lab's grids are the same whatever effect is conceal
     rc::Options wrong = opt;
     wrong.grids = std::make_shared<const std::vector<ev::Grid>>(ev::make_grids(*other, ev::single_library(*other), 12));
     CHECK(rc::reconcile(*with, wrong).statement == mine.statement);
+}
+
+TEST_CASE("planning: a prediction with a term scoped to some zones is the full prediction exactly (the other zones "
+          "taken from the twin as given or from the thread's last prediction with the same other terms)",
+          "[planning][power]") {
+    // The forward model computes only the zones a region's wet fraction (or a zone's leak or gain)
+    // touches and takes the rest from what it kept: the numbers must be those of every zone
+    // computed, here a model whose own version holds the same terms (predicted in full).
+    test::SyntheticOptions o;
+    o.seed = 21;
+    o.replicates = 3;
+    const auto cases = test::make_campaign(tw::TwinVersion{"world", {}}, o);
+    const auto model = rc::make_twin_model(cases, tw::TwinVersion{});
+    auto full = [&](const std::vector<tw::Term>& terms) { return rc::make_twin_model(cases, tw::TwinVersion{"all", terms})->predict({}); };
+    auto wet = [](double f) { return tw::Term{"partial_wettedness", {{"fraction", f}}, "head", {}}; };
+    auto gamma = [](double g) { return tw::Term{"humidity_buoyancy", {{"gamma", g}}, "", {}}; };
+    const tw::Term leak{"heat_leak", {{"q_w_m2", 7.0}}, "", {5, 23}};
+    const tw::Term gain{"zone_gain", {{"gain", 0.03}}, "", {2}};
+    // In the order a pair's scan and fit ask: the same global term again (kept), another, back.
+    const std::vector<std::vector<tw::Term>> asked = {
+        {wet(0.5)}, {gamma(100.0), wet(0.5)}, {gamma(100.0), wet(0.7)}, {gamma(120.0), wet(0.7)},
+        {gamma(100.0), wet(0.9)}, {gamma(120.0), wet(0.2)}, {gamma(80.0), leak}, {leak, gain}, {wet(0.3), gain},
+        {gamma(100.0)}, {gamma(100.0), wet(0.5)}};
+    for (const auto& extra : asked) {
+        INFO(extra.size() << " terms, the first " << extra.front().name);
+        CHECK(model->predict(extra) == full(extra));
+    }
 }
 
 TEST_CASE("planning: the plan is the same on one thread and on two (each drawn campaign from its own seed and its "
