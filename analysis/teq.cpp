@@ -167,7 +167,12 @@ Calibration calibrate(const Campaign& campaign, const CampaignResult& analysis, 
     for (const char* ch : {"skin_temp_c", "heat_flux_w_m2", "air_temp_c", "wall_temp_c"}) c.instruments[ch] = campaign.instrument(ch);
     const ZoneMap& map = campaign.zone_map;
     std::set<int> cases;
-    for (const auto& cs : analysis.cases)
+    for (const auto& cs : analysis.cases) {
+        // teq is a dry heat exchange: a wet skin's evaporation would be fitted as convection.
+        if (cs.wettedness && *cs.wettedness > 0.0)
+            throw std::invalid_argument(fmt::format("{}: case {}: wettedness {:.2f}: a calibration for teq is run with a dry skin "
+                                                    "(evaporation is not part of h_cal)",
+                                                    campaign.name, cs.case_id, *cs.wettedness));
         for (const auto& t : cs.trials) {
             if (!t.included) {
                 c.warnings.push_back(fmt::format("case {} trial {} left out: {}", cs.case_id, t.id, t.exclusion_reason));
@@ -202,6 +207,7 @@ Calibration calibrate(const Campaign& campaign, const CampaignResult& analysis, 
             c.trials.push_back(std::move(ct));
             cases.insert(cs.case_id);
         }
+    }
     for (const auto& cs : analysis.unanalysed_cases)
         c.warnings.push_back(fmt::format("case {}: no steady trial, left out", cs.case_id));
     if (c.trials.empty())
@@ -721,6 +727,10 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             c.whole_body = finish("whole_body", values, mean(values), moved, whole_spread.sd(), a, ts, q);
         }
         if (c.replicates == 1) c.notes.push_back("one replicate: Type A from the calibration's fit only");
+        if (cs.wettedness && *cs.wettedness > 0.0)
+            out.warnings.push_back(fmt::format("case {}: wettedness {:.2f}: q includes evaporation, so teq (a dry-heat index) "
+                                               "comes out too high; measure teq with a dry skin",
+                                               cs.case_id, *cs.wettedness));
         out.cases.push_back(std::move(c));
     }
     if (out.cases.empty()) throw std::invalid_argument(fmt::format("{}: no case with a steady trial", campaign.name));
@@ -804,10 +814,12 @@ plot::Figure comfort_figure(const Result& r) {
     plot::Figure f;
     const double panel_h = 420.0;
     f.width_px = 900.0;
-    f.height_px = 70.0 + panel_h * static_cast<double>(r.cases.size());
+    f.height_px = 84.0 + panel_h * static_cast<double>(r.cases.size());
     f.title = fmt::format("Equivalent temperature per zone: {} (calibration {})", r.campaign, r.calibration_campaign);
-    f.notes.push_back(fmt::format("teq ± U95 (ISO 14505-2) against the neutral range of each zone; ranges: {}", r.ranges.source));
-    double y = 60.0;
+    f.notes.push_back("teq ± U95 (ISO 14505-2) beside each zone's neutral range (grey)");
+    f.notes.push_back(r.ranges.placeholder ? std::string("neutral ranges: placeholders 21-26 °C, not from a source (--ranges)")
+                                           : "neutral ranges: " + r.ranges.source);
+    double y = 74.0;
     for (const auto& c : r.cases) {
         plot::XYPanel p;
         p.box = {0.0, y, f.width_px, panel_h};

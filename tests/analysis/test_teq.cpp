@@ -51,11 +51,10 @@ TEST_CASE("teq: without errors or noise the calibration recovers each zone's h a
     CHECK(back.instruments.at("wall_temp_c").accuracy == 0.15);
 }
 
-TEST_CASE("teq: 40 labs with their own instrument errors: teq per zone and whole body inside U95 in 95 % of cases, "
-          "binomial margin", "[teq][proof]") {
+TEST_CASE("teq: 40 labs with their own instrument errors: teq per zone and whole body inside U95 in 95 % of cases "
+          "within the binomial margin", "[teq][proof]") {
     const Manikin m;
-    teq::Options o;
-    o.monte_carlo_draws = 600;
+    const teq::Options o;  // the commands' defaults (2000 draws)
     const int labs = 40;
     int zone_checks = 0, zone_inside = 0, whole_inside = 0, h_checks = 0, h_inside = 0;
     double widest_u95 = 0.0;
@@ -98,8 +97,8 @@ TEST_CASE("teq: 40 labs with their own instrument errors: teq per zone and whole
     CHECK(widest_u95 < 1.5);    // useful: a zone's teq to better than ±1.5 K
 }
 
-TEST_CASE("teq: a calibration campaign whose walls are not at the air temperature or whose air moves is refused, naming "
-          "the case and the quantity", "[teq]") {
+TEST_CASE("teq: a calibration campaign whose walls are not at the air temperature or whose air moves or whose skin is wet "
+          "is refused naming the case and the quantity", "[teq]") {
     const Manikin m;
     std::mt19937_64 rng(7);
     manikind::test::TempDir dir;
@@ -127,9 +126,17 @@ TEST_CASE("teq: a calibration campaign whose walls are not at the air temperatur
             CHECK_THAT(e.what(), Catch::Contains("case 3") && Catch::Contains("air speed") && Catch::Contains("0.300 m/s"));
         }
     }
+    {
+        auto wet = calibration_campaign(m, exact, n, rng);
+        for (auto& t : wet.trials)
+            if (t.info.case_id == 1) t.info.wettedness = 1.0;
+        const auto cal = round_trip(wet, dir.path / "wet");
+        CHECK_THROWS_WITH(teq::calibrate(cal, an::analyze_campaign(cal), {}),
+                          Catch::Contains("case 1") && Catch::Contains("wettedness 1.00"));
+    }
 }
 
-TEST_CASE("teq: bad calibration and range files name the file, line and field", "[teq]") {
+TEST_CASE("teq: bad calibration and range files name the file and line and field", "[teq]") {
     manikind::test::TempDir dir;
     std::filesystem::create_directories(dir.path);
     const auto file = dir.path / "cal.json";
