@@ -3,14 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <numeric>
 #include <random>
 #include <set>
 #include <sstream>
 #include <stdexcept>
 #include <tuple>
 
-#include <boost/math/distributions/students_t.hpp>
 #include <fmt/core.h>
 
 #include "analysis/input_error.hpp"
@@ -91,25 +89,14 @@ Draw draw_errors(const std::map<std::string, InstrumentSpec>& instruments, std::
     return d;
 }
 
-double t_quantile(double dof, double p) {
-    if (!(dof > 0.0) || !std::isfinite(dof) || dof > 1e6) return boost::math::quantile(boost::math::students_t(1e6), p);
-    return boost::math::quantile(boost::math::students_t(dof), p);
-}
-
 // A Type A part: standard uncertainty and its degrees of freedom.
 struct TypeA {
     double u = kNaN;
     double dof = 0.0;
 };
 
-TypeA mean_type_a(const std::vector<double>& v) {
-    if (v.size() < 2) return {};
-    const double n = static_cast<double>(v.size());
-    const double m = std::accumulate(v.begin(), v.end(), 0.0) / n;
-    double ss = 0.0;
-    for (double x : v) ss += (x - m) * (x - m);
-    return {std::sqrt(ss / (n - 1.0) / n), n - 1.0};
-}
+// The replicates' mean: s / sqrt(n) on n - 1 dof (uncertainty.hpp; NaN for one replicate).
+TypeA mean_type_a(const std::vector<double>& v) { return {type_a_of_mean(v), static_cast<double>(v.size()) - 1.0}; }
 
 // Independent Type A parts added in quadrature, Welch-Satterthwaite dof (GUM G.4.1).
 TypeA add(const std::vector<TypeA>& parts) {
@@ -134,7 +121,7 @@ Value make_value(double value, TypeA a, double u_b, double confidence) {
     const double ua = std::isfinite(a.u) ? a.u : 0.0;
     v.u_c = std::hypot(ua, u_b);
     v.dof = ua > 0.0 && a.dof > 0.0 ? std::min(kInfinite, std::pow(v.u_c, 4) / (std::pow(ua, 4) / a.dof)) : kInfinite;
-    v.k = std::isfinite(a.u) ? t_quantile(v.dof, 0.5 + confidence / 2.0) : 2.0;
+    v.k = std::isfinite(a.u) ? coverage_factor(v.dof >= kInfinite ? kInfiniteDof : v.dof, confidence) : 2.0;
     v.U95 = v.k * v.u_c;
     return v;
 }
