@@ -17,6 +17,7 @@ const std::vector<CommandGroup>& command_groups() {
         {add_simulate_command, {"simulate-campaign"}},
         {add_reconcile_command, {"reconcile"}},
         {add_clothing_command, {"clothing"}},
+        {add_comfort_commands, {"calibrate", "teq"}},
         {add_physio_command, {"physio"}},
         {add_demo_command, {"demo"}},
         {add_thermoreg_command, {"thermoreg"}},

@@ -16,6 +16,7 @@ void add_analyze_command(CLI::App& app);     // cmd_analyze.cpp: `manikin analyz
 void add_simulate_command(CLI::App& app);    // cmd_simulate.cpp: `manikin simulate-campaign`
 void add_reconcile_command(CLI::App& app);   // cmd_reconcile.cpp: `manikin reconcile`
 void add_clothing_command(CLI::App& app);    // cmd_clothing.cpp: `manikin clothing <campaign>`
+void add_comfort_commands(CLI::App& app);    // cmd_comfort.cpp: `manikin calibrate`, `manikin teq` (ISO 14505-2)
 void add_physio_command(CLI::App& app);      // cmd_physio.cpp: `manikin physio <campaign>`
 void add_demo_command(CLI::App& app);        // cmd_demo.cpp: `manikin demo` (the README main job)
 void add_thermoreg_command(CLI::App& app);   // cmd_thermoreg.cpp: `manikin thermoreg [sweep|speeds]`
