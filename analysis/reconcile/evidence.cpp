@@ -151,6 +151,7 @@ ProfileMin profile_min(const Eigen::Ref<const Eigen::VectorXd>& chi2, const Grid
         return out;
     }
     out.chi2 = chi2(best);
+    out.grid_chi2 = out.chi2;
     out.theta = g.theta[static_cast<std::size_t>(best)];
     if (best > 0 && best + 1 < n && g.valid[static_cast<std::size_t>(best - 1)] && g.valid[static_cast<std::size_t>(best + 1)]) {
         const double a = chi2(best - 1), b = chi2(best), d = chi2(best + 1);

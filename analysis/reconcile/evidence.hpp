@@ -67,6 +67,7 @@ struct ProfileMin {
     double chi2 = 0.0;
     double theta = 0.0;
     double curvature = 0.0;   // d²chi2/dtheta² from the parabola (0 when not available)
+    double grid_chi2 = 0.0;   // at the best grid point itself (the parabola's value is a guess between points)
 };
 ProfileMin profile_min(const Eigen::Ref<const Eigen::VectorXd>& chi2, const Grid& g);
 

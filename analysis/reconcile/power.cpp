@@ -15,6 +15,8 @@
 #include <set>
 #include <thread>
 
+#include <fmt/format.h>
+
 #include <boost/math/distributions/non_central_chi_squared.hpp>
 
 #include "analysis/reconcile/evidence.hpp"
@@ -555,6 +557,8 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
             if (!d.value || std::abs(*e.value - d.null_value) < std::abs(*d.value - d.null_value)) {
                 d.value = e.value;
                 d.simulated_power = std::max(d.simulated_power, e.simulated_power);
+                // Said as what it is: the limit reached with fewer replicates, not this method's own.
+                d.method = fmt::format("as at {} replicates", e.replicates);
             }
         }
     }

@@ -98,6 +98,7 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
         j["explanation"] = nullptr;
     }
     j["statement"] = r.statement;
+    j["measurement"] = r.measurement;
     if (r.remainder.empty()) {
         j["remainder"] = nullptr;
     } else {
@@ -258,6 +259,7 @@ std::string report_to_text(const Report& r) {
                              r.steps[i].evidence, r.steps[i].threshold, r.steps[i].gof_p_after,
                              r.steps[i].partial ? " (still beyond the noise)" : "");
     }
+    for (const auto& m : r.measurement) o << "  Measurement: " << m << "\n";
     o << "\n";
     o << "Before: " << stats_line(r.before)
       << (r.noise_lower_bound ? "   (against each point's own U: a lower bound, not a verdict)" : "") << "\n";

@@ -8,6 +8,11 @@
 #include <set>
 #include <string>
 
+#include <tuple>
+#include <vector>
+
+#include "analysis/reconcile/from_analysis.hpp"
+#include "analysis/zone_map.hpp"
 #include "tests/reconcile/synthetic_campaign.hpp"
 
 using namespace manikind;
@@ -134,4 +139,29 @@ TEST_CASE("discovery: 10 null campaigns at 2 replicates, the generated hypothese
     }
     std::printf("null campaigns at 2 replicates: %d claims in 10\n", claims);
     CHECK(claims <= 1);
+}
+
+TEST_CASE("discovery: a flux still drifting over the steady window is a finding about the measurement, named by zone "
+          "and trial, never a term",
+          "[reconcile][discovery]") {
+    analysis::CampaignResult result;
+    analysis::CaseResult c;
+    c.case_id = 5;
+    for (const auto& [id, drift, zone, used] : std::vector<std::tuple<std::string, double, int, bool>>{
+             {"c05-r1", 3.1, 27, true}, {"c05-r2", 2.4, 27, true}, {"c05-r3", 1.2, 28, true}, {"c05-r4", 9.0, 30, false}}) {
+        analysis::TrialResult t;
+        t.id = id;
+        t.included = used;
+        t.steady.max_flux_drift_w_m2 = drift;
+        t.steady.worst_flux_drift_zone = zone;
+        c.trials.push_back(t);
+    }
+    result.cases.push_back(c);
+    const auto findings = rc::drift_findings(result, analysis::andi35_zone_map());
+    INFO(findings.size());
+    REQUIRE(findings.size() == 1);  // zone 28 within 2 W/m²; zone 30's trial not used
+    CHECK(findings[0].find("zone 27 (calf_front_l)") != std::string::npos);
+    CHECK(findings[0].find("3.1 W/m²") != std::string::npos);
+    CHECK(findings[0].find("c05-r1, c05-r2") != std::string::npos);
+    CHECK(findings[0].find("not physics") != std::string::npos);
 }
