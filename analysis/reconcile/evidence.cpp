@@ -309,6 +309,7 @@ FamilyNull family_null(const Subset& s, const std::vector<WhitenedGrid>& grids, 
     const int per_draw = draw_covariance ? kCampaignsPerDraw : simulations;
     out.covariance_draws = draw_covariance ? draws : 0;
     out.max_evidence.assign(static_cast<std::size_t>(draws * per_draw), 0.0);
+    out.max_evidence_at_points.assign(out.max_evidence.size(), 0.0);
     out.chi2.assign(out.max_evidence.size(), 0.0);
     // Judged under a covariance S* the whitened shift d and data z (z ~ N(0, I): the fitted model
     // is the truth) give chi2 reductions 2 d'Qz - d'Qd with Q = L' S*^-1 L (L the fitted
@@ -337,10 +338,11 @@ FamilyNull family_null(const Subset& s, const std::vector<WhitenedGrid>& grids, 
         const Eigen::MatrixXd e_grid = 2.0 * (sb.grid_coef.transpose() * p);  // m x S, before the quadratic
         const Eigen::MatrixXd e_lin = sb.linear_coef.transpose() * p;     // L x S
         for (Eigen::Index c = 0; c < per_draw; ++c) {
-            double best = 0.0;
+            double best = 0.0, best_point = 0.0;
             const auto& gc = sb.grid_column;
             for (std::size_t j = 0; j < gc.size(); ++j) {
                 const double e = e_grid(static_cast<Eigen::Index>(j), c) - quad(static_cast<Eigen::Index>(j));
+                best_point = std::max(best_point, e);
                 if (e <= best) continue;
                 double refined = e;
                 // The parabola through the neighbours, as profile_min refines the observed.
@@ -355,8 +357,12 @@ FamilyNull family_null(const Subset& s, const std::vector<WhitenedGrid>& grids, 
                 best = std::max(best, refined);
             }
             for (Eigen::Index j = 0; j < e_lin.rows(); ++j)
-                if (lin_info(j) > 1e-12) best = std::max(best, e_lin(j, c) * e_lin(j, c) / lin_info(j));
+                if (lin_info(j) > 1e-12) {
+                    best = std::max(best, e_lin(j, c) * e_lin(j, c) / lin_info(j));
+                    best_point = std::max(best_point, e_lin(j, c) * e_lin(j, c) / lin_info(j));
+                }
             out.max_evidence[static_cast<std::size_t>(b * per_draw + c)] = best;
+            out.max_evidence_at_points[static_cast<std::size_t>(b * per_draw + c)] = best_point;
             out.chi2[static_cast<std::size_t>(b * per_draw + c)] = chi2(c);
         }
         return true;
@@ -373,13 +379,16 @@ FamilyNull family_null(const Subset& s, const std::vector<WhitenedGrid>& grids, 
         work(0);
     }
     // A draw whose covariance was not positive definite is left out (never counted as zero).
-    std::vector<double> kept, kept_chi2;
+    std::vector<double> kept, kept_points, kept_chi2;
     for (int b = 0; b < draws; ++b)
         if (ok[static_cast<std::size_t>(b)]) {
             kept.insert(kept.end(), out.max_evidence.begin() + b * per_draw, out.max_evidence.begin() + (b + 1) * per_draw);
+            kept_points.insert(kept_points.end(), out.max_evidence_at_points.begin() + b * per_draw,
+                               out.max_evidence_at_points.begin() + (b + 1) * per_draw);
             kept_chi2.insert(kept_chi2.end(), out.chi2.begin() + b * per_draw, out.chi2.begin() + (b + 1) * per_draw);
         }
     out.max_evidence = std::move(kept);
+    out.max_evidence_at_points = std::move(kept_points);
     out.chi2 = std::move(kept_chi2);
     return out;
 }

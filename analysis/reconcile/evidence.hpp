@@ -88,6 +88,9 @@ Eigen::MatrixXd simulate(const Eigen::VectorXd& mean, int count, std::mt19937_64
 // so a covariance draw costs products with r basis vectors, not with every grid column.
 struct FamilyNull {
     std::vector<double> max_evidence;   // one per simulated campaign
+    // The same at the grids' points alone, without the parabola between them: the observed
+    // counterpart is what the data reach at a point, for the reported p (issue 61).
+    std::vector<double> max_evidence_at_points;
     std::vector<double> chi2;           // the twin's chi2 in each (a goodness-of-fit null with the same draws)
     int covariance_draws = 0;           // 0: the plug-in noise model
     int basis_rank = 0;
