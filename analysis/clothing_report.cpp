@@ -9,41 +9,13 @@
 #include <fmt/core.h>
 
 #include "analysis/clothing.hpp"
+#include "analysis/plot/body_map.hpp"
 #include "analysis/plot/svg_figure.hpp"
 
 namespace manikind::analysis::clothing {
 namespace {
 
 using plot::xml_escape;
-
-// Where each ANDI zone is drawn (the console's body map, web/console.js): view, x, y, w, h.
-struct Shape {
-    bool front;
-    double x, y, w, h;
-};
-const std::map<std::string, Shape>& zone_shapes() {
-    static const std::map<std::string, Shape> shapes = {
-        {"face", {true, 82, 8, 36, 42}},            {"scalp", {false, 82, 8, 36, 42}},
-        {"neck", {true, 90, 50, 20, 14}},           {"upper_chest", {true, 68, 64, 64, 46}},
-        {"abdomen", {true, 70, 110, 60, 40}},       {"pelvis_front", {true, 70, 150, 60, 30}},
-        {"crotch", {true, 92, 180, 16, 14}},        {"upper_back", {false, 68, 64, 64, 50}},
-        {"lower_back", {false, 70, 114, 60, 40}},   {"buttock_l", {false, 70, 154, 30, 40}},
-        {"buttock_r", {false, 100, 154, 30, 40}},   {"shoulder_l", {true, 132, 64, 20, 20}},
-        {"shoulder_r", {true, 48, 64, 20, 20}},     {"upper_arm_front_l", {true, 134, 84, 18, 56}},
-        {"upper_arm_front_r", {true, 48, 84, 18, 56}}, {"upper_arm_back_l", {false, 48, 70, 18, 70}},
-        {"upper_arm_back_r", {false, 134, 70, 18, 70}}, {"forearm_front_l", {true, 137, 140, 16, 58}},
-        {"forearm_front_r", {true, 47, 140, 16, 58}}, {"forearm_back_l", {false, 47, 140, 16, 58}},
-        {"forearm_back_r", {false, 137, 140, 16, 58}}, {"hand_l", {true, 138, 198, 18, 30}},
-        {"hand_r", {true, 44, 198, 18, 30}},        {"thigh_front_l", {true, 102, 194, 27, 96}},
-        {"thigh_front_r", {true, 71, 194, 27, 96}}, {"thigh_back_l", {false, 71, 194, 27, 96}},
-        {"thigh_back_r", {false, 102, 194, 27, 96}}, {"calf_front_l", {true, 104, 290, 23, 88}},
-        {"calf_front_r", {true, 73, 290, 23, 88}},  {"calf_back_l", {false, 73, 290, 23, 88}},
-        {"calf_back_r", {false, 104, 290, 23, 88}}, {"foot_top_l", {true, 102, 378, 30, 20}},
-        {"foot_top_r", {true, 68, 378, 30, 20}},    {"foot_sole_l", {false, 68, 378, 30, 20}},
-        {"foot_sole_r", {false, 102, 378, 30, 20}},
-    };
-    return shapes;
-}
 
 // The body map's fixed scale: total local insulation 0 to 4 clo (docs/clothing.md), light to dark.
 constexpr double kScaleMaxClo = 4.0;
@@ -60,33 +32,27 @@ std::string body_map_svg(const EnsembleResult& e, const ZoneMap& map) {
     std::map<std::string, double> clo_by_region;
     for (const auto& rv : e.regions)
         if (rv.insulation_total) clo_by_region[rv.region] = rv.insulation_total->value / kClo_m2k_w;
-    std::ostringstream o;
-    o << R"(<svg xmlns="http://www.w3.org/2000/svg" width="470" height="430" viewBox="0 0 470 430" role="img" )"
-      << R"(aria-label="local total insulation, clo">)";
-    o << R"(<text x="100" y="420" text-anchor="middle" font-size="12">front</text>)"
-      << R"(<text x="300" y="420" text-anchor="middle" font-size="12">back</text>)";
+    plot::BodyMap body;
+    body.title = "Local total insulation";
+    body.scale_label = "It, clo";
+    body.scale_min = 0.0;
+    body.scale_max = kScaleMaxClo;
+    body.colour = colour_for;
+    plot::BodyMapPanel panel;
+    std::map<std::string, const Zone*> zone_by_name;
     for (const auto& z : map.zones) {
-        const auto it = zone_shapes().find(z.name);
-        if (it == zone_shapes().end()) continue;
-        const Shape& s = it->second;
-        const double x = s.x + (s.front ? 0.0 : 200.0);
-        const auto v = clo_by_region.find(z.region);
-        const std::string fill = v == clo_by_region.end() ? "#dddddd" : colour_for(v->second);
-        o << fmt::format(R"(<rect x="{}" y="{}" width="{}" height="{}" rx="{:.1f}" fill="{}" stroke="#555" stroke-width="0.6">)",
-                         x, s.y, s.w, s.h, std::min(s.w, s.h) / 3.0, fill);
-        o << "<title>" << xml_escape(fmt::format("{} {} ({}): {}", z.zone, z.name, z.region,
-                                                  v == clo_by_region.end() ? "no value" : fmt::format("{:.2f} clo", v->second)))
-          << "</title></rect>";
+        zone_by_name[z.name] = &z;
+        if (const auto v = clo_by_region.find(z.region); v != clo_by_region.end()) panel.value_by_zone[z.name] = v->second;
     }
-    // Colour bar with its unit and fixed scale.
-    for (int i = 0; i < 40; ++i)
-        o << fmt::format(R"(<rect x="420" y="{}" width="16" height="9" fill="{}"/>)", 390 - i * 9, colour_for(kScaleMaxClo * i / 39.0));
-    for (int c = 0; c <= 4; ++c)
-        o << fmt::format(R"(<text x="440" y="{}" font-size="11">{}</text>)", 399 - c * 9 * 39 / 4.0, c);
-    o << R"(<text x="412" y="20" font-size="11">It, clo</text></svg>)";
-    return o.str();
+    body.panels.push_back(std::move(panel));
+    body.tooltip = [&zone_by_name](const std::string& name, std::optional<double> clo) {
+        const auto z = zone_by_name.find(name);
+        const std::string value = clo ? fmt::format("{:.2f} clo", *clo) : "no value";
+        return z == zone_by_name.end() ? fmt::format("{}: {}", name, value)
+                                       : fmt::format("{} {} ({}): {}", z->second->zone, name, z->second->region, value);
+    };
+    return plot::body_map_svg(body);
 }
-
 std::string row(const char* name, const std::optional<Value>& v, bool insulation) {
     if (!v) return "";
     const std::string si = fmt::format("{:.4f} ± {:.4f}", v->value, v->U95);

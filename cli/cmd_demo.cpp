@@ -139,8 +139,8 @@ void add_demo_command(CLI::App& app) {
                         report.after.rmse, report.after.chi2_per_dof, report.after.outside_ci,
                         report.explanation->loo_rmse.value_or(NAN));
         std::printf("  (full report: manikin reconcile %s)\n", (out / "campaign").string().c_str());
-        std::printf("Plots: %s, %s\n", (out / "plots" / "parity.svg").string().c_str(),
-                    (out / "plots" / "residual_vs_driver.svg").string().c_str());
+        std::printf("Plots: %s (parity, residual by driver and by height, the residual on the body map)\n",
+                    (out / "plots").string().c_str());
         if (report.explanation) std::printf("New twin version: %s\n", (out / "twin-reconciled.toml").string().c_str());
         std::printf("Timing: simulate %.2f s, analyse %.2f s, reconcile %.2f s\n", secs(t0, t_sim), secs(t_sim, t_analysis),
                     secs(t_analysis, t_end));

@@ -56,7 +56,7 @@ void add_reconcile_command(CLI::App& app) {
     cmd->add_option("--twin", o->twin, "Twin version: 'baseline' (docs/twin-baseline.md) or a twin-version TOML file")
         ->capture_default_str();
     cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 3) instead of the report");
-    cmd->add_option("--plots", o->plots, "Write parity.svg and residual_vs_driver.svg into this folder");
+    cmd->add_option("--plots", o->plots, "Write parity.svg, residual_vs_driver.svg, residual_body_map.svg (the standardised residual on the body, before and after) and residual_vs_height.svg into this folder");
     cmd->add_option("--write-twin", o->write_twin, "Write the new twin version (TOML) here when a term is found");
     cmd->add_flag("--no-pairs", o->no_pairs, "Fit single terms only");
     cmd->add_option("--hypotheses", o->hypotheses,

@@ -2,11 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <map>
 #include <sstream>
+#include <stdexcept>
 
 #include <fmt/core.h>
 
+#include "analysis/plot/body_map.hpp"
 #include "analysis/plot/svg_figure.hpp"
 
 namespace manikind::analysis::reconcile {
@@ -320,7 +323,30 @@ std::string report_to_text(const Report& r) {
     return o.str();
 }
 
-std::vector<std::string> plot_file_names() { return {"parity.svg", "residual_vs_driver.svg"}; }
+std::vector<std::string> plot_file_names() {
+    return {"parity.svg", "residual_vs_driver.svg", "residual_body_map.svg", "residual_vs_height.svg"};
+}
+
+namespace {
+
+// A point's residual in units of its noise: the diagonal of the covariance the fits were judged
+// against (replicate scatter and the instruments' Type B), or the recording's own u without one.
+double standardised(const Report& r, const Point& p, std::size_t i, double predicted) {
+    const bool have = r.noise.covariance.rows() > static_cast<Eigen::Index>(i);
+    const double var = have ? r.noise.covariance(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(i)) : 0.0;
+    const double sd = var > 0.0 ? std::sqrt(var) : p.standard_u();
+    return sd > 0.0 ? (p.q_exp - predicted) / sd : 0.0;
+}
+
+// What the "after" of the plots holds: the terms claimed, in the order claimed.
+std::string after_caption(const Report& r) {
+    if (!r.explanation) return "";
+    std::string terms;
+    for (const auto& st : r.steps) terms += (terms.empty() ? "" : " + ") + st.label;
+    return "after: + " + (terms.empty() ? r.explanation->label : terms);
+}
+
+}  // namespace
 
 std::vector<std::filesystem::path> write_plots(const Report& r, const ForwardModel& model, const std::filesystem::path& dir,
                                                const std::string& unit) {
@@ -403,6 +429,93 @@ std::vector<std::filesystem::path> write_plots(const Report& r, const ForwardMod
     const auto res_path = dir / plot_file_names()[1];
     pl::write_svg(residual, res_path);
     written.push_back(res_path);
+
+    // The body map (issue 61 part 3): each zone's standardised residual, averaged over the cases,
+    // front and back, before and after. Red: the recording above the twin; blue: below.
+    std::map<std::string, std::pair<double, int>> z_before, z_after;
+    std::map<std::string, std::string> region_of;
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+        if (pts[i].zone == 0 || pts[i].zone_name.empty()) continue;
+        region_of[pts[i].zone_name] = pts[i].region;
+        auto& b = z_before[pts[i].zone_name];
+        b.first += standardised(r, pts[i], i, r.predicted_before[i]);
+        ++b.second;
+        if (r.explanation) {
+            auto& a = z_after[pts[i].zone_name];
+            a.first += standardised(r, pts[i], i, r.predicted_after[i]);
+            ++a.second;
+        }
+    }
+    if (!z_before.empty()) {
+        pl::BodyMap body;
+        body.title = "Where the twin misses: mean standardised residual by zone";
+        body.scale_label = "(Q_exp − Q_sim)/σ";
+        body.scale_min = -3.0;
+        body.scale_max = 3.0;
+        body.colour = [](double v) { return pl::diverging_colour(v, 3.0); };
+        auto panel_of = [](const std::map<std::string, std::pair<double, int>>& sums, std::string caption) {
+            pl::BodyMapPanel panel;
+            panel.caption = std::move(caption);
+            for (const auto& [zone, s] : sums) panel.value_by_zone[zone] = s.first / s.second;
+            return panel;
+        };
+        body.panels.push_back(panel_of(z_before, "before: " + r.twin_name));
+        if (r.explanation) body.panels.push_back(panel_of(z_after, after_caption(r)));
+        body.tooltip = [&z_before, &region_of](const std::string& zone, std::optional<double> v) {
+            const auto n = z_before.find(zone);
+            return v ? fmt::format("{} ({}): {:+.2f} σ, mean of {} case{}", zone, region_of[zone], *v, n->second.second,
+                                   n->second.second == 1 ? "" : "s")
+                     : zone + ": not in this campaign";
+        };
+        body.notes.push_back("σ: each point's noise (replicate scatter and the instruments' Type B); red: the recording above the twin;");
+        body.notes.push_back("grey: a zone without points; the scale is clamped at ±3 σ (the tooltip gives the value).");
+        const auto body_path = dir / plot_file_names()[2];
+        std::ofstream out(body_path, std::ios::binary);
+        out << pl::body_map_svg(body);
+        if (!out) throw std::runtime_error("cannot write " + body_path.string());
+        written.push_back(body_path);
+    }
+
+    // Residual against each zone's height (the probe's 1.1 m marked): a vertical gradient shows
+    // as a slope, a local effect as a cluster at its height.
+    pl::Series h_before, h_after;
+    h_before.label = "before";
+    h_before.colour = before_colour;
+    h_after.label = after_caption(r);
+    h_after.colour = after_colour;
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+        const auto it = pts[i].drivers.find("zone height");
+        if (it == pts[i].drivers.end()) continue;
+        h_before.x.push_back(standardised(r, pts[i], i, r.predicted_before[i]));
+        h_before.y.push_back(it->second);
+        if (r.explanation) {
+            h_after.x.push_back(standardised(r, pts[i], i, r.predicted_after[i]));
+            h_after.y.push_back(it->second);
+        }
+    }
+    if (!h_before.x.empty()) {
+        for (auto* s : {&h_before, &h_after}) {
+            s->marker_radius_px = 2.6;
+            s->opacity = 0.6;
+        }
+        pl::Figure fig;
+        fig.width_px = 560;
+        fig.height_px = 620;
+        fig.title = "Residual against the zone's height";
+        fig.notes.push_back("dashed: the air probe's height (1.1 m) and no residual");
+        pl::XYPanel hp;
+        hp.box = {0, 46, 560, 554};
+        hp.x.label = "(Q_exp − Q_sim)/σ";
+        hp.y.label = "Zone centroid height (m)";
+        hp.reference_lines.push_back({false, 0.0, "#888888", "4 3"});
+        hp.reference_lines.push_back({true, 1.1, "#888888", "4 3"});
+        hp.series.push_back(h_before);
+        if (r.explanation) hp.series.push_back(h_after);
+        fig.xy_panels.push_back(std::move(hp));
+        const auto h_path = dir / plot_file_names()[3];
+        pl::write_svg(fig, h_path);
+        written.push_back(h_path);
+    }
     return written;
 }
 

@@ -7,7 +7,9 @@
 
 #include <catch2/catch.hpp>
 
+#include "analysis/plot/body_map.hpp"
 #include "analysis/plot/svg_figure.hpp"
+#include "analysis/zone_map.hpp"
 
 namespace pl = manikind::analysis::plot;
 
@@ -243,4 +245,57 @@ TEST_CASE("plot heat map: cells coloured on a symmetric scale with a colour bar 
     CHECK(pl::scale_colour(0.0, true) == "#2166ac");
     CHECK(pl::scale_colour(1.0, true) == "#b2182b");
     CHECK(pl::scale_colour(2.0, true) == "#b2182b");  // clamped
+}
+
+TEST_CASE("body map: every ANDI zone drawn front or back, coloured by its value, grey without one, texts escaped",
+          "[analysis][plot]") {
+    // The drawing knows exactly the compiled map's zones, 20 in front and 15 behind.
+    const auto& map = manikind::analysis::andi35_zone_map();
+    REQUIRE(pl::andi_zone_shapes().size() == map.size());
+    int front = 0;
+    for (const auto& z : map.zones) {
+        const auto it = pl::andi_zone_shapes().find(z.name);
+        REQUIRE(it != pl::andi_zone_shapes().end());
+        front += it->second.front ? 1 : 0;
+    }
+    CHECK(front == 20);
+
+    // The diverging scale: white at zero, its ends at +-limit, clamped beyond, symmetric.
+    CHECK(pl::diverging_colour(0.0, 3.0) == "#ffffff");
+    CHECK(pl::diverging_colour(3.0, 3.0) == "#b2182b");
+    CHECK(pl::diverging_colour(-3.0, 3.0) == "#2166ac");
+    CHECK(pl::diverging_colour(7.0, 3.0) == "#b2182b");
+    CHECK(pl::diverging_colour(std::nan(""), 3.0) == "#ffffff");
+    CHECK(pl::diverging_colour(1.5, 3.0) != pl::diverging_colour(-1.5, 3.0));
+
+    pl::BodyMap body;
+    body.title = "t <&> \"x\"";
+    body.scale_label = "σ";
+    body.scale_min = -3.0;
+    body.scale_max = 3.0;
+    body.colour = [](double v) { return pl::diverging_colour(v, 3.0); };
+    body.tooltip = [](const std::string& zone, std::optional<double> v) {
+        return zone + (v ? " has " + std::to_string(*v) : std::string(" none <b>"));
+    };
+    pl::BodyMapPanel before, after;
+    before.caption = "before & <x>";
+    before.value_by_zone["face"] = 3.0;
+    before.value_by_zone["calf_back_l"] = -9.0;  // beyond the scale: its end colour
+    after.value_by_zone["face"] = 0.0;
+    body.panels = {before, after};
+    const auto svg = pl::body_map_svg(body);
+    auto count = [&svg](const std::string& what) {
+        std::size_t n = 0;
+        for (auto at = svg.find(what); at != std::string::npos; at = svg.find(what, at + 1)) ++n;
+        return n;
+    };
+    CHECK(count("<title>") == 70);                    // 35 zones in each of the two panels
+    CHECK(count(R"(fill="#b2182b" stroke)") == 1);     // the face before
+    CHECK(count(R"(fill="#2166ac" stroke)") == 1);     // the left calf's back, clamped
+    CHECK(count(R"(fill="#ffffff" stroke)") == 1);     // the face after
+    CHECK(count(R"(fill="#dddddd" stroke)") == 67);    // every zone without a value
+    CHECK(count("none &lt;b&gt;") == 67);
+    CHECK(svg.find("before &amp; &lt;x&gt;") != std::string::npos);
+    CHECK(svg.find("t &lt;&amp;&gt;") != std::string::npos);
+    CHECK(svg.find("<b>") == std::string::npos);
 }

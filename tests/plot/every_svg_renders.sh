@@ -20,7 +20,8 @@ fi
 "$manikin" thermoreg --plot "$dir/fig4.svg" >/dev/null
 "$manikin" thermoreg sweep --t-step 5 --rh-step 19 --out "$dir/sweep" >/dev/null
 
-svgs=("$dir/analyze.svg" "$dir/reconcile/parity.svg" "$dir/reconcile/residual_vs_driver.svg" "$dir/fig4.svg"
+svgs=("$dir/analyze.svg" "$dir/reconcile/parity.svg" "$dir/reconcile/residual_vs_driver.svg"
+      "$dir/reconcile/residual_body_map.svg" "$dir/reconcile/residual_vs_height.svg" "$dir/fig4.svg"
       "$dir/sweep/core_diff.svg" "$dir/sweep/skin_diff.svg")
 fail=0
 for svg in "${svgs[@]}"; do
@@ -43,4 +44,8 @@ done
 [ -s "$dir/analyze-cli.png" ] || { echo "FAIL: manikin analyze --png wrote no PNG"; fail=1; }
 grep -q 'class="colour-bar"' "$dir/sweep/core_diff.svg" || { echo "FAIL: core_diff.svg has no colour bar"; fail=1; }
 grep -q 'W/m²' "$dir/reconcile/parity.svg" || { echo "FAIL: parity.svg has no unit on its axes"; fail=1; }
+# The body map: front and back of the 35 zones, before and after the claim (humidity buoyancy here).
+zones=$(grep -o '<title>[^<]*σ, mean of' "$dir/reconcile/residual_body_map.svg" | wc -l)
+[ "$zones" = 70 ] || { echo "FAIL: residual_body_map.svg draws $zones zones with a value, not 35 before and 35 after"; fail=1; }
+grep -q 'after: + humidity_buoyancy' "$dir/reconcile/residual_body_map.svg" || { echo "FAIL: the body map does not name the claim after"; fail=1; }
 exit "$fail"
