@@ -70,6 +70,8 @@ const std::vector<InputInfo>& input_info() {
         {"vapour_pressure_pa", "Pa", "water-vapour pressure of the air", 1500.0, 100.0, 400.0},
         {"wettedness", "", "skin wettedness", 1.0, 0.2, 1.0},
         {"heat_flux_w_m2", "W/m2", "heat flux the sensors read", 30.0, 2.0, 10.0},
+        // A fraction of the anemometer's reading (0.8/m: 1.8x at 1 m above the probe).
+        {"air_speed_m_s", "", "air speed", 3.0, 0.2, 1.5},
     };
     return info;
 }
@@ -91,15 +93,18 @@ std::vector<CandidateTerm> generated_hypotheses(const GeometryKnown& g, bool all
         {"air_temp_c", "height"},         {"wall_temp_c", "front"},     {"wall_temp_c", "back"},
         {"wall_temp_c", "left"},          {"wall_temp_c", "right"},     {"wall_temp_c", "height"},
         {"vapour_pressure_pa", "uniform"}, {"vapour_pressure_pa", "height"}, {"wettedness", "left"},
-        {"wettedness", "right"},
+        {"wettedness", "right"},      {"air_speed_m_s", "height"},
     };
     auto offered = [&](const std::string& input, const std::string& pattern) {
         if (pattern == "height" && !g.height) return false;
         if ((pattern == "front" || pattern == "back") && !g.facing) return false;
         if ((pattern == "left" || pattern == "right") && !g.sides) return false;
         if ((input == "vapour_pressure_pa" || input == "wettedness") && !g.wet) return false;
+        // The air's speed by pattern matters only with forced convection, where air moves.
+        if (input == "air_speed_m_s" && !g.air_moves) return false;
         // Uniform shifts of these are the named terms (air_temp_bias, wall_offset, partial
         // wettedness, a heat leak): the named one is offered, not its generated twin.
+        // (a uniform air speed is mixed_convection's own scale: (1 + d)^0.56 times 10.4 v^0.56).
         if (pattern == "uniform" && input != "vapour_pressure_pa") return false;
         if (all) return true;
         for (const auto& [i, p] : pairings)
@@ -189,6 +194,15 @@ std::string plain_statement(const CandidateTerm& c, const std::vector<double>& v
     if (c.term == "partial_wettedness")
         return fmt::format("Only {:.0f} % (±{:.0f} %) of the {} region is wet (e.g. clogged pores); the rest "
                            "evaporates nothing.", 100.0 * v[0], 100.0 * u[0], c.region);
+    if (c.generated() && c.input == "air_speed_m_s") {
+        const std::string size = fmt::format("{:+.2f} (±{:.2f})", v[0], u[0]);
+        if (c.pattern == "height")
+            return fmt::format("The air moves faster higher up: the speed a zone meets changes by {} of the anemometer's "
+                               "reading per metre of height about the probe at 1.1 m (forced convection stronger at the "
+                               "{}).", size, v[0] > 0 ? "head than at the feet" : "feet than at the head");
+        return fmt::format("The air speed the zones meet differs by {} of the anemometer's reading ({}).", size,
+                           c.pattern == "uniform" ? "everywhere" : "on the body's " + c.pattern);
+    }
     if (c.generated()) {
         const auto& info = info_of(c.input);
         const std::string pm = info.unit;  // "per metre of height" is said in words

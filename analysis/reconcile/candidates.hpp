@@ -52,6 +52,7 @@ std::vector<CandidateTerm> candidate_library(const std::vector<std::string>& wet
 // and back, zones on the left and right; whether any case is wet.
 struct GeometryKnown {
     bool height = false, facing = false, sides = false, wet = false;
+    bool air_moves = false;  // a case with recorded air speed: the air's speed by pattern can matter
 };
 
 // Hypotheses generated from the twin's inputs and the body's geometry (issue 61): each input

@@ -97,7 +97,10 @@ std::vector<CandidateTerm> single_library(const ForwardModel& model, const std::
     // What the zones' geometry can show (the drivers TwinModel gives each point).
     std::set<double> heights;
     std::set<double> sides, facings;
+    bool air_moves = false;
     for (const auto& p : model.points()) {
+        // Air that moves (over 0.05 m/s, beyond a sealed enclosure's < 0.02: Text S3.1) in some case.
+        if (const auto v = p.drivers.find("air speed"); v != p.drivers.end() && v->second > 0.05) air_moves = true;
         const auto it = p.drivers.find("wettedness");
         if (it != p.drivers.end() && it->second > 0.0) wet_regions.insert(p.region);
         if (const auto h = p.drivers.find("zone height"); h != p.drivers.end()) heights.insert(h->second);
@@ -113,6 +116,7 @@ std::vector<CandidateTerm> single_library(const ForwardModel& model, const std::
         g.sides = sides.count(-1.0) && sides.count(1.0);
         g.facing = facings.count(-1.0) && facings.count(1.0);
         g.wet = !wet_regions.empty();
+        g.air_moves = air_moves;
         for (auto& c : generated_hypotheses(g, generated == "all")) library.push_back(std::move(c));
     }
     return library;

@@ -650,10 +650,23 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
     }
     if (lower_bound) st.threshold = std::numeric_limits<double>::infinity();
     rep.noise_lower_bound = lower_bound;
+    // The term beyond the null that predicts held-out cases best. A tie goes to the simpler reading
+    // (issue 61): a named term within kTieDeviance of a generated pattern's predictive deviance is
+    // preferred to it, as "air_temp_bias" is to "the air warmer by the same everywhere".
+    constexpr double kTieDeviance = 1.0;
     auto best_passing = [&](const Stage& x) -> std::optional<std::size_t> {
         std::optional<std::size_t> best;
         for (std::size_t k = 0; k < x.singles.size(); ++k)
             if (x.singles[k].evidence > x.threshold && (!best || *x.singles[k].loo_score < *x.singles[*best].loo_score)) best = k;
+        if (best && library[*best].generated()) {
+            std::optional<std::size_t> named;
+            for (std::size_t k = 0; k < x.singles.size(); ++k)
+                if (!library[k].generated() && x.singles[k].evidence > x.threshold &&
+                    *x.singles[k].loo_score <= *x.singles[*best].loo_score + kTieDeviance &&
+                    (!named || *x.singles[k].loo_score < *x.singles[*named].loo_score))
+                    named = k;
+            if (named) best = named;
+        }
         return best;
     };
 
@@ -737,6 +750,15 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
             if (k != x) chosen_pairs.insert(std::minmax(x, k));
         for (std::size_t a = 0; a < strong.size(); ++a)
             for (std::size_t b = a + 1; b < strong.size(); ++b) chosen_pairs.insert(std::minmax(strong[a], strong[b]));
+        // The air's speed by pattern shows only where forced convection is in the twin, so alone it
+        // has no evidence and is never among the strong: it is paired with mixed_convection whenever
+        // forced convection itself stands beyond the null (air faster higher up was otherwise read
+        // as humidity stratified with height and drier feet).
+        for (std::size_t m = 0; m < library.size(); ++m) {
+            if (library[m].term != "mixed_convection" || st.singles[m].evidence <= st.threshold) continue;
+            for (std::size_t k = 0; k < library.size(); ++k)
+                if (library[k].generated() && library[k].input == "air_speed_m_s") chosen_pairs.insert(std::minmax(m, k));
+        }
         pairs.assign(chosen_pairs.begin(), chosen_pairs.end());
     }
     // The planner's verdict settled already: the claim can only be the winning single or one of
@@ -843,6 +865,9 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
             for (std::size_t y = 0; y < st.singles.size(); ++y) {
                 if (y == x || st.singles[y].evidence <= st.threshold) continue;
                 const Eigen::VectorXd source = sub.whiten(st.single_fits[y].prediction);
+                // A rival that predicts what the winner predicts says the same thing (a generated
+                // uniform air offset beside air_temp_bias, under --hypotheses all): not a rival.
+                if ((source - sub.whiten(st.single_fits[x].prediction)).squaredNorm() < 1e-6) continue;
                 const Eigen::MatrixXd sim = ev::simulate(source, opt.selection_simulations, rng);
                 const Eigen::MatrixXd prof = ev::profile_chi2({&st.grids[y], &st.grids[x]}, sim);
                 std::vector<double> d(static_cast<std::size_t>(sim.cols()));
@@ -903,7 +928,10 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
             r.reason = fmt::format("evidence {:.1f} within what noise alone gives ({:.1f} at the {:.0f} % level)", r.evidence,
                                    st.threshold, 100.0 * (1.0 - opt.alpha));
         else if (winner_single && r.label != st.singles[*winner_single].label)
-            r.reason = fmt::format("explains less out of sample than {}", st.singles[*winner_single].label);
+            r.reason = r.loo_score && st.singles[*winner_single].loo_score && *r.loo_score < *st.singles[*winner_single].loo_score
+                           ? fmt::format("ties out of sample with {}, the simpler reading (a named term before a pattern)",
+                                         st.singles[*winner_single].label)
+                           : fmt::format("explains less out of sample than {}", st.singles[*winner_single].label);
         else if (!why_not.empty())
             r.reason = why_not;
     }

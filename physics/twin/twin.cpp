@@ -96,7 +96,8 @@ const std::vector<SegmentConstants>& baseline_segments() {
 }
 
 const std::vector<std::string>& input_names() {
-    static const std::vector<std::string> names = {"air_temp_c", "wall_temp_c", "vapour_pressure_pa", "wettedness", "heat_flux_w_m2"};
+    static const std::vector<std::string> names = {"air_temp_c", "wall_temp_c", "vapour_pressure_pa", "wettedness", "heat_flux_w_m2",
+                                                   "air_speed_m_s"};
     return names;
 }
 
@@ -141,12 +142,17 @@ void validate_term(const Term& term) {
         auto known = [](const std::vector<std::string>& names, const std::string& x) {
             return std::find(names.begin(), names.end(), x) != names.end();
         };
+        auto listed = [](const std::vector<std::string>& names) {
+            std::string out;
+            for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
+            return out;
+        };
         if (!known(input_names(), term.input))
-            throw std::invalid_argument("twin term 'input_pattern': unknown input '" + term.input +
-                                        "' (known: air_temp_c, wall_temp_c, vapour_pressure_pa, wettedness, heat_flux_w_m2)");
+            throw std::invalid_argument("twin term 'input_pattern': unknown input '" + term.input + "' (known: " +
+                                        listed(input_names()) + ")");
         if (!known(pattern_names(), term.pattern))
-            throw std::invalid_argument("twin term 'input_pattern': unknown pattern '" + term.pattern +
-                                        "' (known: uniform, height, front, back, left, right)");
+            throw std::invalid_argument("twin term 'input_pattern': unknown pattern '" + term.pattern + "' (known: " +
+                                        listed(pattern_names()) + ")");
     }
 }
 
@@ -205,7 +211,9 @@ void predict(const ResolvedVersion& k, const TrialConditions& trial, std::vector
         // The inputs as this zone meets them: the trial's, unless an input_pattern moves them
         // here (the air's absolute humidity stays the probe's unless vapour pressure is moved).
         double air_c = air_trial_c, wall_c = wall_trial_c, p_air_pa = p_air_trial_pa, c_air_kg_m3 = c_air_trial_kg_m3;
+        double h_forced_zone_w_m2k = h_forced_w_m2k;
         if (!k.patterns.empty()) {
+            double speed_factor = 1.0;  // air_speed_m_s: relative to the anemometer's reading
             for (const auto& pt : k.patterns) {
                 const double d = pt.value * pattern_weight(pt.pattern, z, pt.ref_height_m);
                 if (pt.input == "air_temp_c") air_c += d;
@@ -213,8 +221,13 @@ void predict(const ResolvedVersion& k, const TrialConditions& trial, std::vector
                 else if (pt.input == "vapour_pressure_pa") p_air_pa = std::max(0.0, p_air_pa + d);
                 else if (pt.input == "wettedness") wettedness = wettedness > 0.0 ? std::clamp(wettedness + d, 0.0, 1.0) : 0.0;
                 else if (pt.input == "heat_flux_w_m2") leak_w_m2 += d;  // what the sensor adds
+                else if (pt.input == "air_speed_m_s") speed_factor += d;
             }
             c_air_kg_m3 = vapour_concentration_kg_m3(p_air_pa, air_c);
+            // The air a zone meets moves speed_factor times what the anemometer reads; it matters
+            // only where forced convection is in the twin (mixed_convection).
+            if (speed_factor != 1.0 && k.forced_scale > 0.0)
+                h_forced_zone_w_m2k = k.forced_scale * h_forced_de_dear_w_m2k(std::max(0.0, speed_m_s * speed_factor));
         }
 
         // Fluxes from an exchange surface at surface_c (the textile, when it has resistance).
@@ -229,7 +242,7 @@ void predict(const ResolvedVersion& k, const TrialConditions& trial, std::vector
             const double dc_kg_m3 = vapour_concentration_kg_m3(p_surface_pa, surface_c) - c_air_kg_m3;
             const double drive_c = dt_c + k.gamma * wettedness * dc_kg_m3;  // Eq. 7 with omega
             double h = k.h0_w_m2k + seg->wissler_a * std::sqrt(std::sqrt(std::abs(drive_c)));  // |.|^(1/4)
-            if (h_forced_w_m2k > 0.0) h = h_mixed_w_m2k(h, h_forced_w_m2k);  // Eq. 9, n = 3
+            if (h_forced_zone_w_m2k > 0.0) h = h_mixed_w_m2k(h, h_forced_zone_w_m2k);  // Eq. 9, n = 3
             f.h_c_w_m2k = h;
             f.q_convection_w_m2 = h * dt_c;
             f.q_radiation_w_m2 = radiative_heat_flux_w_m2(surface_c, wall_c, baseline_skin_emissivity, seg->radiating_fraction);

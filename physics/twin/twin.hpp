@@ -56,13 +56,14 @@ struct Term {
     std::vector<int> zones;        // heat_leak: the zones it applies to
     // input_pattern: which input the twin takes is off (input_names()) and by which pattern over
     // the body (pattern_names()); its parameter `value` is the size, in the input's unit (per
-    // metre for "height", relative to the probe's height `ref_height_m`).
+    // metre for "height", relative to the probe's height `ref_height_m`); for air_speed_m_s a
+    // fraction of the anemometer's reading (the zone meets the reading x (1 + value x pattern)).
     std::string input{};
     std::string pattern{};
 };
 
 // The inputs and patterns an input_pattern term may name.
-const std::vector<std::string>& input_names();    // air_temp_c, wall_temp_c, vapour_pressure_pa, wettedness, heat_flux_w_m2
+const std::vector<std::string>& input_names();    // air_temp_c, wall_temp_c, vapour_pressure_pa, wettedness, heat_flux_w_m2, air_speed_m_s
 const std::vector<std::string>& pattern_names();  // uniform, height, front, back, left, right
 // The weight of a pattern at one zone (0 where the pattern does not reach it); throws
 // std::invalid_argument for "height" on a zone without a height.

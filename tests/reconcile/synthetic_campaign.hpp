@@ -79,6 +79,9 @@ struct SyntheticOptions {
     double air_gradient_k_per_m = 0.0;
     double front_wall_offset_c = 0.0;
     std::optional<double> left_leg_wettedness;
+    // The air speed a zone meets grows with height: the probe's reading (at 1.1 m) times
+    // 1 + g (h - 1.1), at least zero. It shows only in a world with forced convection.
+    double air_speed_growth_per_m = 0.0;
 };
 
 // One zone's truth where the world varies over the body: the zone alone, at its own conditions.
@@ -92,6 +95,8 @@ inline physics::twin::ZoneFlux zone_truth(const physics::twin::TwinVersion& worl
     // The same vapour in warmer or colder air: RH at the zone's own temperature.
     one.air_rh_pct = std::clamp(100.0 * p_air_pa / physics::saturation_vapour_pressure_pa(one.air_temp_c), 0.0, 100.0);
     if (row.facing == "front") *one.wall_temp_c += o.front_wall_offset_c;
+    if (o.air_speed_growth_per_m != 0.0 && one.air_speed_m_s)
+        one.air_speed_m_s = *one.air_speed_m_s * std::max(0.0, 1.0 + o.air_speed_growth_per_m * (row.height_m - 1.1));
     const bool leg = row.side == "l" && (row.segment == "thigh" || row.segment == "calf" || row.segment == "foot");
     if (leg && o.left_leg_wettedness && actual.wettedness > 0.0) one.zone_wettedness = {*o.left_leg_wettedness};
     else if (actual.wettedness > 0.0 && o.left_leg_wettedness) one.zone_wettedness = {actual.wettedness};
@@ -136,7 +141,8 @@ inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::
             actual.air_rh_pct += o.setpoint_rh_sd_pct * noise(rng);
             *actual.wall_temp_c += actual.air_temp_c - nominal.air_temp_c;
             auto truth = physics::twin::predict(world, actual);
-            if (o.air_gradient_k_per_m != 0.0 || o.front_wall_offset_c != 0.0 || o.left_leg_wettedness)
+            if (o.air_gradient_k_per_m != 0.0 || o.front_wall_offset_c != 0.0 || o.left_leg_wettedness ||
+                o.air_speed_growth_per_m != 0.0)
                 for (std::size_t z = 0; z < zones.size(); ++z) truth[z] = zone_truth(world, actual, z, zones[z], o);
             physics::twin::TrialConditions recorded = actual;
             recorded.air_temp_c += o.probe_air_halfwidth_c * uniform(rng);
