@@ -17,15 +17,22 @@ namespace {
 
 using plot::xml_escape;
 
-// The body map's fixed scale: total local insulation 0 to 4 clo (docs/clothing.md), light to dark.
-constexpr double kScaleMaxClo = 4.0;
-std::string colour_for(double clo) {
-    const double t = std::clamp(clo / kScaleMaxClo, 0.0, 1.0);
+// The body map's colour, light to dark over 0 .. max_clo.
+std::string colour_for(double clo, double max_clo) {
+    const double t = std::clamp(clo / max_clo, 0.0, 1.0);
     // From pale yellow (bare) to deep blue (heavily insulated).
     const int r = static_cast<int>(std::lround(255 - t * (255 - 8)));
     const int g = static_cast<int>(std::lround(247 - t * (247 - 48)));
     const int b = static_cast<int>(std::lround(188 + t * (107 - 188 + 60)));
     return fmt::format("#{:02x}{:02x}{:02x}", std::clamp(r, 0, 255), std::clamp(g, 0, 255), std::clamp(b, 0, 255));
+}
+
+// The scale's top follows the data (issue 63): the largest local value rounded up to half a clo,
+// at least 1 clo, so a light shirt is not a uniform pale map and an 8-clo bag is not all dark.
+double scale_max_clo(const std::map<std::string, double>& clo_by_region) {
+    double top = 0.0;
+    for (const auto& [region, clo] : clo_by_region) top = std::max(top, clo);
+    return std::max(1.0, std::ceil(top * 2.0 - 1e-9) / 2.0);
 }
 
 std::string body_map_svg(const EnsembleResult& e, const ZoneMap& map) {
@@ -36,8 +43,8 @@ std::string body_map_svg(const EnsembleResult& e, const ZoneMap& map) {
     body.title = "Local total insulation";
     body.scale_label = "It, clo";
     body.scale_min = 0.0;
-    body.scale_max = kScaleMaxClo;
-    body.colour = colour_for;
+    body.scale_max = scale_max_clo(clo_by_region);
+    body.colour = [top = body.scale_max](double clo) { return colour_for(clo, top); };
     plot::BodyMapPanel panel;
     std::map<std::string, const Zone*> zone_by_name;
     for (const auto& z : map.zones) {
@@ -141,7 +148,8 @@ std::string to_html(const Result& r, const ZoneMap& map) {
                   e.evaporative_replicates.size());
         for (const auto& n : e.notes) o << "<p class=small>Note: " << xml_escape(n) << "</p>\n";
         o << "</div><div><h2>Local total insulation</h2>" << body_map_svg(e, map)
-          << "<p class=small>Each zone coloured by its region's total insulation (parallel), fixed scale 0-4 clo; grey: no value.</p></div></div>\n";
+          << "<p class=small>Each zone coloured by its region's total insulation (parallel), from 0 clo to the scale's top beside "
+             "the map (the largest value rounded up to half a clo, at least 1); grey: no value.</p></div></div>\n";
         o << "<h2>By region</h2><table><tr><th>region</th><th>I<sub>t</sub> ± U95 (clo)</th><th>I<sub>cle</sub> ± U95 (clo)</th>"
              "<th>R<sub>et</sub> ± U95 (m²Pa/W)</th></tr>\n";
         for (const auto& rv : e.regions) {

@@ -12,6 +12,8 @@
 
 #include <catch2/catch.hpp>
 
+#include <fmt/core.h>
+
 #include "analysis/analyze.hpp"
 #include "analysis/clothing.hpp"
 #include "analysis/input_error.hpp"
@@ -179,6 +181,19 @@ TEST_CASE("clothing: parallel and serial insulation and evaporative resistance f
             CHECK(rv.insulation_total->value > it);
         }
     CHECK(chest);
+    // The report's body map scale follows the data (issue 63): its top is each ensemble's largest
+    // local value rounded up to half a clo (at least 1), printed beside the colour bar.
+    const auto html = cl::to_html(r, lab.map);
+    for (const auto& e : r.ensembles) {
+        double top = 0.0;
+        for (const auto& rv : e.regions)
+            if (rv.insulation_total) top = std::max(top, rv.insulation_total->value / cl::kClo_m2k_w);
+        const double scale = std::max(1.0, std::ceil(top * 2.0 - 1e-9) / 2.0);
+        INFO(e.id << ": largest local " << top << " clo");
+        CHECK(scale >= top);
+        CHECK(scale - top < 0.5 + 1e-9 + (top < 1.0 ? 1.0 : 0.0));
+        CHECK_THAT(html, Catch::Contains(fmt::format(R"(font-size="11">{:g}</text>)", scale)));
+    }
 }
 
 TEST_CASE("clothing: without a given fcl, ISO 9920's estimate fcl = 1 + 0.28 Icl (clo) is solved with Icl = It - Ia/fcl",
