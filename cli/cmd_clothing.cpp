@@ -28,6 +28,8 @@ void add_clothing_command(CLI::App& app) {
         bool json = false, force = false;
         bool require_flux_stability = false;
         analysis::clothing::Options options;
+        // The replicate criteria in percent, as every output prints them (5 means 5 %).
+        double cv_limit_insulation_pct = 5.0, cv_limit_evaporative_pct = 10.0;
     };
     auto o = std::make_shared<Opts>();
     auto* cmd = app.add_subcommand("clothing", "Clothing insulation (It, Icle, Icl) and evaporative resistance (Ret, Recl, "
@@ -40,13 +42,13 @@ void add_clothing_command(CLI::App& app) {
     cmd->add_option("--report", o->report, "Write the one-page-per-ensemble report (HTML with SVG) to this file (new; "
                                            "never inside a campaign folder it reads, never over a database)");
     cmd->add_flag("--force", o->force, "Replace an existing report file");
-    cmd->add_option("--cv-limit-insulation", o->options.cv_limit_insulation,
-                    "Largest coefficient of variation of the re-dressed replicates' total insulation (fraction)")
-        ->check(CLI::Range(0.001, 1.0))
+    cmd->add_option("--cv-limit-insulation", o->cv_limit_insulation_pct,
+                    "Largest coefficient of variation of the re-dressed replicates' total insulation, in % (5 = 5 %)")
+        ->check(CLI::Range(0.1, 100.0))
         ->capture_default_str();
-    cmd->add_option("--cv-limit-evaporative", o->options.cv_limit_evaporative,
-                    "Largest coefficient of variation of the replicates' total evaporative resistance (fraction)")
-        ->check(CLI::Range(0.001, 1.0))
+    cmd->add_option("--cv-limit-evaporative", o->cv_limit_evaporative_pct,
+                    "Largest coefficient of variation of the replicates' total evaporative resistance, in % (10 = 10 %)")
+        ->check(CLI::Range(0.1, 100.0))
         ->capture_default_str();
     cmd->add_flag("--require-flux-stability", o->require_flux_stability,
                   "Steady also in heat flux (each zone's drift and scatter over the window within manikin analyze's "
@@ -84,13 +86,22 @@ void add_clothing_command(CLI::App& app) {
         if (!o->baseline.empty()) {
             CampaignSource from = o->source;
             from.campaign = o->baseline;
-            baseline = read_campaign_source(from);
+            try {
+                baseline = read_campaign_source(from);
+            } catch (const UserError& e) {
+                // Named as the baseline: "no campaign 'nude'" alone read as if the tested campaign were missing.
+                throw UserError(fmt::format("--baseline '{}' (the nude manikin's campaign): {}", o->baseline, e.what()), e.code(),
+                                e.status(), e.details());
+            }
             baseline_result = analysis::analyze_campaign(*baseline, analysis_options);
         }
+        analysis::clothing::Options options = o->options;
+        options.cv_limit_insulation = o->cv_limit_insulation_pct / 100.0;
+        options.cv_limit_evaporative = o->cv_limit_evaporative_pct / 100.0;
         analysis::clothing::Result r;
         try {
             r = analysis::clothing::compute(campaign, result, baseline ? &*baseline : nullptr,
-                                            baseline_result ? &*baseline_result : nullptr, o->options);
+                                            baseline_result ? &*baseline_result : nullptr, options);
         } catch (const std::invalid_argument& e) {
             throw UserError(e.what());
         }

@@ -145,6 +145,8 @@ void print_status(const nlohmann::json& s) {
         std::printf("campaign %s: %d of %d trials done; stage %s%s\n", s["campaign"].get<std::string>().c_str(),
                     s["trials_done"].get<int>(), s["trials_total"].get<int>(), s["stage"].get<std::string>().c_str(),
                     s["paused"].get<bool>() ? " (paused)" : "");
+    if (s.contains("awaiting_operator") && s["awaiting_operator"].is_string())
+        std::printf("WAITING FOR THE OPERATOR: %s; when done: manikin continue\n", s["awaiting_operator"].get<std::string>().c_str());
     if (s.contains("trial")) {
         const auto& t = s["trial"];
         std::printf("trial %ld: case %d replicate %d, %.0f s in stage\n", t["id"].get<long>(), t["case"].get<int>(),
@@ -270,8 +272,12 @@ void add_daemon_commands(CLI::App& app) {
             if (c->json) std::printf("%s\n", nlohmann::json{{"ok", ok}, {"outcome", outcome}}.dump().c_str());
             if (!ok)
                 throw UserError::campaign_not_done(
-                    fmt::format("campaign '{}' ended {} (trials: {})", name, outcome.value("state", "?"),
-                                outcome.contains("trials") ? outcome["trials"].dump() : "{}"),
+                    fmt::format("campaign '{}' ended {} (trials: {}){}", name, outcome.value("state", "?"),
+                                outcome.contains("trials") ? outcome["trials"].dump() : "{}",
+                                outcome.value("model_fallbacks", 0) > 0
+                                    ? fmt::format("; {} physiological trial(s) fell back to constant skin temperature",
+                                                  outcome.value("model_fallbacks", 0))
+                                    : std::string()),
                     outcome);
             if (!c->json) std::printf("campaign '%s' done: every trial done\n", name.c_str());
         });
@@ -364,6 +370,23 @@ void add_daemon_commands(CLI::App& app) {
             });
         }
     }
+    if (building("continue")) {
+        auto c = std::make_shared<Conn>();
+        auto* cmd = app.add_subcommand("continue", "Tell the daemon the operator did what it waits for (dressed the manikin for "
+                                                   "a clothing test); recorded with who said it");
+        add_conn_options(cmd, *c, true);
+        cmd->footer("`manikin status` says what the daemon waits for (\"WAITING FOR THE OPERATOR\"); so does the console,\n"
+                    "whose Continue button does the same. A simulated lab's operator answers at once unless\n"
+                    "[simulation] operator_prompts = \"wait\" (docs/daemon.md, \"Operator prompts\").");
+        cmd->callback([c] {
+            const auto before = call(*c, {{"cmd", "status"}}, false)["status"];
+            call(*c, {{"cmd", "continue"}}, true);
+            if (c->json) std::printf("{\"ok\":true}\n");
+            else std::printf("continued: %s\n", before.value("awaiting_operator", nlohmann::json("")).is_string()
+                                                    ? before["awaiting_operator"].get<std::string>().c_str()
+                                                    : "");
+        });
+    }
     if (building("setpoint")) {
         auto c = std::make_shared<Conn>();
         auto temp = std::make_shared<double>(), rh = std::make_shared<double>();
@@ -382,8 +405,7 @@ void add_daemon_commands(CLI::App& app) {
     }
     if (building("note")) {
         struct NoteArgs {
-            std::string campaign, kind = "comment", text, author;
-            std::int64_t trial = 0;
+            std::string campaign, kind = "comment", text, author, trial;
         };
         auto c = std::make_shared<Conn>();
         auto a = std::make_shared<NoteArgs>();
@@ -391,8 +413,9 @@ void add_daemon_commands(CLI::App& app) {
                                                "stored by the daemon with the time and its author (append-only)");
         cmd->add_option("text", a->text, "The note (quote it; newlines allowed, at most 4000 bytes)")->required();
         cmd->add_option("--campaign", a->campaign, "The campaign the note is about")->required();
-        cmd->add_option("--trial", a->trial, "A trial of it, by its database id (the running trial's: `manikin status --json`, trial.id)")
-            ->check(CLI::Range(std::int64_t{1}, std::int64_t{9'000'000'000'000'000}));
+        cmd->add_option("--trial", a->trial,
+                        "A trial of it, by the name every export and report gives it (c03-r2: case 3, replicate 2) or its "
+                        "database id (the running trial's: `manikin status --json`, trial.id)");
         cmd->add_option("--kind", a->kind, "comment, operator (who ran it), ensemble (what the manikin wore), garment")
             ->capture_default_str()
             ->check(CLI::IsMember({"comment", "operator", "ensemble", "garment"}));
@@ -407,27 +430,55 @@ void add_daemon_commands(CLI::App& app) {
                 if (const char* user = std::getenv("USER")) author = user;
             nlohmann::json req{{"cmd", "note"}, {"campaign", a->campaign}, {"kind", a->kind}, {"text", a->text}};
             if (!author.empty()) req["author"] = author;
-            if (a->trial > 0) req["trial"] = a->trial;
+            if (!a->trial.empty()) {
+                // Digits: a database id; anything else the daemon looks up as a trial's name (c03-r2).
+                const bool id = a->trial.size() <= 15 && std::all_of(a->trial.begin(), a->trial.end(), [](char ch) { return ch >= '0' && ch <= '9'; });
+                if (id) req["trial"] = std::stoll(a->trial);
+                else req["trial"] = a->trial;
+            }
             call(*c, req, true);
             if (c->json) std::printf("%s\n", nlohmann::json{{"ok", true}}.dump().c_str());
-            else std::printf("note stored on '%s'%s\n", a->campaign.c_str(), a->trial > 0 ? fmt::format(" trial {}", a->trial).c_str() : "");
+            else std::printf("note stored on '%s'%s\n", a->campaign.c_str(), a->trial.empty() ? "" : fmt::format(" trial {}", a->trial).c_str());
         });
     }
     if (building("notes")) {
         auto c = std::make_shared<Conn>();
         auto campaign = std::make_shared<std::string>();
-        auto* cmd = app.add_subcommand("notes", "The lab notebook of a campaign, from the running daemon: time, author, kind, trial, text");
+        auto db = std::make_shared<std::string>();
+        auto* cmd = app.add_subcommand("notes", "The lab notebook of a campaign: time, author, kind, trial, text; from the running "
+                                                "daemon, or with --db from its database (no daemon needed)");
         cmd->add_option("--campaign", *campaign, "The campaign")->required();
+        cmd->add_option("--db", *db, "Read the notes from this database (read-only) instead of asking the daemon");
         add_conn_options(cmd, *c, false);
-        cmd->callback([c, campaign] {
-            const auto reply = call(*c, {{"cmd", "notes"}, {"campaign", *campaign}}, false);
+        cmd->callback([c, campaign, db] {
+            nlohmann::json notes;
+            if (!db->empty()) {
+                auto database = recorder::Database::open_read_only(*db);
+                const auto id = database.find_campaign(*campaign);
+                if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", *db, printable(*campaign, 100)));
+                std::map<std::int64_t, int> case_number;
+                for (const auto& cs : database.cases(*id)) case_number[cs.id] = case_number_of(cs);
+                std::map<std::int64_t, std::string> trial_name;
+                for (const auto& t : database.trials(*id)) trial_name[t.id] = exported_trial_id(case_number[t.case_id], t.replicate);
+                notes = nlohmann::json::array();
+                for (const auto& n : database.notes(*id)) {
+                    nlohmann::json e{{"id", n.id}, {"utc", analysis::iso_utc_ms(n.utc_ns)}, {"author", n.author}, {"kind", n.kind}, {"text", n.text}};
+                    e["trial_id"] = n.trial_id ? nlohmann::json(*n.trial_id) : nlohmann::json(nullptr);
+                    if (n.trial_id && trial_name.count(*n.trial_id)) e["trial"] = trial_name[*n.trial_id];
+                    notes.push_back(std::move(e));
+                }
+            } else {
+                notes = call(*c, {{"cmd", "notes"}, {"campaign", *campaign}}, false)["notes"];
+            }
             if (c->json) {
-                std::printf("%s\n", dump_json(reply["notes"], 2).c_str());
+                std::printf("%s\n", dump_json(notes, 2).c_str());
                 return;
             }
-            if (reply["notes"].empty()) std::printf("no notes on '%s' yet (manikin note --campaign %s \"...\")\n", campaign->c_str(), campaign->c_str());
-            for (const auto& n : reply["notes"]) {
-                const std::string trial = n["trial_id"].is_null() ? std::string("campaign") : fmt::format("trial {}", n["trial_id"].get<long long>());
+            if (notes.empty()) std::printf("no notes on '%s' yet (manikin note --campaign %s \"...\")\n", campaign->c_str(), campaign->c_str());
+            for (const auto& n : notes) {
+                const std::string trial = n["trial_id"].is_null() ? std::string("campaign")
+                                          : n.contains("trial") ? n["trial"].get<std::string>()
+                                                                : fmt::format("trial {}", n["trial_id"].get<long long>());
                 std::printf("%s  %-10s %-8s %-10s %s\n", n.value("utc", "").c_str(), printable(n.value("author", ""), 40).c_str(),
                             n.value("kind", "").c_str(), trial.c_str(), n.value("text", "").c_str());
             }

@@ -40,6 +40,10 @@ const std::vector<CommandGroup>& command_groups();
 // options was a third of `manikin status`'s start-up, issue 36), nothing but the global options
 // for a bare --version, and the whole tree otherwise (--help, a misspelt command).
 void add_commands_for(CLI::App& app, int argc, char** argv);
+// After a parse error: the first word of argv that names no command where one is required, as
+// "unknown command 'campaign chek' (did you mean 'campaign check'?)", or empty when every command
+// word is known (CLI11's "A subcommand is required" said nothing of the misspelt word).
+std::string unknown_command_message(const CLI::App& app, int argc, char** argv);
 // Inside a group's add function: whether to build the command `name` (false only while
 // add_commands_for builds another command of the same group).
 bool building(std::string_view name);

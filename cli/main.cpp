@@ -54,7 +54,8 @@ int main(int argc, char** argv) {
 
     CLI::App app{"manikin: thermal-manikin trials, heat fluxes with 95 % CIs, and the physics behind them"};
     app.footer("Every command takes --json. Exit status: 0 ok, 1 internal error, 2 bad usage or input, 3 daemon not\n"
-               "reachable, 4 refused, 5 negative verdict (a check found problems). docs/cli.md has the contract.");
+               "reachable, 4 refused, 5 negative verdict (a check found problems), 6 a campaign waited for did not\n"
+               "end done. docs/cli.md has the contract.");
     // Every argument is UTF-8 text (names, notes, paths): one that is not went into a JSON request
     // and came back as "internal error" (issue 60); it is a usage error, named here.
     for (int i = 1; i < argc; ++i)
@@ -70,6 +71,8 @@ int main(int argc, char** argv) {
     } catch (const CLI::Success& e) {
         return app.exit(e);  // --help and --version: text, status 0, even with --json
     } catch (const CLI::ParseError& e) {
+        if (const auto unknown = manikind::cli::unknown_command_message(app, argc, argv); !unknown.empty())
+            return report_error(json, "usage", unknown, ExitStatus::bad_input);
         if (!json) {
             app.exit(e);  // CLI11's own message and "Run with --help"; the status is ours
             return static_cast<int>(ExitStatus::bad_input);

@@ -242,6 +242,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*s, "simulation", "step_s", c.simulation.step_s, 0.01, 60.0, "s");
         r.number(*s, "simulation", "manikin_period_s", c.simulation.manikin_period_s, 0.1, 60.0, "s");
         r.number(*s, "simulation", "air_speed_m_s", c.simulation.air_speed_m_s, 0.0, 5.0, "m/s");
+        r.text(*s, "simulation", "operator_prompts", c.simulation.operator_prompts, {"auto", "wait"});
         sim::ReplicateScatter& sc = c.simulation.scatter;
         r.number(*s, "simulation", "replicate_flux_rel_sd", sc.replicate_flux_rel_sd, 0.0, 0.2, "fraction");
         r.number(*s, "simulation", "replicate_flux_sd_w_m2", sc.replicate_flux_sd_w_m2, 0.0, 50.0, "W/m²");

@@ -81,6 +81,10 @@ struct SimulationConfig {
     double step_s = 1.0;                      // virtual-clock step
     double manikin_period_s = 5.0;            // the manikin's zone report interval (Text S3.2: 5 s)
     double air_speed_m_s = 0.01;              // the enclosure's air speed: sealed < 0.02 (Text S3.1); 0.4 for clothing tests
+    // Who answers an operator prompt (dress the manikin for a clothing test): "auto", the simulated
+    // operator at once (campaigns run unattended: tests, the demo); "wait", `manikin continue` or
+    // the console's button, as on a real lab, where prompts always wait.
+    std::string operator_prompts = "auto";
     sim::ReplicateScatter scatter;            // per-trial replicate scatter (keys replicate_*, probe_*)
 };
 

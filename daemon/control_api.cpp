@@ -32,7 +32,7 @@ nlohmann::json fail(const std::string& why) { return {{"ok", false}, {"error", w
 const std::map<std::string, bool>& commands() {  // name -> mutating
     static const std::map<std::string, bool> c = {{"status", false}, {"live", false},          {"results", false},
                                                   {"start_campaign", true}, {"abort", true}, {"pause", true},
-                                                  {"resume", true},  {"set_chamber", true},  {"shutdown", true},
+                                                  {"resume", true},  {"continue", true}, {"set_chamber", true},  {"shutdown", true},
                                                   {"alarms", false}, {"ack_alarm", true}, {"campaign_outcome", false},
                                                   {"alarm_history", false}, {"shelve_alarm", true}, {"unshelve_alarm", true},
                                                   {"note", true}, {"notes", false}};
@@ -133,9 +133,17 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
             const auto body = text("text");
             if (!body) return fail("\"text\": expected the note's text (a string)");
             std::optional<std::int64_t> trial;
-            if (req.contains("trial") && !req["trial"].is_null()) {
+            if (req.contains("trial") && req["trial"].is_string()) {
+                // The export's name of a trial ("c03-r2"), as the lab reads it in every file and report.
+                const auto label = text("trial");
+                if (!label) return fail("\"trial\": expected a trial's id or its name (c03-r2)");
+                auto found = daemon.trial_by_label(*name, *label);
+                if (const auto* why = std::get_if<std::string>(&found)) return fail(*why);
+                trial = std::get<std::int64_t>(found);
+            } else if (req.contains("trial") && !req["trial"].is_null()) {
                 const auto t = number("trial");
-                if (!t || *t != std::trunc(*t) || *t < 1 || *t > 9e15) return fail("\"trial\": expected a trial's id (a whole number)");
+                if (!t || *t != std::trunc(*t) || *t < 1 || *t > 9e15)
+                    return fail("\"trial\": expected a trial's id (a whole number) or its name (c03-r2)");
                 trial = static_cast<std::int64_t>(*t);
             }
             const std::string kind = text("kind").value_or("comment");
@@ -162,6 +170,7 @@ nlohmann::json handle_request(LabDaemon& daemon, const ControlOptions& o, const 
         }
         if (cmd == "pause") return done(daemon.pause());
         if (cmd == "resume") return done(daemon.resume());
+        if (cmd == "continue") return done(daemon.operator_continue(origin.who));
         if (cmd == "set_chamber") {
             const auto t = number("chamber_temp_c"), rh = number("chamber_rh_pct");
             if (!t || !rh) return fail("\"chamber_temp_c\" and \"chamber_rh_pct\": expected numbers");

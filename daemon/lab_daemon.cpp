@@ -16,6 +16,7 @@
 #include "base/guarded.hpp"
 #include "analysis/zone_map.hpp"
 #include "daemon/setup_record.hpp"
+#include "store/database_export.hpp"
 #include "base/text.hpp"
 #include "base/user_error.hpp"
 
@@ -229,15 +230,39 @@ std::string LabDaemon::add_note(const std::string& campaign, std::optional<std::
     return {};
 }
 
+std::variant<std::int64_t, std::string> LabDaemon::trial_by_label(const std::string& campaign, const std::string& label) {
+    std::lock_guard lk(lock_);
+    flush_all_locked();
+    const auto id = db_.find_campaign(campaign);
+    if (!id) return fmt::format("\"campaign\": no campaign named '{}' in {}", printable(campaign, 100), db_path_.filename().string());
+    std::map<std::int64_t, int> case_number;
+    for (const auto& c : db_.cases(*id)) case_number[c.id] = manikind::case_number_of(c);
+    std::optional<std::int64_t> found;
+    std::string known;
+    for (const auto& t : db_.trials(*id)) {
+        const std::string name = manikind::exported_trial_id(case_number[t.case_id], t.replicate);
+        if (name == label) found = std::max(found.value_or(0), t.id);
+        if (known.find(name) == std::string::npos) known += (known.empty() ? "" : ", ") + name;
+    }
+    if (found) return *found;
+    return fmt::format("\"trial\": no trial '{}' in campaign '{}' (its trials so far: {})", printable(label, 40), printable(campaign, 100),
+                       known.empty() ? "none" : known);
+}
+
 nlohmann::json LabDaemon::notes_json(const std::string& campaign) {
     std::lock_guard lk(lock_);
     flush_all_locked();
     const auto id = db_.find_campaign(campaign);
     if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), printable(campaign, 100)));
+    std::map<std::int64_t, int> case_number;
+    for (const auto& c : db_.cases(*id)) case_number[c.id] = manikind::case_number_of(c);
+    std::map<std::int64_t, std::string> trial_name;  // the export's name of each trial (c03-r2)
+    for (const auto& t : db_.trials(*id)) trial_name[t.id] = manikind::exported_trial_id(case_number[t.case_id], t.replicate);
     nlohmann::json out = nlohmann::json::array();
     for (const auto& n : db_.notes(*id)) {
         nlohmann::json e{{"id", n.id}, {"utc", analysis::iso_utc_ms(n.utc_ns)}, {"author", n.author}, {"kind", n.kind}, {"text", n.text}};
         e["trial_id"] = n.trial_id ? nlohmann::json(*n.trial_id) : nlohmann::json(nullptr);
+        if (n.trial_id && trial_name.count(*n.trial_id)) e["trial"] = trial_name[*n.trial_id];
         out.push_back(std::move(e));
     }
     return out;
@@ -407,6 +432,7 @@ nlohmann::json LabDaemon::status_json() {
     for (const auto& p : waiting_) j["queued_campaigns"].push_back(p.name);
     j["stage"] = stage_name(stage_);
     j["paused"] = paused_;
+    j["awaiting_operator"] = operator_prompt_ ? nlohmann::json(*operator_prompt_) : nlohmann::json(nullptr);
     j["trials_done"] = trials_done_;
     j["trials_total"] = trials_total_;
     if (current_) {

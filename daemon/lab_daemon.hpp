@@ -16,6 +16,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <variant>
 #include <thread>
 #include <unordered_map>
 #include <utility>
@@ -72,6 +73,9 @@ public:
     std::optional<std::string> running_campaign();
     std::string pause();
     std::string resume();
+    // The operator did what the daemon waits for (dress the manikin: docs/daemon.md, "Operator
+    // prompts"); recorded with who. An error message when nothing is waiting.
+    std::string operator_continue(const std::string& who);
     std::string set_chamber(double temp_c, double rh_pct);
 
     nlohmann::json status_json();
@@ -95,6 +99,9 @@ public:
     std::string add_note(const std::string& campaign, std::optional<std::int64_t> trial_id, const std::string& kind,
                          const std::string& text, const std::string& author);
     nlohmann::json notes_json(const std::string& campaign);
+    // A trial of `campaign` by the export's id ("c03-r2": case 3, replicate 2), the latest run of
+    // it when the replicate was run again; or a message naming what was not found.
+    std::variant<std::int64_t, std::string> trial_by_label(const std::string& campaign, const std::string& label);
     nlohmann::json alarms_json();
     nlohmann::json alarm_history_json();
     std::string acknowledge_alarm(std::int64_t id, const std::string& who = "the operator");
@@ -254,6 +261,10 @@ private:
     Stage stage_ = Stage::idle;
     std::int64_t stage_start_ns_ = 0;
     bool paused_ = false;
+    // An operator prompt of the current trial: waiting for `continue`, or answered (the trial's
+    // configuring then goes on); both cleared when the next trial starts.
+    std::optional<std::string> operator_prompt_;
+    bool operator_answered_ = false;
     std::int64_t paused_at_ns_ = 0;
     std::int64_t paused_total_ns_ = 0;  // every pause's length, summed: the physiological loop's clock stands still by it
     bool safety_tripped_ = false;

@@ -142,8 +142,23 @@ std::string LabDaemon::abort(const std::string& reason, const std::string& who) 
     acq_->manikin().set_run(false);
     event("warn", "abort", fmt::format("'{}' aborted by {}: {}", plan_->name, who, reason));
     if (trial_id_) finish_trial("aborted", fmt::format("{} (by {})", reason, who));
+    if (operator_prompt_) {  // nobody waits for the operator any more
+        alarms_.clear("operator", "prompt", "the campaign was aborted", now_utc_ns());
+        operator_prompt_.reset();
+    }
     waiting_.clear();  // an operator's abort stops what was queued too
     finish_campaign("aborted");
+    return {};
+}
+
+std::string LabDaemon::operator_continue(const std::string& who) {
+    std::lock_guard lk(lock_);
+    if (!operator_prompt_) return "nothing is waiting for the operator";
+    const std::string message = fmt::format("done: {} (said by {})", *operator_prompt_, printable(who, 100));
+    event("info", "operator", message);
+    alarms_.clear("operator", "prompt", message, now_utc_ns());
+    operator_prompt_.reset();
+    operator_answered_ = true;  // the next tick's configuring goes on
     return {};
 }
 
@@ -308,8 +323,10 @@ nlohmann::json LabDaemon::campaign_outcome_json(const std::string& campaign) {
                         std::any_of(waiting_.begin(), waiting_.end(), [&](const CampaignPlan& p) { return p.name == campaign; });
     std::map<std::string, int> by_state;
     std::set<std::pair<std::int64_t, std::int64_t>> done, tried;
+    int fallbacks = 0;  // physiological trials that fell back to constant skin temperature
     for (const auto& t : db_.trials(*id)) {
         ++by_state[t.state];
+        fallbacks += (t.quality_flags & flag_model_fallback) != 0 ? 1 : 0;
         tried.insert({t.case_id, t.replicate});
         if (t.state == "done") done.insert({t.case_id, t.replicate});
     }
@@ -320,8 +337,10 @@ nlohmann::json LabDaemon::campaign_outcome_json(const std::string& campaign) {
             {"state", active ? std::string("running") : state},
             {"active", active},
             {"trials", trials},
-            // Every case x replicate tried has a done trial (an interrupted one run again counts once).
-            {"ok", !active && state == "done" && done.size() == tried.size() && planned > 0}};
+            {"model_fallbacks", fallbacks},
+            // Every case x replicate tried has a done trial (an interrupted one run again counts once),
+            // and no physiological trial ran its end at constant skin temperature (issue 64).
+            {"ok", !active && state == "done" && done.size() == tried.size() && planned > 0 && fallbacks == 0}};
 }
 
 bool LabDaemon::campaign_active() {

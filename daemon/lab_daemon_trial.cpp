@@ -282,11 +282,14 @@ void LabDaemon::advance_locked() {
             queue_.pop_front();
             trial_id_ = trial;
             dropped_samples_ = 0;
+            operator_prompt_.reset();
+            operator_answered_ = false;
             begin_trial_bins_locked(trial);
             enter(Stage::configuring, fmt::format("case {} replicate {}", current_->c.id, current_->replicate));
             [[fallthrough]];
         }
         case Stage::configuring: {
+            if (operator_prompt_) return;  // the chamber is set; the operator has not said done yet
             // A chamber that answers with an exception or not at all for a while (a controller
             // rebooting) is retried each tick, not failed at once: otherwise a 4-min glitch fails
             // every queued trial in as many ticks. The plan was checked against [safety] already.
@@ -300,18 +303,31 @@ void LabDaemon::advance_locked() {
             settle_off_history_.clear();
             target_ = enclosure_target(current_->c);  // once a trial: settling and excursions read it each tick
             // A clothing test: the operator dresses the manikin for this trial (re-dressed for
-            // every replicate). On the simulated lab the world puts the wardrobe's ensemble on.
-            if (auto* lab = acq_ ? acq_->lab() : nullptr; lab && current_->c.ensemble.empty()) {
+            // every replicate) while the chamber goes to its setpoint, and says done (`manikin
+            // continue`, the console's button); the trial waits in configuring until then (issue
+            // 64). On the simulated lab the world puts the wardrobe's ensemble on, and its
+            // operator answers at once unless [simulation] operator_prompts = "wait".
+            auto* lab = acq_ ? acq_->lab() : nullptr;
+            if (lab && current_->c.ensemble.empty()) {
                 lab->dress("");  // not a clothing test: bare
             } else if (!current_->c.ensemble.empty()) {
-                if (lab) {
-                    if (!lab->dress(current_->c.ensemble))
-                        event("warn", "clothing",
-                              fmt::format("the simulated lab's wardrobe has no ensemble '{}': the manikin runs bare",
-                                          current_->c.ensemble));
-                } else {
-                    event("info", "clothing", fmt::format("dress the manikin: {} ({} test)", current_->c.ensemble, current_->c.test));
+                const std::string prompt = fmt::format("dress the manikin in '{}' for the {} test (case {} replicate {})",
+                                                       current_->c.ensemble, current_->c.test, current_->c.id, current_->replicate);
+                const bool simulated_operator = lab && o_.config.simulation.operator_prompts == "auto";
+                if (!operator_answered_ && !simulated_operator) {
+                    operator_prompt_ = prompt;
+                    // An alarm while it waits (the console, the notifications), cleared by continue.
+                    const std::string message = "waiting for the operator: " + prompt + "; say done with `manikin continue`";
+                    log_event("warn", "operator", message);
+                    alarms_.raise("warn", "operator", "prompt", message, now_utc_ns());
+                    notify_locked("alarm_warn", "warn", "operator: " + prompt, message);
+                    return;
                 }
+                if (simulated_operator) event("info", "operator", prompt + ": done by the simulated operator");
+                operator_answered_ = false;
+                if (lab && !lab->dress(current_->c.ensemble))
+                    event("warn", "clothing",
+                          fmt::format("the simulated lab's wardrobe has no ensemble '{}': the manikin runs bare", current_->c.ensemble));
             }
             enter(Stage::chamber_settling,
                   fmt::format("waiting for the enclosure at {} ± {} °C, {} ± {} % RH, stable for {:.0f} min",

@@ -13,6 +13,7 @@
 #include <memory>
 #include <csignal>
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <sys/signalfd.h>
 #include <sys/stat.h>
@@ -80,6 +81,11 @@ int main(int argc, char** argv) {
         ->check(CLI::Range(0.1, 10.0));
     app.add_option("--campaign", campaign, "Start this campaign at once (a campaign TOML file, or builtin:table-s3)");
     app.add_flag("--exit-when-done", exit_when_done, "Exit when the campaign given with --campaign has finished");
+    std::optional<double> sim_air_speed_m_s;
+    app.add_option("--sim-air-speed", sim_air_speed_m_s,
+                   "Simulated lab: the enclosure's air speed in m/s (overrides [simulation] air_speed_m_s, 0.01: sealed; "
+                   "0.4 for the clothing templates, ASTM F1291 / ISO 15831)")
+        ->check(CLI::Range(0.0, 5.0));
     app.footer("Talk to it with `manikin status`, `manikin campaign run <file>`, `manikin trial watch`, `manikin results`.\n"
                "Mutating API commands need the token ([api] token, or the <socket>.token file it writes).");
     CLI11_PARSE(app, argc, argv);
@@ -99,6 +105,10 @@ int main(int argc, char** argv) {
         config::Config cfg = config_file.empty() ? config::default_config() : config::load_config(config_file);
         for (const auto& w : cfg.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
         if (!database.empty()) cfg.database = database;
+        if (sim_air_speed_m_s) {
+            if (cfg.mode != "simulated") throw UserError("--sim-air-speed needs mode = \"simulated\" (a real lab's fans set the air speed)");
+            cfg.simulation.air_speed_m_s = *sim_air_speed_m_s;
+        }
         if (!http_listen.empty()) {
             cfg.http.listen = http_listen;
             cfg.key_where["http.listen"] = "--http";
@@ -255,8 +265,10 @@ int main(int argc, char** argv) {
                 const auto outcome = daemon.campaign_outcome_json(campaign_name);
                 if (!outcome.value("ok", false)) {
                     exit_status = static_cast<int>(ExitStatus::not_done);
-                    std::fprintf(stderr, "manikind: campaign '%s' ended %s (trials: %s): exit status %d\n", campaign_name.c_str(),
-                                 outcome.value("state", "?").c_str(), outcome["trials"].dump().c_str(), exit_status);
+                    std::fprintf(stderr, "manikind: campaign '%s' ended %s (trials: %s%s): exit status %d\n", campaign_name.c_str(),
+                                 outcome.value("state", "?").c_str(), outcome["trials"].dump().c_str(),
+                                 outcome.value("model_fallbacks", 0) > 0 ? "; a physiological trial fell back to constant skin temperature" : "",
+                                 exit_status);
                 }
             }
             ::sd_notify(0, "STOPPING=1");

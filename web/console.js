@@ -516,6 +516,9 @@ function onUpdate(msg) {
   const s = msg.status;
   $("last-update").textContent = new Date(msg.server_utc_ms || Date.now()).toLocaleTimeString();
   $("hdr-stage").textContent = (s.stage || "—").replaceAll("_", " ") + (s.paused ? " (PAUSED)" : "");
+  // What the daemon waits for the operator to do (dress the manikin), with the button that says done.
+  $("operator-banner").hidden = typeof s.awaiting_operator !== "string";
+  $("operator-prompt").textContent = s.awaiting_operator || "";
   const active = (msg.alarms || []).filter((a) => a.state === "UNACK" || a.state === "ACKED").length;
   const unacked = (msg.alarms || []).filter((a) => !a.acknowledged).length;
   $("hdr-alarms").textContent = `alarms: ${active} active, ${unacked} to acknowledge`;
@@ -562,6 +565,7 @@ async function main() {
   $("resume").addEventListener("click", () => command({ cmd: "resume" }));
   // The header's copies: the same commands; Abort opens the confirmation below (name and reason).
   $("hdr-pause").addEventListener("click", () => command({ cmd: "pause" }));
+  $("operator-continue").addEventListener("click", () => command({ cmd: "continue" }));
   $("hdr-resume").addEventListener("click", () => command({ cmd: "resume" }));
   $("hdr-abort").addEventListener("click", () => { $("abort").click(); $("control-panel").scrollIntoView(); });
   // Abort asks first: the campaign's name typed, and a reason (both recorded by the daemon).

@@ -154,6 +154,22 @@ TEST_CASE("cli contract: input and usage errors under --json are one error objec
         CHECK(plain.exit_code == 2);
         CHECK(plain.out.find("internal error") == std::string::npos);
     }
+    SECTION("a misspelt command is named with the nearest one, at the top and inside a command (issue 64)") {
+        const auto top = run_manikin("clothes 2>&1");
+        CHECK(top.exit_code == 2);
+        CHECK_THAT(top.out, Catch::Contains("unknown command 'clothes' (did you mean 'clothing'?)"));
+        const auto inner = run_manikin("campaign chek x.toml --json");
+        CHECK(inner.exit_code == 2);
+        CHECK_THAT(error_of(inner)["message"].get<std::string>(),
+                   Catch::Contains("unknown command 'campaign chek' (did you mean 'campaign check'?)") &&
+                       Catch::Contains("the commands of 'campaign' are: "));
+        // An option's value is not taken for a command word; far from every name, no guess.
+        const auto socket = run_manikin("campaign --socket /nowhere.sock zzzzzz 2>&1");
+        CHECK_THAT(socket.out, Catch::Contains("unknown command 'campaign zzzzzz';"));
+        CHECK(socket.out.find("did you mean") == std::string::npos);
+        // The footer's exit statuses include 6 (docs/cli.md).
+        CHECK_THAT(run_manikin("--help").out, Catch::Contains("6 a campaign waited for did not"));
+    }
     SECTION("--help is not an error, even with --json") {
         const auto r = run_manikin("thermoreg --help --json");
         CHECK(r.exit_code == 0);

@@ -184,8 +184,14 @@ TEST_CASE("control API: the lab notebook takes notes on a campaign and its trial
           std::string::npos);
     CHECK(note(R"("campaign":"notebook","trial":999999,"text":"x")")["error"].get<std::string>().find("\"trial\": no trial 999999") == 0);
     CHECK(note(R"("campaign":"notebook","trial":1e300,"text":"x")")["error"].get<std::string>().find("\"trial\"") == 0);
+    // A trial by the name the exports and reports give it (issue 64: a database id was all it took).
+    CHECK(note(R"("campaign":"notebook","trial":"c01-r1","text":"zipper caught at the neck")")["ok"] == true);
+    CHECK(note(R"("campaign":"notebook","trial":"c09-r9","text":"x")")["error"].get<std::string>().find(
+              "\"trial\": no trial 'c09-r9' in campaign 'notebook' (its trials so far: c01-r1)") == 0);
     const auto listed = ask(f, R"({"cmd":"notes","campaign":"notebook"})");
-    REQUIRE(listed["notes"].size() == 2);
+    REQUIRE(listed["notes"].size() == 3);
+    CHECK(listed["notes"][2]["trial_id"] == trial);
+    CHECK(listed["notes"][1]["trial"] == "c01-r1");
     CHECK(listed["notes"][0]["author"] == "ana");
     CHECK(listed["notes"][0]["trial_id"].is_null());
     CHECK(listed["notes"][1]["trial_id"] == trial);
@@ -194,14 +200,14 @@ TEST_CASE("control API: the lab notebook takes notes on a campaign and its trial
     auto& db = d.db();
     const auto id = db.find_campaign("notebook");
     REQUIRE(id);
-    CHECK(db.notes(*id).size() == 2);
+    CHECK(db.notes(*id).size() == 3);
 
-    // The campaign runs to its end; the export carries both notes, the trial's by its exported id.
+    // The campaign runs to its end; the export carries the notes, the trial's by its exported id.
     for (int i = 0; i < 4 * 3600 && d.status_json()["campaign"].is_string(); ++i) d.step_virtual(1.0);
     d.flush_recorder();
     const auto c = manikind::campaign_from_database(db, "notebook");
     REQUIRE(c.trials.size() == 1);
-    REQUIRE(c.notes.size() == 2);
+    REQUIRE(c.notes.size() == 3);
     CHECK(c.notes[0].trial.empty());
     CHECK(c.notes[0].kind == "operator");
     CHECK(c.notes[1].trial == c.trials[0].info.id);
@@ -271,5 +277,56 @@ TEST_CASE("export of a running campaign: the trial still acquiring goes up to it
     CHECK(back.trials[0].info.partial);
     bool said = false;
     for (const auto& w : back.warnings) said = said || w.find("exported while running") != std::string::npos;
+    CHECK(said);
+}
+
+TEST_CASE("operator prompts: a clothing trial waits in configuring until the operator says continue, recorded with who, "
+          "the alarm raised while it waits and cleared after",
+          "[daemon][api][clothing]") {
+    DaemonFixture f([](manikind::config::Config& c) { c.simulation.operator_prompts = "wait"; });
+    auto& d = f.daemon();
+    auto plan = manikind::test::quick_plan("dressing", 35.0);
+    plan.replicates = 2;
+    plan.cases.front().wet = false;
+    plan.cases.front().ensemble = "coverall";
+    plan.cases.front().test = "insulation";
+    plan.ensembles["coverall"] = {};
+    REQUIRE(d.start_campaign(plan).empty());
+    CHECK(ask(f, R"({"cmd":"continue","token":"s3cret"})")["error"] == "nothing is waiting for the operator");  // not yet asked
+    for (int i = 0; i < 30; ++i) d.step_virtual(1.0);
+    // An hour of lab time later the trial still waits, with the prompt in the status and an alarm.
+    for (int i = 0; i < 3600; ++i) d.step_virtual(1.0);
+    auto s = d.status_json();
+    CHECK(s["stage"] == "configuring");
+    REQUIRE(s["awaiting_operator"].is_string());
+    CHECK_THAT(s["awaiting_operator"].get<std::string>(), Catch::Contains("dress the manikin in 'coverall' for the insulation test") &&
+                                                              Catch::Contains("replicate 1"));
+    auto operator_alarm = [&] {
+        for (const auto& a : d.alarms_json())
+            if (a["kind"] == "operator") return a["state"].get<std::string>();
+        return std::string("none");
+    };
+    CHECK(operator_alarm() == "UNACK");
+    // Without the token nothing moves; with it, the trial goes on to chamber settling.
+    CHECK(ask(f, R"({"cmd":"continue"})")["error"] == "wrong or missing token");
+    CHECK(ask(f, R"({"cmd":"continue","token":"s3cret"})")["ok"] == true);
+    CHECK(d.status_json()["awaiting_operator"].is_null());
+    CHECK(operator_alarm() == "RTN_UNACK");  // returned; an operator acknowledges it as any other
+    d.step_virtual(1.0);
+    CHECK(d.status_json()["stage"] != "configuring");
+    // The second replicate (re-dressed) asks again.
+    for (int i = 0; i < 6 * 3600 && !d.status_json()["awaiting_operator"].is_string(); ++i) d.step_virtual(1.0);
+    s = d.status_json();
+    REQUIRE(s["awaiting_operator"].is_string());
+    CHECK_THAT(s["awaiting_operator"].get<std::string>(), Catch::Contains("replicate 2"));
+    CHECK(s["trials_done"] == 1);
+    // Abort while waiting: nothing waits any more.
+    REQUIRE(d.abort("end of the test", "ana").empty());
+    CHECK(d.status_json()["awaiting_operator"].is_null());
+    bool said = false;
+    for (const auto& e : d.db().events(std::nullopt))
+        if (e.kind == "operator" && e.message.find("done: dress the manikin in 'coverall'") != std::string::npos &&
+            e.message.find("(said by a control-socket client)") != std::string::npos)
+            said = true;
     CHECK(said);
 }

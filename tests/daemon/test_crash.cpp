@@ -215,3 +215,42 @@ TEST_CASE("kill -9 in a physiological trial: the trial ends interrupted and the 
     }
     CHECK(zones_checked == 35);
 }
+
+TEST_CASE("manikind --sim-air-speed sets the simulated enclosure's air speed without a copied config, and a real lab refuses it",
+          "[daemon][clothing]") {
+    const fs::path dir = fs::temp_directory_path() / ("manikind-airspeed-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    {
+        std::ofstream plan(dir / "plan.toml");
+        plan << "name = \"ventilated\"\nreplicates = 1\ntrial_duration_min = 40\n[[cases]]\nchamber_temp_c = 25\n"
+                "chamber_rh_pct = 40\nskin_setpoint_c = 35\n";
+    }
+    const std::string bin = std::string(MANIKIND_BIN_DIR) + "/manikind";
+    const std::string db_path = (dir / "v.db").string();
+    auto child = DaemonProcess::spawn({bin, "--virtual", "--database", db_path, "--socket", (dir / "d.sock").string(),
+                                       "--sim-air-speed", "0.4", "--campaign", (dir / "plan.toml").string(), "--exit-when-done"});
+    CHECK(WEXITSTATUS(child.wait()) == 0);
+    auto db = manikind::recorder::Database::open_read_only(db_path);
+    const auto id = db.find_campaign("ventilated");
+    REQUIRE(id);
+    const auto trials = db.trials(*id);
+    REQUIRE(trials.size() == 1);
+    std::optional<std::int64_t> channel;
+    for (const auto& ch : db.channels())
+        if (ch.device_name == "windsonic" && ch.name == "air_speed_m_s") channel = ch.id;
+    REQUIRE(channel);
+    double sum = 0.0;
+    int n = 0;
+    for (const auto& s : db.samples(trials[0].id, *channel))
+        if (std::isfinite(s.value)) sum += s.value, ++n;
+    REQUIRE(n > 100);
+    CHECK(sum / n == Approx(0.4).margin(0.05));  // the WindSonic reads the world's 0.4 m/s
+
+    // A real lab's fans set the air speed: the flag is refused there, naming why.
+    auto refused = DaemonProcess::spawn({bin, "--config", MANIKIND_CONFIG_DIR "/real-lab.toml", "--database", (dir / "r.db").string(),
+                                         "--socket", (dir / "r.sock").string(), "--sim-air-speed", "0.4"});
+    CHECK(WEXITSTATUS(refused.wait()) != 0);
+    CHECK_THAT(refused.output(), Catch::Contains("--sim-air-speed needs mode = \"simulated\""));
+    fs::remove_all(dir);
+}

@@ -221,4 +221,9 @@ TEST_CASE("physiological trial on the simulated lab: a zone whose heater fails m
     const auto r = ph::compute(manikind::campaign_from_database(db, plan.name));
     REQUIRE(r.trials.size() == 1);
     CHECK(r.trials[0].fell_back);
+    // The campaign's outcome is not ok after a fallback (issue 64): --exit-when-done and
+    // `campaign run --wait` exit 6, not 0.
+    const auto outcome = f.daemon().campaign_outcome_json(plan.name);
+    CHECK(outcome["model_fallbacks"] == 1);
+    CHECK(outcome["ok"] == false);
 }
