@@ -215,7 +215,7 @@ TEST_CASE("planning: the verdict names the concealed term alone or beside the la
 
 TEST_CASE("planning: reconcile asked for the verdict alone gives the verdict the whole report gives, and stops early "
           "where another term wins and no pair could name the concealed one",
-          "[planning][power]") {
+          "[planning][power][proof]") {
     const auto model = recorded(15);
     rc::Options opt;
     opt.null_simulations = 400;
@@ -418,7 +418,7 @@ TEST_CASE("planning: a limit that hangs on the air probe's calibration is flagge
 }
 
 TEST_CASE("planning: where no calibration matters a term is flagged in at most 5 % of plans (plus the binomial margin)",
-          "[planning][power]") {
+          "[planning][power][proof]") {
     // 200 plans whose verdicts are drawn independently of every lab's errors: a flag is false.
     int flagged = 0, p_low = 0, tests = 0;
     for (std::uint64_t seed = 1; seed <= 200; ++seed) {
@@ -440,7 +440,7 @@ TEST_CASE("planning: where no calibration matters a term is flagged in at most 5
 
 TEST_CASE("planning: a drawn lab's grids are the same whatever effect is concealed (its recorded conditions come from "
           "its seed alone) and reconcile given them reports what it reports with its own",
-          "[planning][power]") {
+          "[planning][power][proof]") {
     // The planner makes each drawn lab's grids once and shares them across the values and terms
     // tried there: that changes no answer only if a lab's conditions do not depend on the effect.
     const auto model = recorded(15);
