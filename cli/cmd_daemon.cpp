@@ -164,8 +164,38 @@ void print_status(const nlohmann::json& s) {
                         num(st["on_target_s"].is_number() ? nlohmann::json(st["on_target_s"].get<double>() / 60) : st["on_target_s"], "{:.1f}").c_str(),
                         num(st["window_s"].is_number() ? nlohmann::json(st["window_s"].get<double>() / 60) : st["window_s"], "{:.0f}").c_str(),
                         st.value("timed_out", false) ? "never: timed out, holding (see alarms)"
-                        : st["eta_s"].is_number()    ? fmt::format("in about {:.0f} min", st["eta_s"].get<double>() / 60).c_str()
-                                                     : "unknown (not yet closing in)");
+                        : st["eta_s"].is_number()
+                            ? fmt::format("in about {:.0f} min ({})", st["eta_s"].get<double>() / 60,
+                                          st.contains("eta_high_s") && st["eta_high_s"].is_number()
+                                              ? fmt::format("{:.0f}-{:.0f} min", st["eta_low_s"].get<double>() / 60,
+                                                            st["eta_high_s"].get<double>() / 60)
+                                              : std::string("or later: the pace is uncertain"))
+                                  .c_str()
+                            : "unknown (not yet closing in)");
+            if (st.contains("failing") && st["failing"].is_array() && !st["failing"].empty()) {
+                std::string what;
+                for (const auto& f : st["failing"]) what += (what.empty() ? "" : "; ") + f.get<std::string>();
+                std::printf("  not yet: %s\n", printable(what, 400).c_str());
+            }
+        }
+        if (t.contains("model") && t["model"].is_object()) {
+            // A physiological trial: the model's phase, how long it has run (and when
+            // preconditioning gives up), the model's clock, core and mean skin.
+            const auto& m = t["model"];
+            const std::string phase = m.value("phase", "?");
+            std::string in_phase;
+            if (m.contains("phase_elapsed_s") && m["phase_elapsed_s"].is_number()) {
+                in_phase = fmt::format(", {:.1f} min in it", m["phase_elapsed_s"].get<double>() / 60);
+                if (m.contains("phase_limit_s"))
+                    in_phase += fmt::format(" (falls back at {:.0f} min; every zone at the model's start for {:.0f} of {:.0f} s)",
+                                            m["phase_limit_s"].get<double>() / 60, m.value("on_start_s", 0.0), m.value("hold_s", 0.0));
+            }
+            const double duration_s = m.value("duration_s", 0.0), model_s = m.value("model_time_s", 0.0);
+            std::printf("  model %s: %s%s; model time %.1f of %.0f min %s; core %.2f °C, mean skin %.2f °C%s\n",
+                        printable(m.value("model", ""), 60).c_str(), phase.c_str(), in_phase.c_str(), model_s / 60, duration_s / 60,
+                        bar(duration_s > 0 ? std::min(1.0, model_s / duration_s) : 0.0).c_str(), m.value("core_temp_c", 0.0),
+                        m.value("mean_skin_temp_c", 0.0),
+                        m.contains("fallback_reason") ? (" FELL BACK: " + printable(m["fallback_reason"].get<std::string>(), 200)).c_str() : "");
         }
         if (t.contains("steady_progress")) {
             const double progress = t["steady_progress"].get<double>();

@@ -448,7 +448,8 @@ nlohmann::json LabDaemon::status_json() {
             j["trial"]["skin_setpoint_c"] = current_->c.skin_setpoint_c;
         }
         j["trial"]["zone_setpoints_c"] = std::move(zone_sp);
-        if (stage_ == Stage::acquiring) {
+        // A physiological trial has no steady state: the model's progress stands in its place (trial.model).
+        if (stage_ == Stage::acquiring && !loop_) {
             const SteadyCheck c = check_steady_window_locked(paused_ ? paused_at_ns_ : clock_->mono_ns());
             const double limit_c = o_.config.steady_state.max_skin_fluctuation_c;
             const double elapsed_s = stage_elapsed_s();

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "analysis/settling_eta.hpp"
 #include "analysis/zone_map.hpp"
 
 namespace manikind {
@@ -32,18 +33,38 @@ nlohmann::json LabDaemon::settling_json_locked(std::int64_t now) const {
     const double air_off = air - target.air_c, rh_off = rh - target.rh_pct;
     const double window_s = plan_->settle_window_s;
     const double on_target_s = on_target_since_ns_ ? static_cast<double>(now - *on_target_since_ns_) * 1e-9 : 0.0;
-    // ETA: on target, what the window still needs; off target and closing in, the time to the
-    // tolerance at the last minutes' rate, plus the window; else unknown (null).
-    nlohmann::json eta = nullptr;
-    if (on_target_since_ns_) {
-        eta = std::max(0.0, window_s - on_target_s);
-    } else if (std::isfinite(air_off) && settle_off_history_.size() >= 2) {
-        const auto& [t0, off0] = settle_off_history_.front();
-        const auto& [t1, off1] = settle_off_history_.back();
-        const double rate_c_per_s = (off0 - off1) / (static_cast<double>(t1 - t0) * 1e-9);
-        const double left_c = std::abs(air_off) - plan_->settle_tolerance_c;
-        if (rate_c_per_s > 1e-5 && left_c > 0) eta = left_c / rate_c_per_s + window_s;
-        else if (left_c <= 0) eta = window_s;  // the temperature is there; RH is what is awaited
+    // What still fails, each criterion by name (issue 64: "ready in about 0 min" while the band failed).
+    const bool air_ok = std::isfinite(air_off) && std::abs(air_off) <= plan_->settle_tolerance_c;
+    const bool rh_ok = !std::isfinite(rh_off) || std::abs(rh_off) <= plan_->settle_tolerance_rh_pct;
+    const bool band_ok = !enclosure_range_.empty() && enclosure_range_.range() < plan_->settle_band_c;
+    nlohmann::json failing = nlohmann::json::array();
+    if (!air_ok)
+        failing.push_back(std::isfinite(air_off) ? fmt::format("air {:+.2f} °C from target (within {} °C asked)", air_off, plan_->settle_tolerance_c)
+                                                 : std::string("no air reading"));
+    if (!rh_ok) failing.push_back(fmt::format("RH {:+.1f} % from target (within {} % asked)", rh_off, plan_->settle_tolerance_rh_pct));
+    if (!band_ok && !enclosure_range_.empty())
+        failing.push_back(fmt::format("air varied {:.2f} °C over the window (less than {} °C asked)", enclosure_range_.range(),
+                                      plan_->settle_band_c));
+    if (air_ok && rh_ok && on_target_s < window_s)
+        failing.push_back(fmt::format("on target {:.1f} of {:.0f} min", on_target_s / 60, window_s / 60));
+    // ETA: on target and stable, what the window still needs; off target and closing in, the time
+    // to the tolerance from a first-order approach fitted to the last minutes (analysis/settling_eta),
+    // with its range, plus the window; else unknown (null), with what fails named above.
+    nlohmann::json eta = nullptr, eta_low = nullptr, eta_high = nullptr;
+    std::vector<std::pair<double, double>> history;
+    for (const auto& [t, off] : settle_off_history_) history.emplace_back(static_cast<double>(t - now) * 1e-9, off);
+    const auto fit = std::isfinite(air_off) ? analysis::first_order_eta(history, plan_->settle_tolerance_c) : std::nullopt;
+    if (!rh_ok) {
+        // RH is awaited: the air's approach says nothing of it (null, RH named in `failing`).
+    } else if (fit) {
+        // The tolerance, its window and the band over the window, on the fitted approach.
+        const auto r = analysis::settling_ready(*fit, air_off, plan_->settle_tolerance_c, plan_->settle_band_c, window_s,
+                                                on_target_s);
+        eta = r.eta_s;
+        eta_low = r.low_s;
+        if (std::isfinite(r.high_s)) eta_high = r.high_s;
+    } else if (on_target_since_ns_ && band_ok) {
+        eta = eta_low = eta_high = std::max(0.0, window_s - on_target_s);
     }
     auto number_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
     return {{"criterion", fmt::format("enclosure air within {} °C of {} °C and RH within {} % of {} %, varying less than "
@@ -63,6 +84,9 @@ nlohmann::json LabDaemon::settling_json_locked(std::int64_t now) const {
             {"on_target_s", on_target_s},
             {"window_s", window_s},
             {"eta_s", eta},
+            {"eta_low_s", eta_low},
+            {"eta_high_s", eta_high},  // null: it may not get there at this pace
+            {"failing", failing},
             {"timeout_s", plan_->settle_timeout_s},
             {"timed_out", settle_timeout_alarmed_}};
 }

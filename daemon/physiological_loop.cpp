@@ -145,6 +145,7 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
     LoopOutput out;
     if (phase_ == Phase::finished) return out;
     const std::int64_t now = in.now_ns;
+    last_tick_ns_ = now;
     const std::size_t n = map_.size();
     if (in.zones.size() != n) throw std::invalid_argument("PhysiologicalLoop::tick: one reading per zone");
     const auto period_ns = static_cast<std::int64_t>(cfg_.coupling_period_s * 1e9);
@@ -331,6 +332,18 @@ nlohmann::json PhysiologicalLoop::status_json() const {
                                             {"heat_loss_w", running_since_ns_ ? nlohmann::json(last_loss_w_[i]) : nlohmann::json()}};
     }
     j["mean_skin_temp_c"] = skin / area;
+    // How long the phase has run and, preconditioning, when it gives up (issue 64: shown nowhere).
+    if (last_tick_ns_ && started_ns_) {
+        const double since_start_s = static_cast<double>(*last_tick_ns_ - *started_ns_) * 1e-9;
+        if (phase_ == Phase::preconditioning) {
+            j["phase_elapsed_s"] = since_start_s;
+            j["phase_limit_s"] = cfg_.follow_timeout_s + precondition_limit_extra_s;
+            j["on_start_s"] = on_target_since_ns_ ? static_cast<double>(*last_tick_ns_ - *on_target_since_ns_) * 1e-9 : 0.0;
+            j["hold_s"] = precondition_hold_s;  // every zone within precondition_band_c this long starts the model
+        } else if (running_since_ns_) {
+            j["phase_elapsed_s"] = static_cast<double>(*last_tick_ns_ - *running_since_ns_) * 1e-9;
+        }
+    }
     j["segments"] = segments;
     if (!fallback_reason_.empty()) j["fallback_reason"] = fallback_reason_;
     return j;

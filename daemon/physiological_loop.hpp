@@ -98,6 +98,7 @@ private:
     physics::thermoreg::Body body_;
     Phase phase_ = Phase::preconditioning;
     std::optional<std::int64_t> started_ns_;        // first tick
+    std::optional<std::int64_t> last_tick_ns_;      // the latest tick's time, for status_json
     std::optional<std::int64_t> paused_seen_ns_;    // LoopInputs::paused_total_ns at the last tick
     std::optional<std::int64_t> last_command_ns_;
     std::optional<std::int64_t> running_since_ns_;  // the model's t = 0

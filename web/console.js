@@ -173,6 +173,9 @@ function renderZoneTable() {
   }));
 }
 
+// The model's core and mean skin at each update (issue 64: the model could not be watched), on
+// the lab's clock; a new physiological trial starts a new trend.
+let modelTrend = [];
 function renderTrial(s) {
   const t = s.trial;
   $("campaign-line").textContent = s.campaign
@@ -205,16 +208,28 @@ function renderTrial(s) {
     $("settling-air").replaceChildren(`${fmt(st.air_c, 2)} °C `, off(st.air_off_c, st.tolerance_c, "°C"));
     $("settling-rh").replaceChildren(`${fmt(st.rh_pct, 1)} % `, off(st.rh_off_pct, st.tolerance_rh_pct, "%"));
     $("settling-on").textContent = `${minutes(st.on_target_s)} of ${minutes(st.window_s)}`;
+    // A first-order approach fitted to the last minutes, with its range; what still fails, by name.
+    const range = (st.eta_high_s === null || st.eta_high_s === undefined) ? " or later" :
+      ` (${minutes(st.eta_low_s)} to ${minutes(st.eta_high_s)})`;
     $("settling-eta").textContent = st.timed_out ? "timed out: holding (see alarms)"
-      : (st.eta_s === null ? "unknown (not yet closing in)" : `in about ${minutes(st.eta_s)}`);
+      : (st.eta_s === null ? "unknown (not yet closing in)" : `in about ${minutes(st.eta_s)}${range}`)
+      + ((st.failing || []).length ? `; not yet: ${st.failing.join("; ")}` : "");
   }
 
   // A physiological trial: the model's state beside the zones (status trial.model).
   const m = t && t.model;
   $("model-panel").hidden = !m;
   $("steady-section").hidden = !!m;  // a physiological trial has no steady state
+  if (!m) modelTrend = [];
   if (m) {
-    $("model-phase").textContent = m.phase;
+    // The phase, how long it has run, and (preconditioning) when it falls back.
+    $("model-phase").textContent = m.phase + (typeof m.phase_elapsed_s === "number" ? ` · ${minutes(m.phase_elapsed_s)}` +
+      (typeof m.phase_limit_s === "number" ? ` of ${minutes(m.phase_limit_s)} before fallback` : "") : "");
+    if (s.lab_utc_ms && (!modelTrend.length || modelTrend[modelTrend.length - 1].utc_ms < s.lab_utc_ms))
+      modelTrend.push({ utc_ms: s.lab_utc_ms, core: m.core_temp_c, skin: m.mean_skin_temp_c });
+    if (modelTrend.length > 3000) modelTrend.splice(0, modelTrend.length - 3000);
+    chart("chart-model", modelTrend, [{ key: "core", cls: "measured", label: "core" },
+      { key: "skin", cls: "pv", label: "mean skin" }], "model °C", 0.5);
     $("model-phase").className = "badge " + (m.phase === "fallback" ? "not-steady" : "steady");
     $("model-time").textContent = `${minutes(m.model_time_s)} of ${minutes(m.duration_s)} (${m.model})`;
     $("model-core").textContent = `${fmt(m.core_temp_c, 2)} °C`;

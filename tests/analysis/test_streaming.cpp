@@ -20,7 +20,7 @@ namespace an = manikind::analysis;
 
 namespace {
 
-std::string recordings(const std::string& name) { return std::string(MANIKIND_TEST_DATA_DIR) + "/recordings/" + name; }
+std::string streamed_recording(const std::string& name) { return std::string(MANIKIND_TEST_DATA_DIR) + "/recordings/" + name; }
 
 // Both paths on one folder; every field of the result is in its JSON, table or CSV form.
 void check_same_result(const std::filesystem::path& folder, const an::AnalysisOptions& o) {
@@ -60,13 +60,13 @@ void truncate(an::TrialData& d, std::size_t rows) {
 }  // namespace
 
 TEST_CASE("streaming analysis equals the in-memory one on good-2zone") {
-    check_same_result(recordings("good-2zone"), manikind::test::short_window());
-    check_same_result(recordings("empty-trial"), manikind::test::short_window());
+    check_same_result(streamed_recording("good-2zone"), manikind::test::short_window());
+    check_same_result(streamed_recording("empty-trial"), manikind::test::short_window());
     auto o = manikind::test::short_window();
     o.type_b_correlation = an::TypeBCorrelation::uncorrelated;
     o.coverage = an::Coverage::replicates_t;
     o.include_unsteady = true;
-    check_same_result(recordings("good-2zone"), o);
+    check_same_result(streamed_recording("good-2zone"), o);
 }
 
 TEST_CASE("streaming analysis equals the in-memory one on a synthetic campaign of several cases") {
@@ -95,17 +95,17 @@ TEST_CASE("streaming analysis: a bad trial file gives read_campaign's error text
     for (const char* folder : {"bad-non-numeric", "bad-column-count", "bad-time-backwards", "bad-unknown-zone",
                                "bad-duplicate-id", "bad-missing-file", "no-such-campaign"}) {
         INFO(folder);
-        const std::string expected = error_text([&] { (void)an::read_campaign(recordings(folder)); });
+        const std::string expected = error_text([&] { (void)an::read_campaign(streamed_recording(folder)); });
         CHECK(expected != "no error");
-        CHECK(error_text([&] { (void)an::analyze_campaign_streaming(recordings(folder)); }) == expected);
+        CHECK(error_text([&] { (void)an::analyze_campaign_streaming(streamed_recording(folder)); }) == expected);
     }
-    CHECK(error_text([] { (void)an::analyze_campaign_streaming(recordings("bad-non-numeric")); })
+    CHECK(error_text([] { (void)an::analyze_campaign_streaming(streamed_recording("bad-non-numeric")); })
               .find("c09-r3.csv:4:29 (field 'z02_flux_w_m2'): expected a number, found 'abc'") != std::string::npos);
 }
 
 TEST_CASE("read_campaign_metadata reads campaign.json only, read_trial_data one trial") {
-    const auto whole = an::read_campaign(recordings("good-2zone"));
-    const auto metadata = an::read_campaign_metadata(recordings("good-2zone"));
+    const auto whole = an::read_campaign(streamed_recording("good-2zone"));
+    const auto metadata = an::read_campaign_metadata(streamed_recording("good-2zone"));
     CHECK(metadata.name == whole.name);
     CHECK(metadata.warnings == whole.warnings);
     CHECK(metadata.zone_map.size() == whole.zone_map.size());
@@ -113,13 +113,13 @@ TEST_CASE("read_campaign_metadata reads campaign.json only, read_trial_data one 
     for (std::size_t i = 0; i < metadata.trials.size(); ++i) {
         CHECK(metadata.trials[i].info.id == whole.trials[i].info.id);
         CHECK(metadata.trials[i].data.rows() == 0);
-        const auto data = an::read_trial_data(recordings("good-2zone"), metadata, metadata.trials[i].info);
+        const auto data = an::read_trial_data(streamed_recording("good-2zone"), metadata, metadata.trials[i].info);
         CHECK(data.t_s == whole.trials[i].data.t_s);
         CHECK(data.heat_flux_w_m2 == whole.trials[i].data.heat_flux_w_m2);
     }
     // A campaign.json problem is found before any trial is read.
-    CHECK_THROWS_AS(an::read_campaign_metadata(recordings("bad-duplicate-id")), an::InputError);
-    CHECK_NOTHROW(an::read_campaign_metadata(recordings("bad-non-numeric")));
+    CHECK_THROWS_AS(an::read_campaign_metadata(streamed_recording("bad-duplicate-id")), an::InputError);
+    CHECK_NOTHROW(an::read_campaign_metadata(streamed_recording("bad-non-numeric")));
 }
 
 TEST_CASE("write_json of a campaign without cases equals dump") {
@@ -130,7 +130,7 @@ TEST_CASE("write_json of a campaign without cases equals dump") {
 }
 
 TEST_CASE("aggregate_trials refuses results that do not match the trials") {
-    const auto metadata = an::read_campaign_metadata(recordings("good-2zone"));
+    const auto metadata = an::read_campaign_metadata(streamed_recording("good-2zone"));
     CHECK_THROWS_AS(an::aggregate_trials(metadata, {}), std::invalid_argument);
 }
 

@@ -28,10 +28,10 @@ CliResult run(const std::string& command) {
     return r;
 }
 
-struct TempDir {
+struct StartupDir {
     fs::path path = fs::temp_directory_path() / ("manikind-startup-" + std::to_string(::getpid()));
-    TempDir() { fs::remove_all(path); fs::create_directories(path); }
-    ~TempDir() { fs::remove_all(path); }
+    StartupDir() { fs::remove_all(path); fs::create_directories(path); }
+    ~StartupDir() { fs::remove_all(path); }
 };
 
 }  // namespace
@@ -61,7 +61,7 @@ TEST_CASE("start-up: neither program asks the loader for HDF5, libpq, libcurl or
 TEST_CASE("start-up: without its modules the program still answers --version and --help, and an HDF5 export "
           "names what is missing, exits 2 and writes nothing",
           "[cli][startup]") {
-    TempDir dir;
+    StartupDir dir;
     const fs::path lone = dir.path / "manikin";
     fs::copy_file(fs::path(MANIKIND_BIN_DIR) / "manikin", lone);  // no modules beside this copy
     const auto version = run(lone.string() + " --version");

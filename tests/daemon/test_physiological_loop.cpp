@@ -377,6 +377,13 @@ TEST_CASE("physiological loop: preconditioning that never reaches the model's st
             m.apply(out);
             // Zone 12 sits 0.5 °C warm of its setpoint: it follows (within 1 °C) but never reaches the band.
             m.skin_c[11] = loop.zone_setpoints_c()[11] + 0.5;
+            // The status says how long preconditioning has run and when it gives up (issue 64).
+            if (loop.phase() == PhysiologicalLoop::Phase::preconditioning && i * tick_s == 1800) {
+                const auto s = loop.status_json();
+                CHECK(s["phase_elapsed_s"].get<double>() == Approx(1800.0));
+                CHECK(s["phase_limit_s"].get<double>() == Approx(limit_s));
+                CHECK(s["on_start_s"].get<double>() == 0.0);  // zone 12 keeps it off
+            }
         }
         REQUIRE(fell.fell_back);
         CHECK(loop.phase() == PhysiologicalLoop::Phase::fallback);

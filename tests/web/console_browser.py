@@ -17,18 +17,7 @@ import urllib.request
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from harness import check, run, start_daemon, stop_daemon, wait_for  # noqa: E402
-
-CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
-try:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-    from selenium.webdriver.common.by import By
-except ImportError:
-    print("skipped: python3-selenium is not installed (scripts/setup.sh --tests installs it)")
-    sys.exit(77)
-if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
-    print("skipped: chromium / chromium-driver not installed (scripts/setup.sh --tests installs them)")
-    sys.exit(77)
+from browser import By, make_driver  # noqa: E402 (exits 77 without the browser)
 
 
 
@@ -66,13 +55,7 @@ def main():
             with urllib.request.urlopen(base + "/api/status", timeout=5) as r:
                 return json.load(r)
 
-        opts = webdriver.ChromeOptions()
-        opts.binary_location = CHROMIUM
-        for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1500,1300",
-                  f"--user-data-dir={work}/chromium"):
-            opts.add_argument(a)
-        opts.set_capability("goog:loggingPrefs", {"performance": "ALL"})
-        driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+        driver = make_driver(work, 1500, 1300, performance_log=True)
         driver.get_log("performance")  # drop the browser's own start page requests
         driver.get(base + "/")
 

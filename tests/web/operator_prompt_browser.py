@@ -2,32 +2,20 @@
 """The operator prompt in a real browser (issue 64): a clothing campaign on the simulated lab whose
 operator waits ([simulation] operator_prompts = "wait"): the console's header shows what to put on,
 on the first screen at 800x600, the trial stays in configuring, and "Done: continue" with the
-token lets it go on, recorded with who. Exit 77 (skipped) only when the browser or selenium is
+token lets it go on. Then a physiological trial: the model's core and mean skin drawn as a trend,
+its phase with the time in it. Exit 77 (skipped) only when the browser or selenium is
 not installed.
 
 usage: operator_prompt_browser.py <manikind binary> [--screenshot PATH]
 """
-import json
 import os
 import secrets
 import sys
 import tempfile
-import urllib.request
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from harness import check, run, start_daemon, stop_daemon, wait_for  # noqa: E402
-
-CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
-try:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-    from selenium.webdriver.common.by import By
-except ImportError:
-    print("skipped: python3-selenium is not installed (scripts/setup.sh --tests installs it)")
-    sys.exit(77)
-if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
-    print("skipped: chromium / chromium-driver not installed (scripts/setup.sh --tests installs them)")
-    sys.exit(77)
+from browser import By, get_json, make_driver, post_command  # noqa: E402 (exits 77 without the browser)
 
 
 def main():
@@ -51,22 +39,14 @@ def main():
             return
         base = f"http://127.0.0.1:{port}"
 
-        def status():
-            with urllib.request.urlopen(base + "/api/status", timeout=5) as r:
-                return json.load(r)
-
-        opts = webdriver.ChromeOptions()
-        opts.binary_location = CHROMIUM
-        for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=800,600", f"--user-data-dir={work}/chromium"):
-            opts.add_argument(a)
-        driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+        status = lambda: get_json(base + "/api/status")
+        driver = make_driver(work, 800, 600)
         driver.get(base + "/")
         banner_hidden = lambda: driver.execute_script("return document.getElementById('operator-banner').hidden;")
         wait_for("the page receives updates", lambda: int(driver.find_element(By.TAG_NAME, "body").get_attribute("data-updates") or 0) >= 1, 20)
         check(banner_hidden(), "no campaign: no operator banner")
-        body = json.dumps({"cmd": "start_campaign", "token": token, "plan_toml": plan}).encode()
-        with urllib.request.urlopen(urllib.request.Request(base + "/api/command", data=body, method="POST"), timeout=10) as r:
-            check(json.load(r).get("ok") is True, "the clothing campaign was started through POST /api/command")
+        started = post_command(base, {"cmd": "start_campaign", "token": token, "plan_toml": plan})
+        check(started.get("ok") is True, "the clothing campaign was started through POST /api/command")
         shown = wait_for("the header says what the operator must do", lambda: not banner_hidden() and driver.execute_script(
             "return document.getElementById('operator-banner').textContent;"), 30)
         check(bool(shown) and "dress the manikin in 'coverall' for the insulation test" in shown,
@@ -84,6 +64,29 @@ def main():
         moved = wait_for("the trial goes on to chamber settling", lambda: status().get("stage") not in (None, "configuring", "idle"), 30)
         check(bool(moved), f"after Continue the trial left configuring ({status().get('stage')})")
         check(status().get("awaiting_operator") is None, "nothing waits for the operator any more")
+
+        # A physiological trial next: its model is watched as a trend (core and mean skin) with its
+        # phase and how long it has run, where a constant-skin trial shows its steady-state bar.
+        aborted = post_command(base, {"cmd": "abort", "token": token, "reason": "next: the model", "confirm": "dressing"})
+        check(aborted.get("ok") is True, f"the clothing campaign was aborted ({aborted})")
+        physio = ('name = "model"\nreplicates = 1\nsettle_window_min = 0\nsettle_band_c = 10\nsettle_tolerance_c = 10\n'
+                  'settle_tolerance_rh_pct = 50\n[[cases]]\nid = 1\nchamber_temp_c = 41\nchamber_rh_pct = 20\n'
+                  'control = "physiological"\n[cases.model]\nname = "stolwijk-2026"\nmetabolic_met = 1.5\nduration_min = 30\n')
+        started = post_command(base, {"cmd": "start_campaign", "token": token, "plan_toml": physio})
+        check(started.get("ok") is True, f"the physiological campaign was started ({started})")
+        trend = wait_for("the model's trend draws core and mean skin", lambda: driver.execute_script(
+            "const p = document.getElementById('model-panel'); if (p.hidden) return 0;"
+            "return document.querySelectorAll('#chart-model polyline').length;") >= 2, 90)
+        check(bool(trend), "the model panel draws two trend lines (core, mean skin)")
+        phase = driver.execute_script("return document.getElementById('model-phase').textContent;")
+        check("min" in phase and ("before fallback" in phase or "running" in phase),
+              f"the phase says how long it has run (and when preconditioning falls back): {phase}")
+        check(driver.execute_script("return document.getElementById('steady-section').hidden;"),
+              "a physiological trial shows no steady-state bar")
+        if screenshot:
+            driver.set_window_size(1500, 1300)
+            driver.execute_script("document.getElementById('model-panel').scrollIntoView();")
+            driver.save_screenshot(screenshot.replace(".png", "-model.png"))
     finally:
         if driver:
             driver.quit()
