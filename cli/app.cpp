@@ -27,7 +27,7 @@ const std::vector<CommandGroup>& command_groups() {
         {add_demo_command, {"demo"}},
         {add_thermoreg_command, {"thermoreg"}},
         {add_daemon_commands,
-         {"status", "campaign", "continue", "setpoint", "note", "notes", "alarms", "trial", "results", "live", "campaigns", "log", "report", "export"}},
+         {"status", "campaign", "continue", "setpoint", "note", "notes", "ack", "shelve", "alarms", "trial", "results", "live", "campaigns", "log", "report", "export"}},
         {add_sim_commands, {"sim", "replay"}},
         {add_probe_command, {"probe"}},
         {add_archive_command, {"archive"}},

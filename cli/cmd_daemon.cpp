@@ -514,6 +514,33 @@ void add_daemon_commands(CLI::App& app) {
             }
         });
     }
+    if (building("ack") || building("shelve")) {
+        // Acknowledge or shelve an alarm from the terminal (issue 64: the console's token pasted into
+        // a page was the only way): the daemon records who, the Unix user over the socket.
+        struct AlarmArgs {
+            std::int64_t id = 0;
+            double hours = 1.0;
+        };
+        for (const char* name : {"ack", "shelve"}) {
+            if (!building(name)) continue;
+            auto c = std::make_shared<Conn>();
+            auto a = std::make_shared<AlarmArgs>();
+            const bool shelve = std::string(name) == "shelve";
+            auto* cmd = app.add_subcommand(name, shelve ? "Shelve an open alarm for a while (at most 8 h; it comes back by itself), recorded with who"
+                                                        : "Acknowledge an open alarm (someone is on it; it does not clear the cause), recorded with who");
+            cmd->add_option("id", a->id, "The alarm's id (`manikin alarms`, first column)")->required()->check(CLI::Range(std::int64_t{1}, std::int64_t{9'000'000'000'000'000}));
+            if (shelve) cmd->add_option("--hours", a->hours, "How long")->capture_default_str()->check(CLI::Range(0.01, 8.0));
+            add_conn_options(cmd, *c, true);
+            cmd->callback([c, a, shelve] {
+                nlohmann::json req{{"cmd", shelve ? "shelve_alarm" : "ack_alarm"}, {"id", a->id}};
+                if (shelve) req["duration_s"] = a->hours * 3600.0;
+                call(*c, req, true);
+                if (c->json) std::printf("{\"ok\":true}\n");
+                else std::printf("alarm %lld %s\n", static_cast<long long>(a->id),
+                                 shelve ? fmt::format("shelved for {:g} h", a->hours).c_str() : "acknowledged");
+            });
+        }
+    }
     if (building("alarms")) {
         auto c = std::make_shared<Conn>();
         auto history = std::make_shared<bool>(false);
@@ -521,7 +548,8 @@ void add_daemon_commands(CLI::App& app) {
         cmd->add_flag("--history", *history, "The closed alarms instead (returned and acknowledged)");
         add_conn_options(cmd, *c, false);
         cmd->footer("States (ISA-18.2): UNACK, ACKED, RTN_UNACK (returned, not acknowledged), SHELVED, NORMAL (closed).\n"
-                    "Acknowledge in the console, or {\"cmd\":\"ack_alarm\",\"id\":N} on the socket (docs/daemon.md).");
+                    "Acknowledge with `manikin ack ID`, shelve with `manikin shelve ID --hours H` (who is recorded: your Unix user),\n"
+                    "in the console, or {\"cmd\":\"ack_alarm\",\"id\":N} on the socket (docs/daemon.md).");
         cmd->callback([c, history] {
             const auto reply = call(*c, {{"cmd", *history ? "alarm_history" : "alarms"}}, false);
             if (c->json) {

@@ -1,6 +1,7 @@
 // The CLI's small cuts a textile lab met on its first day (issue 64 part 8), each as the lab typed it.
 #include <catch2/catch.hpp>
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -8,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "../daemon/daemon_process.hpp"
 #include "run_cli.hpp"
 #include "store/database.hpp"
 
@@ -62,5 +64,50 @@ TEST_CASE("notes --db reads the lab notebook from the database with no daemon ru
     const auto missing = manikind::test::run_manikin("notes --db " + db_path.string() + " --campaign nope --json");
     CHECK(missing.exit_code == 2);
     CHECK_THAT(missing.out, Catch::Contains("no campaign named 'nope'"));
+    fs::remove_all(dir);
+}
+
+TEST_CASE("manikin ack and manikin shelve act on an open alarm from the terminal, recorded with the Unix user",
+          "[cli][alarms]") {
+    const fs::path dir = fs::temp_directory_path() / ("manikind-cuts-ack-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string socket = (dir / "d.sock").string();
+    // The real clock: a shelf of half an hour must not end between two commands, as it would on
+    // the virtual clock, which runs as fast as the CPU.
+    auto d = manikind::test::DaemonProcess::spawn({std::string(MANIKIND_BIN_DIR) + "/manikind", "--socket", socket,
+                                                   "--database", (dir / "d.db").string(), "--campaign",
+                                                   std::string(MANIKIND_CONFIG_DIR) + "/campaign-example.toml"});
+    REQUIRE(d.read_until("control socket"));
+    // An abort is an alarm (MINOR) until someone acknowledges it.
+    REQUIRE(manikind::test::run_manikin("campaign abort --reason 'probe fell off' --socket " + socket + " > /dev/null").exit_code == 0);
+    auto open_alarm = [&](const std::string& kind) {
+        for (const auto& a : nlohmann::json::parse(manikind::test::run_manikin("alarms --json --socket " + socket).out))
+            if (a.value("kind", "") == kind) return a;
+        return nlohmann::json();
+    };
+    const auto abort_alarm = open_alarm("abort");
+    REQUIRE(abort_alarm.is_object());
+    const auto id = std::to_string(abort_alarm["id"].get<long long>());
+    // Shelving: bounded (at most 8 h), refused for an alarm that does not exist (exit 4).
+    CHECK(manikind::test::run_manikin("shelve " + id + " --hours 9 --socket " + socket + " 2>/dev/null").exit_code == 2);
+    CHECK(manikind::test::run_manikin("shelve 999999 --socket " + socket + " 2>/dev/null").exit_code == 4);
+    const auto shelved = manikind::test::run_manikin("shelve " + id + " --hours 0.5 --socket " + socket);
+    CHECK(shelved.exit_code == 0);
+    CHECK_THAT(shelved.out, Catch::Contains("alarm " + id + " shelved for 0.5 h"));
+    const auto on_shelf = open_alarm("abort");
+    REQUIRE(on_shelf.is_object());
+    CHECK(on_shelf.value("state", "") == "SHELVED");
+    CHECK(on_shelf.value("shelved_by", std::string()).find("uid") != std::string::npos);  // who: the Unix user
+    // Acknowledged (on the shelf it stays open until the shelf ends): who is recorded.
+    const auto ack = manikind::test::run_manikin("ack " + id + " --socket " + socket);
+    CHECK(ack.exit_code == 0);
+    CHECK_THAT(ack.out, Catch::Contains("alarm " + id + " acknowledged"));
+    const auto acked = open_alarm("abort");
+    REQUIRE(acked.is_object());
+    CHECK(acked.value("acknowledged", false));
+    CHECK(acked.value("acknowledged_by", std::string()).find("uid") != std::string::npos);
+    ::kill(d.pid(), SIGTERM);
+    d.wait();
     fs::remove_all(dir);
 }
