@@ -486,15 +486,13 @@ void add_daemon_commands(CLI::App& app) {
                 auto database = recorder::Database::open_read_only(*db);
                 const auto id = database.find_campaign(*campaign);
                 if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", *db, printable(*campaign, 100)));
-                std::map<std::int64_t, int> case_number;
-                for (const auto& cs : database.cases(*id)) case_number[cs.id] = case_number_of(cs);
-                std::map<std::int64_t, std::string> trial_name;
-                for (const auto& t : database.trials(*id)) trial_name[t.id] = exported_trial_id(case_number[t.case_id], t.replicate);
+                const auto trial_name = exported_trial_ids(database, *id);
                 notes = nlohmann::json::array();
                 for (const auto& n : database.notes(*id)) {
                     nlohmann::json e{{"id", n.id}, {"utc", analysis::iso_utc_ms(n.utc_ns)}, {"author", n.author}, {"kind", n.kind}, {"text", n.text}};
                     e["trial_id"] = n.trial_id ? nlohmann::json(*n.trial_id) : nlohmann::json(nullptr);
-                    if (n.trial_id && trial_name.count(*n.trial_id)) e["trial"] = trial_name[*n.trial_id];
+                    if (const auto it = n.trial_id ? trial_name.find(*n.trial_id) : trial_name.end(); it != trial_name.end())
+                        e["trial"] = it->second;
                     notes.push_back(std::move(e));
                 }
             } else {

@@ -235,13 +235,10 @@ std::variant<std::int64_t, std::string> LabDaemon::trial_by_label(const std::str
     flush_all_locked();
     const auto id = db_.find_campaign(campaign);
     if (!id) return fmt::format("\"campaign\": no campaign named '{}' in {}", printable(campaign, 100), db_path_.filename().string());
-    std::map<std::int64_t, int> case_number;
-    for (const auto& c : db_.cases(*id)) case_number[c.id] = manikind::case_number_of(c);
     std::optional<std::int64_t> found;
     std::string known;
-    for (const auto& t : db_.trials(*id)) {
-        const std::string name = manikind::exported_trial_id(case_number[t.case_id], t.replicate);
-        if (name == label) found = std::max(found.value_or(0), t.id);
+    for (const auto& [trial, name] : manikind::exported_trial_ids(db_, *id)) {
+        if (name == label) found = std::max(found.value_or(0), trial);
         if (known.find(name) == std::string::npos) known += (known.empty() ? "" : ", ") + name;
     }
     if (found) return *found;
@@ -254,15 +251,12 @@ nlohmann::json LabDaemon::notes_json(const std::string& campaign) {
     flush_all_locked();
     const auto id = db_.find_campaign(campaign);
     if (!id) throw UserError(fmt::format("{}: no campaign named '{}'", db_path_.string(), printable(campaign, 100)));
-    std::map<std::int64_t, int> case_number;
-    for (const auto& c : db_.cases(*id)) case_number[c.id] = manikind::case_number_of(c);
-    std::map<std::int64_t, std::string> trial_name;  // the export's name of each trial (c03-r2)
-    for (const auto& t : db_.trials(*id)) trial_name[t.id] = manikind::exported_trial_id(case_number[t.case_id], t.replicate);
+    const auto trial_name = manikind::exported_trial_ids(db_, *id);  // the export's name of each trial (c03-r2)
     nlohmann::json out = nlohmann::json::array();
     for (const auto& n : db_.notes(*id)) {
         nlohmann::json e{{"id", n.id}, {"utc", analysis::iso_utc_ms(n.utc_ns)}, {"author", n.author}, {"kind", n.kind}, {"text", n.text}};
         e["trial_id"] = n.trial_id ? nlohmann::json(*n.trial_id) : nlohmann::json(nullptr);
-        if (n.trial_id && trial_name.count(*n.trial_id)) e["trial"] = trial_name[*n.trial_id];
+        if (const auto it = n.trial_id ? trial_name.find(*n.trial_id) : trial_name.end(); it != trial_name.end()) e["trial"] = it->second;
         out.push_back(std::move(e));
     }
     return out;

@@ -62,6 +62,14 @@ int case_number_of(const recorder::CaseRow& c) {
 
 std::string exported_trial_id(int case_number, std::int64_t replicate) { return fmt::format("c{:02d}-r{}", case_number, replicate); }
 
+std::map<std::int64_t, std::string> exported_trial_ids(recorder::Database& db, std::int64_t campaign_id) {
+    std::map<std::int64_t, int> case_number;
+    for (const auto& c : db.cases(campaign_id)) case_number[c.id] = case_number_of(c);
+    std::map<std::int64_t, std::string> out;
+    for (const auto& t : db.trials(campaign_id)) out[t.id] = exported_trial_id(case_number[t.case_id], t.replicate);
+    return out;
+}
+
 struct CampaignReader::Span {
     recorder::TrialRow row;
     std::int64_t start_mono_ns, end_mono_ns, start_utc_ns;

@@ -80,6 +80,8 @@ analysis::Campaign read_whole_campaign(CampaignReader& reader);
 int case_number_of(const recorder::CaseRow& c);
 // The export's id of a trial: "c01-r2".
 std::string exported_trial_id(int case_number, std::int64_t replicate);
+// The export's id of every trial of a campaign, by the trial's database id.
+std::map<std::int64_t, std::string> exported_trial_ids(recorder::Database& db, std::int64_t campaign_id);
 
 // `manikin export`: writes campaign.json and trials/*.csv into `folder`.
 void export_campaign(recorder::Database& db, const std::string& campaign_name, const std::filesystem::path& folder);
