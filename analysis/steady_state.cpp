@@ -183,6 +183,8 @@ SteadyStateResult detect_steady_state(const TrialData& data, const ZoneMap& map,
                                            "or empty cells)", zone, map.zones[z].name, gap_s, o.max_gap_s);
         double drift = 0.0, sd = 0.0;
         flux_line(data.t_s, data.heat_flux_w_m2[z], first, o.window_s, drift, sd);
+        r.zone_flux_drift_w_m2.resize(map.size(), 0.0);
+        r.zone_flux_drift_w_m2[z] = drift;
         if (drift > r.max_flux_drift_w_m2) {
             r.max_flux_drift_w_m2 = drift;
             r.worst_flux_drift_zone = zone;

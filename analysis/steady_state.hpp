@@ -57,6 +57,9 @@ struct SteadyStateResult {
     // Flux statistics over the window (always computed, gated by require_flux_stability).
     double max_flux_drift_w_m2 = 0.0;
     int worst_flux_drift_zone = 0;
+    // Every zone's |slope| x window (the map's order; 0 where it has too few samples): reconcile
+    // leaves a drifting zone's points out of its fit (a finding about the measurement).
+    std::vector<double> zone_flux_drift_w_m2;
     double max_flux_sd_w_m2 = 0.0;
     int worst_flux_sd_zone = 0;
     // Skin-temperature drift over the window, per zone (reported, never gated), and the zone

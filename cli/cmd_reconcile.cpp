@@ -207,7 +207,6 @@ void add_reconcile_command(CLI::App& app) {
         }
         opt.new_version_name = fmt::format("{}+reconciled", base.name);
         auto report = rc::reconcile(*model, opt);
-        report.measurement = rc::drift_findings(result, campaign.zone_map);
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         if (!o->plots.empty()) {
             for (const auto& p : rc::write_plots(report, *model, o->plots)) spdlog::info("wrote {}", p.string());

@@ -4,6 +4,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <stdexcept>
 
@@ -43,6 +44,7 @@ public:
                 const double q = in.q_exp_w_m2.at(z);
                 const double u = in.expanded_u_w_m2.at(z);
                 if (!std::isfinite(q) || !std::isfinite(u) || u <= 0.0) continue;
+                if (still_drifting(in, z)) continue;
                 Point p;
                 p.case_id = in.case_id;
                 p.zone = cond.zones[z].zone;
@@ -66,6 +68,7 @@ public:
                 index_.emplace_back(c, z);
             }
         }
+        measurement_ = drift_findings();
         // The twin as given at each trial (the zones a scoped term leaves alone); none where it
         // cannot be evaluated (predict then computes every zone and fails as before).
         try {
@@ -75,8 +78,71 @@ public:
         }
     }
     const std::vector<Point>& points() const override { return points_; }
+    std::vector<std::string> measurement() const override { return measurement_; }
     bool supports(const std::string&) const override { return true; }
     std::string base_name() const override { return base_.name; }
+
+    // A case's zone whose flux still moved by more than the steady-state check's limit over the
+    // window in any of its replicates: its mean is a recording still settling, not a steady flux.
+    static bool still_drifting(const CaseInput& in, std::size_t z) {
+        for (const auto& t : in.trials)
+            if (z < t.flux_drift_w_m2.size() && t.flux_drift_w_m2[z] > kFluxDriftLimit_w_m2) return true;
+        return false;
+    }
+
+    // What a recording cannot settle (issue 61, part 4), zones with the same cases together:
+    // "zones 27 (calf_front_l), 28 (calf_front_r): the heat flux still drifts up to 6.1 W/m² ...".
+    std::vector<std::string> drift_findings() const {
+        struct Seen {
+            double worst_w_m2 = 0.0;
+            std::vector<int> cases;
+            std::vector<std::string> trials;
+        };
+        std::map<int, Seen> by_zone;
+        std::map<int, std::string> names;
+        for (const auto& in : cases_)
+            for (std::size_t z = 0; z < in.conditions.zones.size(); ++z) {
+                if (!still_drifting(in, z)) continue;
+                const int zone = in.conditions.zones[z].zone;
+                Seen& seen = by_zone[zone];
+                names[zone] = z < in.zone_names.size() ? in.zone_names[z] : std::string{};
+                seen.cases.push_back(in.case_id);
+                for (const auto& t : in.trials)
+                    if (z < t.flux_drift_w_m2.size() && t.flux_drift_w_m2[z] > kFluxDriftLimit_w_m2) {
+                        seen.worst_w_m2 = std::max(seen.worst_w_m2, t.flux_drift_w_m2[z]);
+                        seen.trials.push_back(t.id.empty() ? fmt::format("case {}", in.case_id) : t.id);
+                    }
+            }
+        // Zones drifting in the same cases are one finding.
+        std::map<std::vector<int>, std::vector<int>> by_cases;
+        for (const auto& [zone, seen] : by_zone) by_cases[seen.cases].push_back(zone);
+        std::vector<std::string> out;
+        for (const auto& [cases, zones] : by_cases) {
+            std::string who, trials;
+            double worst = 0.0;
+            std::size_t listed = 0, all = 0;
+            for (int zone : zones) {
+                who += fmt::format("{}{}{}", who.empty() ? "" : ", ", zone, names[zone].empty() ? "" : " (" + names[zone] + ")");
+                worst = std::max(worst, by_zone[zone].worst_w_m2);
+                for (const auto& t : by_zone[zone].trials) {
+                    if (trials.find(t) != std::string::npos) continue;
+                    ++all;
+                    if (listed < 6) trials += (listed++ ? ", " : "") + t;
+                }
+            }
+            if (all > listed) trials += fmt::format(" and {} more", all - listed);
+            std::string case_list;
+            for (int c : cases) case_list += fmt::format("{}{}", case_list.empty() ? "" : ", ", c);
+            const std::size_t left_out = cases.size() * zones.size();
+            out.push_back(fmt::format("zone{} {}: the heat flux still drifts up to {:.1f} W/m² over the steady window "
+                                      "(case{} {}; {}): not steady, so a finding about the measurement, not physics; "
+                                      "{} point{} left out of the fit; a longer trial or the flux stability rule "
+                                      "(--require-flux-stability) would settle it",
+                                      zones.size() > 1 ? "s" : "", who, worst, cases.size() > 1 ? "s" : "", case_list, trials,
+                                      left_out, left_out > 1 ? "s" : ""));
+        }
+        return out;
+    }
     std::vector<tw::Term> base_terms() const override { return base_.terms; }
 
     // A case's prediction is the mean of the twin at each replicate's own recorded conditions, as
@@ -652,6 +718,9 @@ public:
                 // The analysis's U shrinks with the replicates as its Type A part does (used for
                 // locating and the points outside their CI, not for the claims).
                 for (double& u : c.expanded_u_w_m2) u *= 1.0 / (here * std::sqrt(static_cast<double>(replicates)));
+                // The points the recorded campaign leaves out (still drifting) are out of its draws too.
+                for (std::size_t z = 0; z < z_count; ++z)
+                    if (still_drifting(in, z)) c.q_exp_w_m2[z] = std::numeric_limits<double>::quiet_NaN();
                 out.push_back(std::move(c));
             }
             return make_twin_model(std::move(out), model_.base_, model_.carried_);
@@ -710,6 +779,7 @@ private:
     tw::TwinVersion base_;
     std::optional<CarriedNoise> carried_;
     std::vector<Point> points_;
+    std::vector<std::string> measurement_;
     std::vector<std::pair<std::size_t, std::size_t>> index_;
     TrialFluxes base_flux_;  // the twin as given
     // Tells this model's kept fluxes from another's (a thread's memo outlives the models it served).

@@ -121,13 +121,25 @@ public:
     virtual std::unique_ptr<CampaignSimulator> campaign_simulator(const Instruments&, double /*probe_shared_fraction*/) const {
         return nullptr;
     }
+    // Findings about the recording itself (fluxes still drifting over the steady window), with the
+    // points this left out of the fit: never physics (Report::measurement).
+    virtual std::vector<std::string> measurement() const { return {}; }
 };
 
 // One replicate's steady-window means: its own recorded conditions and zone fluxes.
 struct TrialInput {
     physics::twin::TrialConditions conditions;
     std::vector<double> q_w_m2;                  // per zone, aligned with the case's zones
+    std::string id;                              // c03-r2, for what is said about the recording
+    // Per zone, how far the flux moved over the steady window (|slope| x window, the steady-state
+    // check's measure); empty when unknown. A zone drifting beyond kFluxDriftLimit_w_m2 in any
+    // replicate of a case leaves that case's point out of the fit: a recording still settling
+    // says nothing about physics (docs/reconcile.md, "What a recording cannot settle").
+    std::vector<double> flux_drift_w_m2;
 };
+
+// The steady-state check's default flux-drift limit (analysis/steady_state.hpp).
+inline constexpr double kFluxDriftLimit_w_m2 = 2.0;
 
 // The twin over recorded cases: one point per case and zone.
 struct CaseInput {

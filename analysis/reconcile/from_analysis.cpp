@@ -2,9 +2,6 @@
 
 #include <cmath>
 #include <limits>
-#include <map>
-
-#include <fmt/format.h>
 
 namespace manikind::analysis::reconcile {
 double case_condition(const CaseResult& c, const std::string& channel) {
@@ -70,38 +67,13 @@ std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, co
             if (std::isfinite(t.air_speed_m_s)) trial.conditions.air_speed_m_s = t.air_speed_m_s;
             for (std::size_t z = 0; z < trial.conditions.zones.size(); ++z) trial.conditions.zones[z].skin_temp_c = t.zone_skin_temp_c[z];
             trial.q_w_m2.assign(t.zone_q_w_m2.begin(), t.zone_q_w_m2.begin() + static_cast<long>(trial.conditions.zones.size()));
+            trial.id = t.id;
+            if (t.steady.zone_flux_drift_w_m2.size() >= trial.conditions.zones.size())
+                trial.flux_drift_w_m2.assign(t.steady.zone_flux_drift_w_m2.begin(),
+                                             t.steady.zone_flux_drift_w_m2.begin() + static_cast<long>(trial.conditions.zones.size()));
             in.trials.push_back(std::move(trial));
         }
         out.push_back(std::move(in));
-    }
-    return out;
-}
-
-std::vector<std::string> drift_findings(const CampaignResult& result, const ZoneMap& map, double limit_w_m2) {
-    struct Seen {
-        double worst_w_m2 = 0.0;
-        std::vector<std::string> trials;
-    };
-    std::map<int, Seen> by_zone;
-    for (const auto& c : result.cases)
-        for (const auto& t : c.trials) {
-            if (!t.included || t.steady.worst_flux_drift_zone <= 0) continue;
-            if (!(t.steady.max_flux_drift_w_m2 > limit_w_m2)) continue;
-            Seen& s = by_zone[t.steady.worst_flux_drift_zone];
-            s.worst_w_m2 = std::max(s.worst_w_m2, t.steady.max_flux_drift_w_m2);
-            s.trials.push_back(t.id);
-        }
-    std::vector<std::string> out;
-    for (const auto& [zone, s] : by_zone) {
-        std::string name;
-        if (zone >= 1 && static_cast<std::size_t>(zone) <= map.size()) name = " (" + map.zones[static_cast<std::size_t>(zone) - 1].name + ")";
-        std::string trials;
-        for (std::size_t i = 0; i < s.trials.size() && i < 6; ++i) trials += (i ? ", " : "") + s.trials[i];
-        if (s.trials.size() > 6) trials += fmt::format(" and {} more", s.trials.size() - 6);
-        out.push_back(fmt::format("zone {}{}: the heat flux still drifts up to {:.1f} W/m² over the steady window (trial{} {}): "
-                                  "not steady, so a finding about the measurement, not physics; a longer trial or the flux "
-                                  "stability rule (--require-flux-stability) would settle it",
-                                  zone, name, s.worst_w_m2, s.trials.size() > 1 ? "s" : "", trials));
     }
     return out;
 }

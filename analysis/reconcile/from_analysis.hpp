@@ -17,10 +17,4 @@ double case_condition(const CaseResult& c, const std::string& channel);
 std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, const ZoneMap& map,
                                                 std::vector<int>* skipped = nullptr);
 
-// Findings about the recording, never physics (issue 61): zones whose heat flux was still
-// drifting over a used trial's steady window by more than `limit_w_m2` (|slope| x window, the
-// steady-state check's flux measure), grouped by zone. A drift is what a recording cannot
-// settle: the twin's steady fluxes are not to be fitted to it.
-std::vector<std::string> drift_findings(const CampaignResult& result, const ZoneMap& map, double limit_w_m2 = 2.0);
-
 }  // namespace manikind::analysis::reconcile

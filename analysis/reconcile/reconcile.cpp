@@ -1077,6 +1077,7 @@ ExplanationStep step_of(const Report& r) {
 // walk, and what is left is said as the remainder.
 Report reconcile(const ForwardModel& model, const Options& opt) {
     Report rep = reconcile_step(model, opt);
+    rep.measurement = model.measurement();
     if (!rep.explanation) return rep;
     rep.steps.push_back(step_of(rep));
     constexpr std::size_t max_terms = 3;

@@ -118,7 +118,7 @@ struct Report {
     double gof_p_after = 1.0;                // goodness of fit after the explanation
     std::vector<ExplanationStep> steps;      // in the order claimed
     std::string remainder;                   // what is left, where and with what it correlates
-    std::vector<std::string> measurement;    // findings about the recording itself (drift_findings), never physics
+    std::vector<std::string> measurement;    // findings about the recording itself (ForwardModel::measurement), never physics
     std::vector<Located> remainder_located;
     std::string statement;                   // plain language; says so when nothing explains
     FitStats after;

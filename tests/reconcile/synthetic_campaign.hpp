@@ -82,7 +82,33 @@ struct SyntheticOptions {
     // The air speed a zone meets grows with height: the probe's reading (at 1.1 m) times
     // 1 + g (h - 1.1), at least zero. It shows only in a world with forced convection.
     double air_speed_growth_per_m = 0.0;
+    // Flux sensors that answer with a first-order lag (time constant in minutes) on these zones:
+    // each trial steps from preconditioning (23 °C, 50 % RH, dry, the case's skin temperature) to
+    // the case at t = 0 and is judged steady on skin temperature over [60, 90] min, while a lagged
+    // sensor still approaches the zone's flux. The window's mean carries what is left of the step,
+    // and the trial records each zone's drift over the window as the steady-state check measures
+    // it (|least-squares slope| x 30 min). `record_drift` false: a recording that lost that measure.
+    std::vector<int> lagged_zones;
+    double sensor_lag_min = 0.0;
+    bool record_drift = true;
 };
+
+// A first-order sensor's reading over [t0, t0 + w] after a step of `step` (reading - final value
+// at t = 0): the window's mean offset and its drift as |least-squares slope| x w (361 samples, 5 s).
+struct LagWindow {
+    double mean_offset = 0.0, drift = 0.0;
+};
+inline LagWindow lag_window(double step, double tau_min, double t0_min = 60.0, double w_min = 30.0) {
+    const int n = 361;
+    double st = 0.0, sy = 0.0, stt = 0.0, sty = 0.0;
+    for (int i = 0; i < n; ++i) {
+        const double t = t0_min + w_min * i / (n - 1);
+        const double y = step * std::exp(-t / tau_min);
+        st += t, sy += y, stt += t * t, sty += t * y;
+    }
+    const double slope = (n * sty - st * sy) / (n * stt - st * st);
+    return {sy / n, std::abs(slope) * w_min};
+}
 
 // One zone's truth where the world varies over the body: the zone alone, at its own conditions.
 inline physics::twin::ZoneFlux zone_truth(const physics::twin::TwinVersion& world, const physics::twin::TrialConditions& actual,
@@ -150,11 +176,28 @@ inline std::vector<analysis::reconcile::CaseInput> make_campaign(const physics::
             *recorded.wall_temp_c += o.probe_wall_halfwidth_c * uniform(rng);
             analysis::reconcile::TrialInput trial;
             trial.conditions = recorded;
+            trial.id = "c" + std::string(c.case_id < 10 ? "0" : "") + std::to_string(c.case_id) + "-r" + std::to_string(r + 1);
+            std::vector<physics::twin::ZoneFlux> before;  // the flux the lagged sensors start from
+            if (!o.lagged_zones.empty()) {
+                physics::twin::TrialConditions pre = actual;
+                pre.air_temp_c = 23.0;
+                pre.air_rh_pct = 50.0;
+                pre.wall_temp_c = 23.0;
+                pre.wettedness = 0.0;
+                before = physics::twin::predict(world, pre);
+            }
             for (std::size_t z = 0; z < nz; ++z) {
-                const double q = truth[z].q_total_w_m2 * (1.0 + o.replicate_rel_sd * noise(rng)) + o.replicate_sd_w_m2 * noise(rng);
+                double q = truth[z].q_total_w_m2 * (1.0 + o.replicate_rel_sd * noise(rng)) + o.replicate_sd_w_m2 * noise(rng);
+                double drift = 0.0;
+                if (std::find(o.lagged_zones.begin(), o.lagged_zones.end(), zones[z].zone) != o.lagged_zones.end()) {
+                    const LagWindow lag = lag_window(before[z].q_total_w_m2 - truth[z].q_total_w_m2, o.sensor_lag_min);
+                    q += lag.mean_offset;
+                    drift = lag.drift;
+                }
                 const auto sensor = o.sensor_gain.find(zones[z].zone);
                 const double zone_gain = sensor == o.sensor_gain.end() ? 1.0 : 1.0 + sensor->second;
                 trial.q_w_m2.push_back(zone_gain * (gain * q + offset));
+                if (o.record_drift) trial.flux_drift_w_m2.push_back(zone_gain * gain * drift);
                 reps[z].push_back(trial.q_w_m2.back());
             }
             air_sum += recorded.air_temp_c;

@@ -142,28 +142,91 @@ TEST_CASE("discovery: 10 null campaigns at 2 replicates, the generated hypothese
 }
 
 TEST_CASE("discovery: a flux still drifting over the steady window is a finding about the measurement, named by zone "
-          "and trial, never a term",
+          "and trial, its points left out of the fit, never a term",
           "[reconcile][discovery]") {
-    analysis::CampaignResult result;
-    analysis::CaseResult c;
-    c.case_id = 5;
-    for (const auto& [id, drift, zone, used] : std::vector<std::tuple<std::string, double, int, bool>>{
-             {"c05-r1", 3.1, 27, true}, {"c05-r2", 2.4, 27, true}, {"c05-r3", 1.2, 28, true}, {"c05-r4", 9.0, 30, false}}) {
-        analysis::TrialResult t;
-        t.id = id;
-        t.included = used;
-        t.steady.max_flux_drift_w_m2 = drift;
-        t.steady.worst_flux_drift_zone = zone;
-        c.trials.push_back(t);
-    }
-    result.cases.push_back(c);
-    const auto findings = rc::drift_findings(result, analysis::andi35_zone_map());
-    INFO(findings.size());
-    REQUIRE(findings.size() == 1);  // zone 28 within 2 W/m²; zone 30's trial not used
+    // Two cases, zone 27 drifting 3.1 W/m² in one replicate of case 5, zone 28 within the limit.
+    auto cases = test::make_campaign(tw::TwinVersion{}, [] {
+        test::SyntheticOptions o;
+        o.replicates = 2;
+        return o;
+    }());
+    cases.resize(6);
+    for (auto& t : cases[4].trials) t.flux_drift_w_m2.assign(t.q_w_m2.size(), 0.3);
+    cases[4].trials[0].flux_drift_w_m2[26] = 3.1;
+    cases[4].trials[1].flux_drift_w_m2[27] = 1.9;
+    const auto model = rc::make_twin_model(cases, tw::TwinVersion{});
+    const auto findings = model->measurement();
+    INFO((findings.empty() ? std::string("none") : findings[0]));
+    REQUIRE(findings.size() == 1);
     CHECK(findings[0].find("zone 27 (calf_front_l)") != std::string::npos);
     CHECK(findings[0].find("3.1 W/m²") != std::string::npos);
-    CHECK(findings[0].find("c05-r1, c05-r2") != std::string::npos);
+    CHECK(findings[0].find("case 5; c05-r1") != std::string::npos);
     CHECK(findings[0].find("not physics") != std::string::npos);
+    CHECK(findings[0].find("1 point left out") != std::string::npos);
+    CHECK(model->points().size() == 6 * 35 - 1);
+    for (const auto& p : model->points()) CHECK_FALSE((p.case_id == 5 && p.zone == 27));
+    CHECK(rc::reconcile(*model).measurement == findings);
+}
+
+TEST_CASE("discovery: lagging flux sensors on the calves (25 min, steady windows judged on skin temperature) are said "
+          "to be still settling, their points left out, and no physics term is named, at 1, 2 and 3 replicates",
+          "[reconcile][discovery][proof]") {
+    for (int replicates : {1, 2, 3}) {
+        test::SyntheticOptions o;
+        o.seed = 41;
+        o.replicates = replicates;
+        o.lagged_zones = {27, 28, 29, 30};
+        o.sensor_lag_min = 25.0;
+        const auto rep = discover(tw::TwinVersion{}, o, "calf flux sensors lagging 25 min");
+        INFO(replicates << " replicates: " << rep.statement);
+        CHECK_FALSE(rep.explanation.has_value());
+        CHECK(rep.anomalies.empty());
+        REQUIRE_FALSE(rep.measurement.empty());
+        std::string said;
+        for (const auto& m : rep.measurement) said += m + "\n";
+        INFO(said);
+        for (const char* zone : {"27 (calf_front_l)", "28 (calf_back_l)", "29 (calf_front_r)", "30 (calf_back_r)"})
+            CHECK(said.find(zone) != std::string::npos);
+        CHECK(said.find("not physics") != std::string::npos);
+    }
+    // The same recordings without the drift measure: the twin fails at the calves (the mismatch
+    // is real and located there, though nothing is named), so this test would fail without the screen.
+    test::SyntheticOptions o;
+    o.seed = 41;
+    o.replicates = 3;
+    o.lagged_zones = {27, 28, 29, 30};
+    o.sensor_lag_min = 25.0;
+    o.record_drift = false;
+    const auto blind = discover(tw::TwinVersion{}, o, "calf flux sensors lagging 25 min, drift not recorded");
+    CHECK(blind.gof_p_before < 0.01);
+    REQUIRE_FALSE(blind.located.empty());
+    CHECK(blind.located.front().where.find("calf") != std::string::npos);
+    CHECK_FALSE(blind.explanation.has_value());
+}
+
+TEST_CASE("discovery: at one replicate with the lab's scatter carried from a 3-replicate campaign (--noise-from), a "
+          "vertical air gradient of 1.5 K/m is described as a gradient with the truth in its interval",
+          "[reconcile][discovery][proof]") {
+    test::SyntheticOptions earlier;
+    earlier.seed = 43;
+    earlier.replicates = 3;
+    const auto source = rc::make_twin_model(test::make_campaign(tw::TwinVersion{}, earlier), tw::TwinVersion{});
+    const auto carried = rc::carried_noise(*source, rc::Options{}.instruments, "an earlier campaign of the lab");
+    test::SyntheticOptions o;
+    o.seed = 44;
+    o.replicates = 1;
+    o.air_gradient_k_per_m = 1.5;
+    const auto model = rc::make_twin_model(test::make_campaign(tw::TwinVersion{}, o), tw::TwinVersion{}, carried);
+    const auto rep = rc::reconcile(*model);
+    std::printf("air gradient 1.5 K/m, 1 replicate, --noise-from: %s\n  %s\n",
+                rep.explanation ? rep.explanation->label.c_str() : "no claim", rep.statement.c_str());
+    INFO(rep.statement);
+    REQUIRE(rep.explanation.has_value());
+    // Not resolved (docs/reconcile.md): at one replicate the gradient comes with a small partner in
+    // 5 of seeds 44-49 (an air bias of 0.04-0.06 °C within the probe's spec, or gamma 2-6), each
+    // clearing the pairs' chi2_1 rule; the gradient's interval held 1.5 in all six.
+    CHECK(labels(*rep.explanation).count("input_pattern:air_temp_c/height") == 1);
+    CHECK(holds(*rep.explanation, "input_pattern:air_temp_c/height", 1.5));
 }
 
 TEST_CASE("discovery: air speed growing with height in a world with forced convection is answered forced convection, "
