@@ -24,6 +24,10 @@ struct CouplingStep {
     tr::SegmentValues loss_w{};
     tr::Environment env;
     double core_c = 0.0, skin_c = 0.0, sweat_g_h = 0.0, metabolic_w = 0.0, respiration_w = 0.0, storage_w = 0.0;
+    // What the loop took out of the heaters' power for warming each segment's shell, and the
+    // shell capacity's relative standard uncertainty (0 in recordings from before issue 63).
+    tr::SegmentValues shell_w{};
+    double shell_u_rel = 0.0;
     bool fallback = false;
 };
 
@@ -79,6 +83,12 @@ std::optional<Recorded> recorded_steps(const Campaign& c, const Trial& t) {
         s.metabolic_w = value("metabolic_w", row);
         s.respiration_w = value("respiration_loss_w", row);
         s.storage_w = value("storage_w", row);
+        auto optional_value = [&](const std::string& name) {
+            return index.count(name) && present(name, row) && std::isfinite(value(name, row)) ? value(name, row) : 0.0;
+        };
+        for (std::size_t i = 0; i < names.size(); ++i) s.shell_w[i] = optional_value(std::string(names[i]) + ".shell_storage_w");
+        if (const double cap = optional_value("shell_heat_capacity_j_m2k"); cap > 0.0)
+            s.shell_u_rel = optional_value("shell_heat_capacity_u_j_m2k") / cap;
         if (!r.steps.empty() && value("metabolic_met", row) != r.met)
             throw InputError(t.info.file, row + 2, 0, "model.metabolic_met",
                              fmt::format("model.metabolic_met changes within the trial ({} then {})", r.met,
@@ -192,11 +202,15 @@ Result compute(const Campaign& campaign, const Options& options) {
             const double air_e = draw_error(rng, air, envs[0].air_temp_c);
             const double rh_e = draw_error(rng, rh, envs[0].rh_pct);
             const double wall_e = draw_error(rng, wall, envs[0].mrt_c);
+            // The shell's capacity, off by its stated standard uncertainty (normal): the storage
+            // the loop subtracted scales with it.
+            const double shell_e = std::normal_distribution<double>(0.0, 1.0)(rng);
             auto l = losses;
             auto e = envs;
             for (std::size_t k = 0; k < used; ++k) {
                 for (std::size_t i = 0; i < l[k].size(); ++i)
-                    l[k][i] = l[k][i] * (1.0 + flux_gain) + (zone_area[i] > 0 ? offset_w[i] / zone_area[i] * model_areas[i] : 0.0);
+                    l[k][i] = l[k][i] * (1.0 + flux_gain) + (zone_area[i] > 0 ? offset_w[i] / zone_area[i] * model_areas[i] : 0.0) -
+                              shell_e * r.steps[k].shell_u_rel * r.steps[k].shell_w[i];
                 e[k].air_temp_c += air_e;
                 e[k].rh_pct = std::clamp(e[k].rh_pct + rh_e, 0.0, 100.0);
                 e[k].mrt_c += wall_e;

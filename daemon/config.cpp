@@ -304,6 +304,8 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*ph, "physiological", "stale_after_s", p.stale_after_s, 1.0, 3600.0, "s");
         r.number(*ph, "physiological", "min_core_temp_c", p.min_core_temp_c, 30.0, 45.0, "°C");
         r.number(*ph, "physiological", "max_core_temp_c", p.max_core_temp_c, 30.0, 45.0, "°C");
+        r.number(*ph, "physiological", "shell_heat_capacity_j_m2k", p.shell_heat_capacity_j_m2k, 0.0, 1e6, "J/(m²K)");
+        r.number(*ph, "physiological", "shell_heat_capacity_u_j_m2k", p.shell_heat_capacity_u_j_m2k, 0.0, 1e6, "J/(m²K)");
         if (p.min_skin_setpoint_c >= p.max_skin_setpoint_c || p.min_core_temp_c >= p.max_core_temp_c)
             throw UserError(fmt::format("{}: [physiological]: every min_* must be below its max_*", source_name));
         if (const auto* seg = r.table(*ph, "physiological", "segments")) {

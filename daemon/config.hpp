@@ -148,6 +148,12 @@ struct PhysiologicalConfig {
     double stale_after_s = 30.0;              // a zone's heat flux older than this is stale: fallback
     double min_core_temp_c = 35.0;            // the model's core outside these has diverged: fallback
     double max_core_temp_c = 40.5;
+    // The zones' shell: heat the heaters put into warming it is not heat the body lost, so the loop
+    // feeds the model the measured flux minus C dT_skin/dt (issue 63). Per m² of zone; the
+    // default is the simulated lab's shell (sim/world), with 20 % as its standard uncertainty:
+    // set your manikin's (its maker's figure, or a step test: docs/thermoregulation.md).
+    double shell_heat_capacity_j_m2k = 2500.0;
+    double shell_heat_capacity_u_j_m2k = 500.0;
     // Which zone-map segments make each model segment (head, trunk, arms, hands, legs, feet).
     std::map<std::string, std::vector<std::string>> segments = analysis::default_model_segments();
 };

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include <fmt/core.h>
@@ -119,6 +120,7 @@ void PhysiologicalLoop::record(const tr::StepState& st, const tr::SegmentValues&
         c.emplace_back(seg + ".fat_temp_c", nodes[4 * i + 2]);
         c.emplace_back(seg + ".skin_temp_c", nodes[4 * i + 3]);
         c.emplace_back(seg + ".heat_loss_w", loss_w[i]);
+        c.emplace_back(seg + ".shell_storage_w", last_shell_w_[i]);  // taken out of the heaters' power
         c.emplace_back(seg + ".modelled_loss_w", st.modelled_loss_w[i]);
         c.emplace_back(seg + ".sweat_rate_g_m2_h", st.sweat_rate_g_m2_h[i]);
         c.emplace_back(seg + ".skin_blood_flow_l_h", st.skin_blood_flow_l_h[i]);
@@ -126,7 +128,10 @@ void PhysiologicalLoop::record(const tr::StepState& st, const tr::SegmentValues&
         sweat_g_h += st.sweat_rate_g_m2_h[i] * areas[i];
     }
     c.emplace_back("blood_temp_c", nodes[tr::node_count - 1]);
-    c.emplace_back("heat_loss_w", loss_total_w);                   // measured, all segments
+    c.emplace_back("heat_loss_w", loss_total_w);                   // measured, all segments, less the shell's storage
+    // The shell's heat capacity the storage was taken with, and its standard uncertainty (Type B in `manikin physio`).
+    c.emplace_back("shell_heat_capacity_j_m2k", cfg_.shell_heat_capacity_j_m2k);
+    c.emplace_back("shell_heat_capacity_u_j_m2k", cfg_.shell_heat_capacity_u_j_m2k);
     c.emplace_back("metabolic_w", st.sample.metabolic_w);
     c.emplace_back("respiration_loss_w", -st.sample.respiration_w);
     c.emplace_back("storage_w", st.sample.storage_w);
@@ -139,6 +144,14 @@ void PhysiologicalLoop::record(const tr::StepState& st, const tr::SegmentValues&
     c.emplace_back("air_speed_m_s", env.air_speed_m_s);
     c.emplace_back("metabolic_met", model_.metabolic_met);
     c.emplace_back("fallback", 0.0);
+}
+
+// Every zone's skin temperature now (NaN where its reading is not good).
+std::vector<double> PhysiologicalLoop::skin_now(const LoopInputs& in) {
+    std::vector<double> out(in.zones.size(), std::numeric_limits<double>::quiet_NaN());
+    for (std::size_t z = 0; z < in.zones.size(); ++z)
+        if (in.zones[z].good && std::isfinite(in.zones[z].skin_temp_c)) out[z] = in.zones[z].skin_temp_c;
+    return out;
 }
 
 LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
@@ -228,6 +241,7 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
         if (on_target_since_ns_ && static_cast<double>(now - *on_target_since_ns_) * 1e-9 >= precondition_hold_s) {
             phase_ = Phase::running;
             running_since_ns_ = now;
+            skin_at_step_c_ = skin_now(in);
             std::fill(flux_sum_w_m2_.begin(), flux_sum_w_m2_.end(), 0.0);
             std::fill(flux_count_.begin(), flux_count_.end(), 0);
             out.alarms.push_back({"info", fmt::format("physiological trial: the model starts ({}, {} met, {:.0f} min, "
@@ -261,17 +275,33 @@ LoopOutput PhysiologicalLoop::tick(const LoopInputs& in) {
         fall_back("the enclosure's air temperature, humidity or wall temperature is not being read", out);
         return out;
     }
-    // Segment loss: the area-weighted mean flux of its zones over the model segment's own area.
-    tr::SegmentValues flux_area{}, loss_w{};
+    // Segment loss: the area-weighted mean flux of its zones over the model segment's own area,
+    // less what warmed the shell: the heaters' power is the surface's loss plus C dT_skin/dt.
+    tr::SegmentValues flux_area{}, shell_area{}, loss_w{};
+    const std::vector<double> skin_c = skin_now(in);
+    double measured_w = 0.0, shell_w = 0.0;
     for (std::size_t z = 0; z < n; ++z) {
         const double mean_w_m2 = flux_count_[z] > 0 ? flux_sum_w_m2_[z] / flux_count_[z] : in.zones[z].heat_flux_w_m2;
-        flux_area[static_cast<std::size_t>(zone_segment_[z])] += mean_w_m2 * map_.zones[z].area_m2;
+        double storage_w_m2 = 0.0;
+        if (z < skin_at_step_c_.size() && std::isfinite(skin_at_step_c_[z]) && std::isfinite(skin_c[z]) && dt_s > 0.0)
+            storage_w_m2 = cfg_.shell_heat_capacity_j_m2k * (skin_c[z] - skin_at_step_c_[z]) / dt_s;
+        flux_area[static_cast<std::size_t>(zone_segment_[z])] += (mean_w_m2 - storage_w_m2) * map_.zones[z].area_m2;
+        shell_area[static_cast<std::size_t>(zone_segment_[z])] += storage_w_m2 * map_.zones[z].area_m2;
+        measured_w += mean_w_m2 * map_.zones[z].area_m2;
+        shell_w += storage_w_m2 * map_.zones[z].area_m2;
         flux_sum_w_m2_[z] = 0.0;
         flux_count_[z] = 0;
     }
+    skin_at_step_c_ = skin_c;
     const auto& areas = tr::Body::segment_areas_m2();
-    for (std::size_t m = 0; m < loss_w.size(); ++m) loss_w[m] = flux_area[m] / segment_zone_area_m2_[m] * areas[m];
+    for (std::size_t m = 0; m < loss_w.size(); ++m) {
+        loss_w[m] = flux_area[m] / segment_zone_area_m2_[m] * areas[m];
+        last_shell_w_[m] = shell_area[m] / segment_zone_area_m2_[m] * areas[m];  // as the loss, on the model's areas
+    }
     last_loss_w_ = loss_w;
+    // The record keeps both: what the heaters gave and what went into the shell (the zones' own area).
+    out.model_channels.emplace_back("heater_power_w", measured_w);
+    out.model_channels.emplace_back("shell_storage_w", shell_w);
     const tr::Environment env{in.air_temp_c, in.wall_temp_c, in.rh_pct, std::max(0.0, in.air_speed_m_s)};
     const double model_target_s = std::min(static_cast<double>(now - *running_since_ns_) * 1e-9, model_.duration_s);
     const tr::StepState* st = nullptr;

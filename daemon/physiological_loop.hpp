@@ -112,7 +112,12 @@ private:
     std::vector<std::int64_t> last_flux_ns_;
     std::size_t next_phase_ = 0;
     std::string fallback_reason_;
+    static std::vector<double> skin_now(const LoopInputs& in);
     physics::thermoreg::SegmentValues last_loss_w_{};
+    physics::thermoreg::SegmentValues last_shell_w_{};  // what warmed each segment's shell at the last step, W
+    // Each zone's skin temperature at the last coupling step: the shell's storage over a step is
+    // C (T_now - T_then) / dt (NaN where a reading was bad then).
+    std::vector<double> skin_at_step_c_;
 };
 
 }  // namespace manikind

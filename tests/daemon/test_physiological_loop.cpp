@@ -394,3 +394,44 @@ TEST_CASE("physiological loop: preconditioning that never reaches the model's st
         CHECK(static_cast<double>(m.now_ns) / ns_per_s <= limit_s + cfg.coupling_period_s + tick_s);
     }
 }
+
+TEST_CASE("physiological loop: the heat that warms the shell is taken out of the heaters' power before the model gets "
+          "it (issue 63: the shell's heat was fed to the model as body heat loss)", "[daemon][physiological]") {
+    // A manikin whose surface loses 40 W/m² in every zone; its heaters also warm the shell, so
+    // each zone reports 40 + C dT/dt over the last coupling period (C the config's capacity).
+    const auto& map = manikind::analysis::andi35_zone_map();
+    manikind::config::PhysiologicalConfig cfg;
+    cfg.coupling_period_s = 20.0;
+    PhysiologicalLoop loop(model_of(30), cfg, map);
+    PerfectManikin m;
+    m.skin_c.assign(map.size(), 35.5);
+    REQUIRE(run_until_running(loop, m, 20) > 0);
+    auto channel = [](const manikind::LoopOutput& out, const std::string& name) {
+        for (const auto& [n, v] : out.model_channels)
+            if (n == name) return v;
+        return std::nan("");
+    };
+    double model_area_m2 = 0.0;
+    for (double a : manikind::physics::thermoreg::Body::segment_areas_m2()) model_area_m2 += a;
+    std::vector<double> before = m.skin_c;
+    double worst_power_excess_w = 0.0;
+    int steps = 0;
+    for (int i = 0; i < 60; ++i) {
+        m.now_ns += 20 * ns_per_s;
+        auto in = m.inputs();
+        for (std::size_t z = 0; z < in.zones.size(); ++z)
+            in.zones[z].heat_flux_w_m2 = 40.0 + cfg.shell_heat_capacity_j_m2k * (m.skin_c[z] - before[z]) / 20.0;
+        const auto out = loop.tick(in);
+        before = m.skin_c;
+        m.apply(out);
+        if (out.commands.empty()) continue;
+        ++steps;
+        // What the model was given: the surface's 40 W/m² on the model's areas, whatever the shell did.
+        CHECK(channel(out, "heat_loss_w") == Approx(40.0 * model_area_m2).epsilon(1e-9));
+        CHECK(channel(out, "heater_power_w") - channel(out, "shell_storage_w") == Approx(40.0 * map.total_area_m2()).epsilon(1e-9));
+        worst_power_excess_w = std::max(worst_power_excess_w, std::abs(channel(out, "shell_storage_w")));
+    }
+    CHECK(steps >= 50);
+    // The skin moved (the model warms it in 30 °C air), so the correction was not zero.
+    CHECK(worst_power_excess_w > 1.0);
+}
