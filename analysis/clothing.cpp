@@ -232,13 +232,18 @@ TypeA type_a(const std::vector<double>& v) {
 
 // A sum of independent Type A parts c_i u_i (Welch-Satterthwaite dof).
 TypeA combine(const std::vector<std::pair<double, TypeA>>& parts) {
+    // A part without Type A (one replicate, nothing carried) adds none; the others' stays (issue
+    // 63: a 1-replicate nude took the 3-replicate ensemble's scatter out of Icle, Icl and Recl).
     double var = 0.0, denom = 0.0;
+    bool any = false;
     for (const auto& [c, a] : parts) {
-        if (!std::isfinite(a.u)) return {};
+        if (!std::isfinite(a.u)) continue;
+        any = true;
         const double v = c * c * a.u * a.u;
         var += v;
         denom += a.dof > 0.0 ? v * v / a.dof : 0.0;
     }
+    if (!any) return {};
     TypeA out;
     out.u = std::sqrt(var);
     out.dof = denom > 0.0 ? var * var / denom : 1e9;
@@ -427,11 +432,21 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             const auto it = reps.find(k);
             return it == reps.end() ? std::vector<double>{} : it->second;
         };
-        auto nude_a = [&](const std::string& k) {
-            const auto it = measured.replicates.find("nude");
+        // Type A of a key: from the replicates, or at one replicate from the carried scatter.
+        auto type_a_in = [&](const std::string& ensemble, const std::string& k) {
+            const auto it = measured.replicates.find(ensemble);
             if (it == measured.replicates.end() || !it->second.count(k)) return TypeA{};
-            return type_a(it->second.at(k));
+            const auto& values = it->second.at(k);
+            const TypeA own = type_a(values);
+            if (std::isfinite(own.u) || !options.redressing) return own;
+            const auto& carried = ensemble == "nude" ? options.redressing->nude : options.redressing->dressed;
+            const auto c = carried.find(k);
+            const double m = mean_of(values);
+            if (c == carried.end() || !std::isfinite(m) || values.empty()) return TypeA{};
+            return TypeA{std::abs(m) * c->second.first / std::sqrt(static_cast<double>(values.size())), c->second.second};
         };
+        auto nude_a = [&](const std::string& k) { return type_a_in("nude", k); };
+        auto own_a = [&](const std::string& k) { return type_a_in(id, k); };
         EnsembleResult e;
         e.id = id;
         if (const auto it = campaign.ensembles.find(id); it != campaign.ensembles.end()) e.description = it->second.description;
@@ -473,12 +488,12 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         if (std::isfinite(value_of("It_par"))) {
             e.insulation_conditions = conditions_of(trials, id, "insulation");
             e.insulation_replicates = reps_of("It_par");
-            e.insulation_total_parallel = make_value(value_of("It_par"), type_a(reps_of("It_par")), u_b(id, "It_par"), "m2K/W", conf);
-            e.insulation_total_serial = make_value(value_of("It_ser"), type_a(reps_of("It_ser")), u_b(id, "It_ser"), "m2K/W", conf);
+            e.insulation_total_parallel = make_value(value_of("It_par"), own_a("It_par"), u_b(id, "It_par"), "m2K/W", conf);
+            e.insulation_total_serial = make_value(value_of("It_ser"), own_a("It_ser"), u_b(id, "It_ser"), "m2K/W", conf);
             e.insulation_cv = cv_of(e.insulation_replicates);
             if (e.insulation_cv) e.insulation_cv_pass = *e.insulation_cv <= options.cv_limit_insulation;
             if (std::isfinite(value_of("Icle_par"))) {
-                const TypeA it_a = type_a(reps_of("It_par")), ia_a = nude_a("It_par");
+                const TypeA it_a = own_a("It_par"), ia_a = nude_a("It_par");
                 e.insulation_effective_parallel =
                     make_value(value_of("Icle_par"), combine({{1.0, it_a}, {1.0, ia_a}}), u_b(id, "Icle_par"), "m2K/W", conf);
                 if (std::isfinite(value_of("Icl_par")))
@@ -530,8 +545,8 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             }
             if (!ret_withheld) {
                 e.evaporative_replicates = reps_of("Ret_par");
-                e.evaporative_total_parallel = make_value(value_of("Ret_par"), type_a(reps_of("Ret_par")), u_b(id, "Ret_par"), "m2kPa/W", conf);
-                e.evaporative_total_serial = make_value(value_of("Ret_ser"), type_a(reps_of("Ret_ser")), u_b(id, "Ret_ser"), "m2kPa/W", conf);
+                e.evaporative_total_parallel = make_value(value_of("Ret_par"), own_a("Ret_par"), u_b(id, "Ret_par"), "m2kPa/W", conf);
+                e.evaporative_total_serial = make_value(value_of("Ret_ser"), own_a("Ret_ser"), u_b(id, "Ret_ser"), "m2kPa/W", conf);
                 e.evaporative_cv = cv_of(e.evaporative_replicates);
                 if (e.evaporative_cv) e.evaporative_cv_pass = *e.evaporative_cv <= options.cv_limit_evaporative;
             }
@@ -540,7 +555,7 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             if (id != "nude" && !ret_withheld && nude_ret) {
                 if (std::isfinite(value_of("Recl_par")))
                     e.evaporative_intrinsic_parallel =
-                        make_value(value_of("Recl_par"), combine({{1.0, type_a(reps_of("Ret_par"))}, {1.0 / e.fcl, nude_a("Ret_par")}}),
+                        make_value(value_of("Recl_par"), combine({{1.0, own_a("Ret_par")}, {1.0 / e.fcl, nude_a("Ret_par")}}),
                                    with_fcl(u_b(id, "Recl_par"), rea), "m2kPa/W", conf);
                 else
                     e.intrinsic_evaporative_withheld_reason = "Recl = Ret - Rea/fcl needs fcl: " + e.fcl_reason +
@@ -551,7 +566,7 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         }
         if (std::isfinite(value_of("im")) && !ret_withheld) {
             const double it = value_of("It_par"), ret = value_of("Ret_par");
-            const TypeA a = combine({{value_of("im") / it, type_a(reps_of("It_par"))}, {value_of("im") / ret, type_a(reps_of("Ret_par"))}});
+            const TypeA a = combine({{value_of("im") / it, own_a("It_par")}, {value_of("im") / ret, own_a("Ret_par")}});
             e.permeability_index = make_value(value_of("im"), a, u_b(id, "im"), "1", conf);
         }
         for (const auto& region : regions) {
@@ -560,26 +575,40 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             for (const auto& z : map.zones)
                 if (z.region == region) rv.area_m2 += z.area_m2;
             if (std::isfinite(value_of("It_par:" + region)))
-                rv.insulation_total = make_value(value_of("It_par:" + region), type_a(reps_of("It_par:" + region)),
+                rv.insulation_total = make_value(value_of("It_par:" + region), own_a("It_par:" + region),
                                                  u_b(id, "It_par:" + region), "m2K/W", conf);
             if (std::isfinite(value_of("Icle_par:" + region)))
                 rv.insulation_effective = make_value(value_of("Icle_par:" + region),
-                                                     combine({{1.0, type_a(reps_of("It_par:" + region))}, {1.0, nude_a("It_par:" + region)}}),
+                                                     combine({{1.0, own_a("It_par:" + region)}, {1.0, nude_a("It_par:" + region)}}),
                                                      u_b(id, "Icle_par:" + region), "m2K/W", conf);
             if (std::isfinite(value_of("Ret_par:" + region)) && !ret_withheld)
-                rv.evaporative_total = make_value(value_of("Ret_par:" + region), type_a(reps_of("Ret_par:" + region)),
+                rv.evaporative_total = make_value(value_of("Ret_par:" + region), own_a("Ret_par:" + region),
                                                   u_b(id, "Ret_par:" + region), "m2kPa/W", conf);
             if (rv.insulation_total || rv.evaporative_total) e.regions.push_back(std::move(rv));
         }
         if (id != "nude" && !measured.value.count("nude"))
             e.notes.push_back("no nude trials (here or --baseline): effective and intrinsic values need Ia and Rea");
-        if (e.insulation_replicates.size() == 1 || e.evaporative_replicates.size() == 1)
-            e.notes.push_back("one replicate: no Type A, U from the instruments alone with k = 2, no replicate criterion");
+        if (e.insulation_replicates.size() == 1 || e.evaporative_replicates.size() == 1) {
+            if (options.redressing) {
+                const auto& carried = id == "nude" ? options.redressing->nude : options.redressing->dressed;
+                std::string what;
+                for (const char* k : {"It_par", "Ret_par"})
+                    if (const auto c = carried.find(k); c != carried.end())
+                        what += fmt::format("{}{} {:.1f} % on {:.0f} dof", what.empty() ? "" : ", ", k, 100.0 * c->second.first, c->second.second);
+                e.notes.push_back(fmt::format("one replicate: Type A is the re-dressing scatter carried from {} ({}); no replicate "
+                                              "criterion", options.redressing->source, what.empty() ? "none for these quantities" : what));
+            } else {
+                e.notes.push_back("one replicate: the interval excludes re-dressing (U from the instruments alone, k = 2), so "
+                                  "it is too short for a garment dressed again; carry the lab's scatter from a test with "
+                                  "replicates (--redress-from <campaign>); no replicate criterion");
+            }
+        }
         if (e.insulation_conditions) e.insulation_checks = insulation_checks(*e.insulation_conditions);
         if (e.evaporative_conditions)
             e.evaporative_checks = evaporative_checks(*e.evaporative_conditions, e.insulation_total_parallel.has_value());
         out.ensembles.push_back(std::move(e));
     }
+    out.replicates = measured.replicates;
     // Conditions against the standards: every check is in the result; those out of range are
     // warnings as well, never a refusal (a lab may test otherwise on purpose).
     for (const auto& e : out.ensembles)
@@ -636,13 +665,49 @@ std::string fmt_value(const std::optional<Value>& v, bool clo = false) {
 
 }  // namespace
 
+RedressingScatter redressing_scatter(const Result& earlier) {
+    // Pooled relative variance: sum (n_e - 1) cv_e^2 / sum (n_e - 1) over the ensembles.
+    std::map<std::string, std::pair<double, double>> dressed_ss, nude_ss;  // key -> (sum (n-1) cv^2, sum (n-1))
+    for (const auto& [ensemble, keys] : earlier.replicates)
+        for (const auto& [key, values] : keys) {
+            if (key.rfind("It_", 0) != 0 && key.rfind("Ret_", 0) != 0) continue;  // the measured totals
+            const auto cv = cv_of(values);
+            if (!cv) continue;
+            std::size_t n = 0;
+            for (double v : values) n += std::isfinite(v) ? 1 : 0;
+            auto& s = (ensemble == "nude" ? nude_ss : dressed_ss)[key];
+            s.first += static_cast<double>(n - 1) * *cv * *cv;
+            s.second += static_cast<double>(n - 1);
+        }
+    RedressingScatter out;
+    out.source = earlier.campaign;
+    for (const auto& [key, s] : dressed_ss) out.dressed[key] = {std::sqrt(s.first / s.second), s.second};
+    for (const auto& [key, s] : nude_ss) out.nude[key] = {std::sqrt(s.first / s.second), s.second};
+    if (out.dressed.empty() && out.nude.empty())
+        throw std::invalid_argument(fmt::format("{}: no ensemble has two replicates of a test, so it has no re-dressing "
+                                                "scatter to carry", earlier.campaign));
+    return out;
+}
+
 nlohmann::json to_json(const Result& r) {
     nlohmann::json j;
     j["campaign"] = r.campaign;
     j["baseline"] = r.baseline.empty() ? nlohmann::json() : nlohmann::json(r.baseline);
+    if (r.options.redressing) {
+        nlohmann::json carried = {{"source", r.options.redressing->source}};
+        for (const auto& [name, m] : {std::pair{"dressed", &r.options.redressing->dressed}, std::pair{"nude", &r.options.redressing->nude}})
+            for (const auto& [key, v] : *m) carried[name][key] = {{"relative_sd", v.first}, {"dof", v.second}};
+        j["redressing_from"] = carried;
+    } else {
+        j["redressing_from"] = nullptr;
+    }
     j["method"] = {{"insulation", "ASTM F1291 / ISO 15831: parallel (global) and serial; effective and intrinsic per ISO 9920"},
                    {"evaporative", "ASTM F2370: parallel and serial, fully wet skin at the zone's skin temperature"},
-                   {"type_a", "re-dressed replicates: s/sqrt(n), n - 1 dof"},
+                   {"type_a", r.options.redressing
+                                  ? "re-dressed replicates: s/sqrt(n), n - 1 dof; at one replicate the re-dressing scatter carried from " +
+                                        r.options.redressing->source
+                                  : std::string("re-dressed replicates: s/sqrt(n), n - 1 dof; none at one replicate (the interval "
+                                                "excludes re-dressing)")},
                    {"type_b", fmt::format("Monte Carlo over the instruments' shared errors, {} draws (GUM Supplement 1)",
                                           r.options.monte_carlo_draws)},
                    {"confidence", r.options.confidence},

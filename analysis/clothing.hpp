@@ -40,6 +40,17 @@ inline constexpr double kFclEstimateCappedU = 0.10;
 // the unit test's ensembles (docs/clothing.md, "The isothermal judgement").
 inline constexpr double kIsothermalTolerance_k = 0.5;
 
+// A lab's re-dressing scatter, carried from an earlier test with replicates to a test of one
+// (issue 63: at one replicate the interval was the instruments' alone and covered 80-87 %):
+// per quantity (It_par, It_ser, Ret_par, Ret_ser and the regions' It_par:<region>, Ret_par:<region>),
+// the relative standard deviation of one re-dressing, pooled over the earlier test's ensembles
+// (the dressed ones; the nude manikin's own scatter apart), with its degrees of freedom.
+struct RedressingScatter {
+    std::string source;                                          // the earlier campaign
+    std::map<std::string, std::pair<double, double>> dressed;    // key -> (relative sd, dof)
+    std::map<std::string, std::pair<double, double>> nude;
+};
+
 struct Options {
     // Replicate acceptance: the coefficient of variation of the re-dressed replicates' total
     // (parallel) value may not exceed this (docs/clothing.md, "Acceptance"; configurable because
@@ -49,6 +60,9 @@ struct Options {
     int monte_carlo_draws = 4000;
     unsigned seed = 20261126;
     double confidence = 0.95;
+    // Where an ensemble has one replicate: its Type A from this scatter (value x relative sd on
+    // the pooled dof); none: the interval excludes re-dressing, and the result says so.
+    std::optional<RedressingScatter> redressing;
 };
 
 // A result with its uncertainty: value, combined standard uncertainty from Type A (replicates)
@@ -126,7 +140,13 @@ struct Result {
     Options options;
     std::vector<EnsembleResult> ensembles;       // "nude" first when present
     std::vector<std::string> warnings;           // conditions outside a standard's, trials left out
+    // Every ensemble's replicate values per quantity key (what redressing_scatter pools).
+    std::map<std::string, std::map<std::string, std::vector<double>>> replicates;
 };
+
+// The re-dressing scatter of a computed test with replicates, for Options::redressing. Throws
+// std::invalid_argument when no ensemble there has two replicates of any quantity.
+RedressingScatter redressing_scatter(const Result& earlier);
 
 // `baseline` (optional): another campaign with the nude manikin's trials (ensemble "nude"),
 // recorded with the same manikin and probes (its instrument errors are the same draws).

@@ -24,7 +24,7 @@ namespace manikind::cli {
 void add_clothing_command(CLI::App& app) {
     struct Opts {
         CampaignSource source;
-        std::string baseline, report;
+        std::string baseline, report, redress_from;
         bool json = false, force = false;
         bool require_flux_stability = false;
         analysis::clothing::Options options;
@@ -38,6 +38,10 @@ void add_clothing_command(CLI::App& app) {
     cmd->add_option("--baseline", o->baseline,
                     "A campaign with the nude manikin's trials (ensemble \"nude\"), when this one has none: a folder, or "
                     "with --db a campaign in the same database");
+    cmd->add_option("--redress-from", o->redress_from,
+                    "An earlier test of this lab with replicates (a folder, or with --db a campaign there): where an "
+                    "ensemble has one replicate, its Type A is the re-dressing scatter pooled from that test's ensembles "
+                    "(without it a 1-replicate interval excludes re-dressing and says so)");
     cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 5) instead of the table");
     cmd->add_option("--report", o->report, "Write the one-page-per-ensemble report (HTML with SVG) to this file (new; "
                                            "never inside a campaign folder it reads, never over a database)");
@@ -60,6 +64,7 @@ void add_clothing_command(CLI::App& app) {
                 "`test` (\"insulation\" or \"evaporative\"); docs/clothing.md has the equations, the standards' conditions\n"
                 "and where each number comes from. Exit status 0 even when a replicate criterion fails (it is reported).\n"
                 "Example: manikin clothing lab-day --baseline nude-baseline --report report.html\n"
+                "         manikin clothing quick-check --redress-from lab-day   # one replicate, the lab's re-dressing scatter\n"
                 "         manikin clothing --db manikind.db --campaign jackets-20261126 --json");
     cmd->callback([o] {
         // The report is checked before anything is read (docs/cli.md, "Reading a database, writing
@@ -69,9 +74,10 @@ void add_clothing_command(CLI::App& app) {
         std::optional<ExportTarget> target;
         if (!o->report.empty()) {
             std::vector<std::filesystem::path> inputs = source_inputs(o->source);
-            if (!o->baseline.empty()) {
+            for (const std::string* other : {&o->baseline, &o->redress_from}) {
+                if (other->empty()) continue;
                 CampaignSource from = o->source;
-                from.campaign = o->baseline;
+                from.campaign = *other;
                 for (auto& p : source_inputs(from)) inputs.push_back(std::move(p));
             }
             target.emplace(o->report, ExportShape::file, o->force, inputs);
@@ -98,6 +104,23 @@ void add_clothing_command(CLI::App& app) {
         analysis::clothing::Options options = o->options;
         options.cv_limit_insulation = o->cv_limit_insulation_pct / 100.0;
         options.cv_limit_evaporative = o->cv_limit_evaporative_pct / 100.0;
+        if (!o->redress_from.empty()) {
+            CampaignSource from = o->source;
+            from.campaign = o->redress_from;
+            try {
+                const analysis::Campaign earlier = read_campaign_source(from);
+                const auto earlier_result = analysis::analyze_campaign(earlier, analysis_options);
+                analysis::clothing::Options plain = options;
+                plain.monte_carlo_draws = 100;  // only its replicates are used
+                options.redressing = analysis::clothing::redressing_scatter(
+                    analysis::clothing::compute(earlier, earlier_result, nullptr, nullptr, plain));
+            } catch (const UserError& e) {
+                throw UserError(fmt::format("--redress-from '{}' (the earlier test with replicates): {}", o->redress_from, e.what()),
+                                e.code(), e.status(), e.details());
+            } catch (const std::invalid_argument& e) {
+                throw UserError(fmt::format("--redress-from '{}': {}", o->redress_from, e.what()));
+            }
+        }
         analysis::clothing::Result r;
         try {
             r = analysis::clothing::compute(campaign, result, baseline ? &*baseline : nullptr,

@@ -475,3 +475,74 @@ TEST_CASE("clothing: each test's conditions are checked against the standard's a
     CHECK(std::count_if(r.warnings.begin(), r.warnings.end(),
                         [](const auto& w) { return w.find("out of range") != std::string::npos; }) == 5);
 }
+
+namespace {
+// The suit's insulation test with re-dressings that change its flux by these factors, and the
+// nude manikin's with `nude_replicates` identical trials.
+an::Campaign redressed(const Lab& lab, const std::vector<double>& fit, int nude_replicates) {
+    an::Campaign c = lab.empty_campaign(1.2);
+    lab.add_test(c, "nude", "insulation", nude_replicates, 35.0, 20.0, 50.0);
+    std::vector<double> skin(lab.map.size(), 35.0);
+    for (std::size_t r = 0; r < fit.size(); ++r) {
+        std::vector<double> q;
+        for (std::size_t z = 0; z < lab.map.size(); ++z) q.push_back(15.0 / lab.it[z] * fit[r]);
+        c.trials.push_back(steady_trial(lab.map, Lab::fmt("s", 7, static_cast<int>(r + 1)), 7, static_cast<int>(r + 1), "suit",
+                                        "insulation", 20.0, 50.0, skin, q));
+    }
+    return c;
+}
+}  // namespace
+
+TEST_CASE("clothing: a 1-replicate nude keeps the 3-replicate ensemble's own Type A in Icle and Icl (issue 63: all of it "
+          "was dropped)", "[clothing]") {
+    const Lab lab;
+    const auto c = redressed(lab, {0.97, 1.0, 1.03}, 1);
+    const auto a = an::analyze_campaign(c);
+    const auto r = cl::compute(c, a, nullptr, nullptr);
+    const auto& suit = ensemble(r, "suit");
+    REQUIRE(suit.insulation_total_parallel);
+    REQUIRE(suit.insulation_effective_parallel);
+    REQUIRE(suit.insulation_intrinsic_parallel);
+    REQUIRE(std::isfinite(suit.insulation_total_parallel->u_a));
+    CHECK(suit.insulation_total_parallel->u_a > 0.0);
+    // Icle = It - Ia: the nude part has none, the ensemble's is all of it.
+    CHECK(suit.insulation_effective_parallel->u_a == Approx(suit.insulation_total_parallel->u_a).epsilon(1e-12));
+    CHECK(suit.insulation_intrinsic_parallel->u_a == Approx(suit.insulation_total_parallel->u_a).epsilon(1e-12));
+    CHECK(suit.insulation_effective_parallel->dof < 1e6);  // finite: the replicates' n - 1 in Welch-Satterthwaite
+    CHECK(suit.insulation_effective_parallel->k > 2.0);
+}
+
+TEST_CASE("clothing: at one replicate the re-dressing scatter carried from an earlier test with replicates is Type A, and "
+          "without it the result says its interval excludes re-dressing", "[clothing]") {
+    const Lab lab;
+    const auto earlier = redressed(lab, {0.96, 1.0, 1.04}, 3);
+    const auto earlier_result = cl::compute(earlier, an::analyze_campaign(earlier), nullptr, nullptr);
+    const auto scatter = cl::redressing_scatter(earlier_result);
+    REQUIRE(scatter.dressed.count("It_par") == 1);
+    // The suit's It over the three fits: 1/0.96, 1, 1/1.04 of the truth; its relative sd.
+    const double m = (1 / 0.96 + 1 + 1 / 1.04) / 3;
+    const double sd = std::sqrt((std::pow(1 / 0.96 - m, 2) + std::pow(1 - m, 2) + std::pow(1 / 1.04 - m, 2)) / 2) / m;
+    CHECK(scatter.dressed.at("It_par").first == Approx(sd).epsilon(1e-9));
+    CHECK(scatter.dressed.at("It_par").second == Approx(2.0));
+    CHECK(scatter.source == "clothing-unit");
+
+    const auto once = redressed(lab, {1.0}, 1);
+    const auto once_result = an::analyze_campaign(once);
+    const auto plain = cl::compute(once, once_result, nullptr, nullptr);
+    const auto& bare = ensemble(plain, "suit");
+    CHECK_FALSE(std::isfinite(bare.insulation_total_parallel->u_a));
+    CHECK_THAT(bare.notes.back(), Catch::Contains("excludes re-dressing") && Catch::Contains("--redress-from"));
+
+    cl::Options o;
+    o.redressing = scatter;
+    const auto carried = cl::compute(once, once_result, nullptr, nullptr, o);
+    const auto& suit = ensemble(carried, "suit");
+    CHECK(suit.insulation_total_parallel->u_a == Approx(suit.insulation_total_parallel->value * sd).epsilon(1e-9));
+    CHECK(suit.insulation_total_parallel->k > 2.5);  // the pooled 2 dof in Welch-Satterthwaite
+    CHECK(suit.insulation_total_parallel->U95 > bare.insulation_total_parallel->U95 * 2.0);
+    CHECK_THAT(suit.notes.back(), Catch::Contains("carried from clothing-unit"));
+    CHECK(cl::to_json(carried)["redressing_from"]["source"] == "clothing-unit");
+
+    // A test with no replicates has nothing to carry.
+    CHECK_THROWS_WITH(cl::redressing_scatter(plain), Catch::Contains("no ensemble has two replicates"));
+}
