@@ -372,6 +372,8 @@ json trial_json(const TrialResult& t) {
             {"settled_since_s", number_or_null(s.settled_since_s)},
             {"max_flux_drift_w_m2", s.max_flux_drift_w_m2},
             {"max_flux_sd_w_m2", s.max_flux_sd_w_m2},
+            {"heat_loss_drift_fraction", s.heat_loss.observed ? json(s.heat_loss.drift_fraction) : json()},
+            {"mean_skin_drift_c", s.heat_loss.observed ? json(s.heat_loss.mean_skin_drift_c) : json()},
             {"skin_drift", skin_drift_json(s)},
             {"whole_body_q_w_m2", number_or_null(t.whole_body_q_w_m2)}};
 }
@@ -436,6 +438,9 @@ json head_json(const CampaignResult& r) {
               {"require_flux_stability", s.require_flux_stability},
               {"max_flux_drift_w_m2", s.max_flux_drift_w_m2},
               {"max_flux_sd_w_m2", s.max_flux_sd_w_m2},
+              {"require_heat_loss_stability", s.require_heat_loss_stability},
+              {"max_heat_loss_drift_fraction", s.heat_loss.max_drift_fraction},
+              {"max_mean_skin_drift_c", s.heat_loss.max_mean_skin_drift_c},
               {"include_unsteady", r.options.include_unsteady},
               {"type_b_correlation", to_string(r.options.type_b_correlation)},
               {"confidence", r.options.confidence},

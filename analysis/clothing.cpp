@@ -355,8 +355,9 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             if (nude_only && info.ensemble != "nude") continue;
             const auto it = by_id.find(info.id);
             if (it == by_id.end() || !it->second->included) {
-                out.warnings.push_back(fmt::format("{}: trial {} ({} {}) left out: {}", c.name, info.id, info.ensemble, info.test,
-                                                   it == by_id.end() ? "not analysed" : it->second->exclusion_reason));
+                const std::string why = it == by_id.end() ? "not analysed" : it->second->exclusion_reason;
+                out.warnings.push_back(fmt::format("{}: trial {} ({} {}) left out: {}", c.name, info.id, info.ensemble, info.test, why));
+                out.left_out.push_back({info.id, info.ensemble, info.test, why});
                 continue;
             }
             into.push_back({info.ensemble, info.test, info.id, it->second, &c});
@@ -609,6 +610,12 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         out.ensembles.push_back(std::move(e));
     }
     out.replicates = measured.replicates;
+    std::set<std::string> named;
+    for (const auto& [id, e] : campaign.ensembles) named.insert(id);
+    for (const auto& l : out.left_out) named.insert(l.ensemble);
+    for (const auto& id : named)
+        if (std::none_of(out.ensembles.begin(), out.ensembles.end(), [&](const EnsembleResult& e) { return e.id == id; }))
+            out.without_result.push_back(id);
     // Conditions against the standards: every check is in the result; those out of range are
     // warnings as well, never a refusal (a lab may test otherwise on purpose).
     for (const auto& e : out.ensembles)
@@ -715,6 +722,10 @@ nlohmann::json to_json(const Result& r) {
                    {"cv_limit_evaporative", r.options.cv_limit_evaporative},
                    {"lewis_relation_k_kpa", kLewisRelation_k_kpa},
                    {"clo_m2k_w", kClo_m2k_w}};
+    j["left_out"] = nlohmann::json::array();
+    for (const auto& l : r.left_out)
+        j["left_out"].push_back({{"trial", l.trial}, {"ensemble", l.ensemble}, {"test", l.test}, {"reason", l.reason}});
+    j["without_result"] = r.without_result;
     j["ensembles"] = nlohmann::json::array();
     for (const auto& e : r.ensembles) {
         nlohmann::json x;
@@ -805,7 +816,15 @@ std::string to_text(const Result& r) {
                                  100 * *e.evaporative_cv, 100 * r.options.cv_limit_evaporative, *e.evaporative_cv_pass ? "pass" : "FAIL");
         }
         if (e.permeability_index) o << "    im permeability index  " << fmt_value(e.permeability_index) << "\n";
+        for (const auto& l : r.left_out)
+            if (l.ensemble == e.id) o << fmt::format("  LEFT OUT: {} ({} test): {}\n", l.trial, l.test, l.reason);
         for (const auto& n : e.notes) o << "  note: " << n << "\n";
+        o << "\n";
+    }
+    for (const auto& id : r.without_result) {
+        o << fmt::format("{}: NO RESULT: every trial of it was left out\n", id);
+        for (const auto& l : r.left_out)
+            if (l.ensemble == id) o << fmt::format("  LEFT OUT: {} ({} test): {}\n", l.trial, l.test, l.reason);
         o << "\n";
     }
     for (const auto& w : r.warnings) o << "warning: " << w << "\n";

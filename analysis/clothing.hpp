@@ -142,6 +142,13 @@ struct Result {
     std::vector<std::string> warnings;           // conditions outside a standard's, trials left out
     // Every ensemble's replicate values per quantity key (what redressing_scatter pools).
     std::map<std::string, std::map<std::string, std::vector<double>>> replicates;
+    // Trials the analysis left out (not steady by the rule applied, not analysed), and ensembles
+    // of campaign.json that got no result at all: the table and the exit status say so.
+    struct LeftOut {
+        std::string trial, ensemble, test, reason;
+    };
+    std::vector<LeftOut> left_out;
+    std::vector<std::string> without_result;
 };
 
 // The re-dressing scatter of a computed test with replicates, for Options::redressing. Throws

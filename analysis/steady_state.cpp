@@ -195,6 +195,29 @@ SteadyStateResult detect_steady_state(const TrialData& data, const ZoneMap& map,
         }
     }
 
+    {
+        // The whole body: area-weighted heat loss and mean skin per row of the window (rows
+        // with a zone missing are left out).
+        HeatLossRule rule = o.heat_loss;
+        rule.window_s = o.window_s;
+        std::vector<double> t, q, skin;
+        const double area = map.total_area_m2();
+        for (std::size_t i = first; i < data.t_s.size(); ++i) {
+            double qa = 0.0, sa = 0.0;
+            bool complete = area > 0.0;
+            for (std::size_t z = 0; z < map.size() && complete; ++z) {
+                complete = std::isfinite(data.heat_flux_w_m2[z][i]) && std::isfinite(data.skin_temp_c[z][i]);
+                qa += map.zones[z].area_m2 * data.heat_flux_w_m2[z][i];
+                sa += map.zones[z].area_m2 * data.skin_temp_c[z][i];
+            }
+            if (!complete) continue;
+            t.push_back(data.t_s[i]);
+            q.push_back(qa / area);
+            skin.push_back(sa / area);
+        }
+        r.heat_loss = judge_heat_loss(t, q, skin, rule);
+    }
+
     if (!r.reason.empty()) return r;  // partial trial
     if (!coverage_problem.empty()) {
         r.reason = "incomplete window: " + coverage_problem;
@@ -208,6 +231,10 @@ SteadyStateResult detect_steady_state(const TrialData& data, const ZoneMap& map,
         if (std::isfinite(r.settled_since_s) && r.settled_since_s > t_first)
             r.reason += fmt::format("; within the limit only since t = {:.0f} s ({:.1f} min before the end)",
                                     r.settled_since_s, (t_last - r.settled_since_s) / 60.0);
+        return r;
+    }
+    if (o.require_heat_loss_stability && !r.heat_loss.steady) {
+        r.reason = "heat loss still moving (the clothing standards' rule): " + r.heat_loss.failing;
         return r;
     }
     if (o.require_flux_stability) {

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "analysis/heat_loss_steady.hpp"
 #include "analysis/recording.hpp"
 
 namespace manikind::analysis {
@@ -21,6 +22,11 @@ struct SteadyStateOptions {
     bool require_flux_stability = false;
     double max_flux_drift_w_m2 = 2.0;        // |slope| x window length, per zone
     double max_flux_sd_w_m2 = 5.0;           // residual standard deviation about the line, per zone
+    // The clothing standards' rule (analysis/heat_loss_steady.hpp): the whole-body heat loss and
+    // the mean skin temperature steady over the window. `manikin clothing` requires it; its
+    // window is this struct's window_s.
+    bool require_heat_loss_stability = false;
+    HeatLossRule heat_loss;
 };
 
 // A zone's skin temperature over the window: the paper's range and, beside it, the drift
@@ -60,6 +66,8 @@ struct SteadyStateResult {
     // Every zone's |slope| x window (the map's order; 0 where it has too few samples): reconcile
     // leaves a drifting zone's points out of its fit (a finding about the measurement).
     std::vector<double> zone_flux_drift_w_m2;
+    // The whole-body heat loss over the window (always judged; gated by require_heat_loss_stability).
+    HeatLossVerdict heat_loss;
     double max_flux_sd_w_m2 = 0.0;
     int worst_flux_sd_zone = 0;
     // Skin-temperature drift over the window, per zone (reported, never gated), and the zone

@@ -44,6 +44,12 @@ public:
         return UserError(message, "campaign_not_done", ExitStatus::not_done, std::move(details));
     }
 
+    // A negative verdict the command's output already carries (its --json document has it): the
+    // CLI ends with status 5 and, in text mode, one line on stderr; no second JSON document.
+    static UserError verdict_in_output(const std::string& message) {
+        return UserError(message, "verdict_in_output", ExitStatus::negative);
+    }
+
     const std::string& code() const { return code_; }
     ExitStatus status() const { return status_; }
     int exit_code() const { return static_cast<int>(status_); }

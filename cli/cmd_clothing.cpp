@@ -27,6 +27,7 @@ void add_clothing_command(CLI::App& app) {
         std::string baseline, report, redress_from;
         bool json = false, force = false;
         bool require_flux_stability = false;
+        bool skin_steadiness_only = false;
         analysis::clothing::Options options;
         // The replicate criteria in percent, as every output prints them (5 means 5 %).
         double cv_limit_insulation_pct = 5.0, cv_limit_evaporative_pct = 10.0;
@@ -54,15 +55,20 @@ void add_clothing_command(CLI::App& app) {
                     "Largest coefficient of variation of the replicates' total evaporative resistance, in % (10 = 10 %)")
         ->check(CLI::Range(0.1, 100.0))
         ->capture_default_str();
+    cmd->add_flag("--skin-steadiness-only", o->skin_steadiness_only,
+                  "Judge steady state by skin temperature alone (the paper's rule). By default a trial is also steady in "
+                  "heat loss as the clothing standards ask: the whole-body heat loss moves at most 3 % and the mean skin "
+                  "temperature 0.1 °C over the 30-min window (docs/clothing.md, \"The stop rule\")");
     cmd->add_flag("--require-flux-stability", o->require_flux_stability,
-                  "Steady also in heat flux (each zone's drift and scatter over the window within manikin analyze's "
-                  "defaults), as the standards ask a steady heat loss, not only a steady skin temperature");
+                  "Stricter still: every zone's flux drift and scatter over the window within manikin analyze's limits "
+                  "(2 W/m², 5 W/m²)");
     cmd->add_option("--draws", o->options.monte_carlo_draws, "Monte Carlo draws for the Type B uncertainty")
         ->check(CLI::Range(100, 1000000))
         ->capture_default_str();
     cmd->footer("Trials take part when campaign.json names their `ensemble` (an id of `ensembles`, or \"nude\") and\n"
                 "`test` (\"insulation\" or \"evaporative\"); docs/clothing.md has the equations, the standards' conditions\n"
-                "and where each number comes from. Exit status 0 even when a replicate criterion fails (it is reported).\n"
+                "and where each number comes from. Exit status 5 when a trial was left out (not steady by the rule, or\n"
+                "not analysed; the table says which and why), 0 otherwise, even when a replicate criterion fails (reported).\n"
                 "Example: manikin clothing lab-day --baseline nude-baseline --report report.html\n"
                 "         manikin clothing quick-check --redress-from lab-day   # one replicate, the lab's re-dressing scatter\n"
                 "         manikin clothing --db manikind.db --campaign jackets-20261126 --json");
@@ -86,6 +92,7 @@ void add_clothing_command(CLI::App& app) {
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
         analysis::AnalysisOptions analysis_options;
         analysis_options.steady.require_flux_stability = o->require_flux_stability;
+        analysis_options.steady.require_heat_loss_stability = !o->skin_steadiness_only;
         const auto result = analysis::analyze_campaign(campaign, analysis_options);
         std::optional<analysis::Campaign> baseline;
         std::optional<analysis::CampaignResult> baseline_result;
@@ -142,6 +149,13 @@ void add_clothing_command(CLI::App& app) {
             std::printf("%s\n", analysis::clothing::to_json(r).dump(2).c_str());
         else
             std::printf("%s", analysis::clothing::to_text(r).c_str());
+        // Trials left out change what the results stand on: the exit status says so (docs/cli.md).
+        if (!r.left_out.empty() || !r.without_result.empty())
+            throw UserError::verdict_in_output(fmt::format(
+                "{} trial{} left out{}: see LEFT OUT in the table (or left_out in --json)", r.left_out.size(),
+                r.left_out.size() == 1 ? "" : "s",
+                r.without_result.empty() ? "" : fmt::format(", {} ensemble{} without a result", r.without_result.size(),
+                                                            r.without_result.size() == 1 ? "" : "s")));
     });
 }
 

@@ -209,6 +209,17 @@ void print_status(const nlohmann::json& s) {
                         wz.is_object() ? fmt::format("{} ({})", wz["zone"].get<int>(), wz["name"].get<std::string>()).c_str() : "—",
                         number_or_dash(t["worst_zone_range_c"], 3).c_str(), t["limit_c"].get<double>(),
                         std::floor(t["elapsed_s"].get<double>() / 60.0), t["min_duration_s"].get<double>() / 60.0);
+            if (t.contains("heat_loss") && t["heat_loss"].is_object()) {
+                const auto& h = t["heat_loss"];
+                if (h.value("observed", false) && h["drift_fraction"].is_number())
+                    std::printf("    heat loss (the clothing standards' rule): moves %.1f %% over the window (limit %.1f %%), "
+                                "mean skin %.3f °C: %s\n",
+                                100.0 * h["drift_fraction"].get<double>(), 100.0 * h.value("limit_fraction", 0.03),
+                                h["mean_skin_drift_c"].is_number() ? h["mean_skin_drift_c"].get<double>() : 0.0,
+                                h.value("steady", false) ? "steady" : "not yet");
+                else
+                    std::printf("    heat loss (the clothing standards' rule): not yet sampled over a whole window\n");
+            }
         }
     }
     if (s.contains("measured")) {

@@ -79,6 +79,7 @@ int main(int argc, char** argv) {
         }
         return report_error(true, "usage", e.what(), ExitStatus::bad_input);
     } catch (const manikind::UserError& e) {
+        if (e.code() == "verdict_in_output" && json) return e.exit_code();  // the document printed says it
         return report_error(json, e.code(), e.what(), e.status(), e.details());
     } catch (const std::exception& e) {
         return report_error(json, "internal", e.what(), ExitStatus::internal);

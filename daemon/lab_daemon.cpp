@@ -474,8 +474,18 @@ nlohmann::json LabDaemon::status_json() {
             t["elapsed_s"] = elapsed_s;
             t["min_duration_s"] = min_duration_s;
             t["window_steady"] = c.window_steady;
-            t["steady"] = steady;
-            t["steady_progress"] = progress;
+            // A clothing test also waits for the standards' steady heat loss (issue 64).
+            const bool clothing = !current_->c.test.empty();
+            const bool all_steady = steady && (!clothing || heat_loss_verdict_.steady);
+            t["steady"] = all_steady;
+            t["steady_progress"] = all_steady ? 1.0 : std::min(progress, 0.999);
+            if (clothing)
+                t["heat_loss"] = {{"observed", heat_loss_verdict_.observed},
+                                  {"drift_fraction", heat_loss_verdict_.observed ? nlohmann::json(heat_loss_verdict_.drift_fraction) : nlohmann::json()},
+                                  {"limit_fraction", analysis::HeatLossRule{}.max_drift_fraction},
+                                  {"mean_skin_drift_c", heat_loss_verdict_.observed ? nlohmann::json(heat_loss_verdict_.mean_skin_drift_c) : nlohmann::json()},
+                                  {"steady", heat_loss_verdict_.steady},
+                                  {"failing", heat_loss_verdict_.failing}};
         }
     }
     nlohmann::json devices = nlohmann::json::array();

@@ -25,6 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "analysis/recording.hpp"
+#include "analysis/heat_loss_steady.hpp"
 #include "analysis/sliding_range.hpp"
 #include "daemon/acquisition.hpp"
 #include "daemon/alarm_book.hpp"
@@ -328,6 +329,13 @@ private:
     std::int64_t acquiring_since_ns_ = 0;
     std::optional<std::int64_t> steady_since_ns_;
     std::int64_t steady_seen_at_ns_ = 0;
+    // Clothing tests: the standards' stop rule, the whole-body heat loss steady over the window
+    // (analysis/heat_loss_steady.hpp, the rule `manikin clothing` applies to the recording).
+    analysis::HeatLossWindow heat_loss_window_;
+    analysis::HeatLossVerdict heat_loss_verdict_;
+    std::int64_t heat_loss_since_ns_ = 0;
+    std::optional<std::int64_t> heat_loss_steady_since_ns_;  // held a minute, as the skin's rule is
+    void sample_heat_loss_locked(std::int64_t now);
     std::map<std::string, std::int64_t> gap_since_ns_;
     std::uint64_t dropped_samples_ = 0;
     // The chamber setpoints last commanded (NaN until the first set_chamber).

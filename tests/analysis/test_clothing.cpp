@@ -546,3 +546,55 @@ TEST_CASE("clothing: at one replicate the re-dressing scatter carried from an ea
     // A test with no replicates has nothing to carry.
     CHECK_THROWS_WITH(cl::redressing_scatter(plain), Catch::Contains("no ensemble has two replicates"));
 }
+
+TEST_CASE("clothing: the standards' stop rule: a heat loss still moving over the window leaves its trial out, the "
+          "table says so per ensemble, and an ensemble with no trial left has no result but a line", "[clothing]") {
+    // The rule alone: a heat loss 3.0 % below its final value at the window's start, easing in.
+    {
+        std::vector<double> t, q, skin;
+        for (int k = 0; k <= 360; ++k) {
+            t.push_back(5.0 * k);
+            q.push_back(100.0 * (1.0 + 0.06 * std::exp(-5.0 * k / 1200.0)));
+            skin.push_back(35.0);
+        }
+        const auto v = an::judge_heat_loss(t, q, skin, an::HeatLossRule{});
+        INFO(v.failing);
+        CHECK(v.observed);
+        CHECK(v.drift_fraction > 0.03);
+        CHECK_FALSE(v.steady);
+        CHECK_THAT(v.failing, Catch::Contains("whole-body heat loss moves") && Catch::Contains("limit 3.0 %"));
+        for (auto& x : q) x = 100.0 + (x - 100.0) / 4.0;  // a quarter of it: 0.8 % or so
+        CHECK(an::judge_heat_loss(t, q, skin, an::HeatLossRule{}).steady);
+        for (std::size_t k = 0; k < skin.size(); ++k) skin[k] = 35.0 + 0.15 * static_cast<double>(k) / 360.0;
+        CHECK_THAT(an::judge_heat_loss(t, q, skin, an::HeatLossRule{}).failing, Catch::Contains("mean skin temperature moves"));
+    }
+    const Lab lab;
+    an::Campaign c = lab.campaign(2, 1.2);
+    // Every trial of the suit's wet test still warming: its flux climbs 6 % over the window.
+    for (auto& t : c.trials)
+        if (t.info.ensemble == "suit" && t.info.test == "evaporative")
+            for (auto& zone : t.data.heat_flux_w_m2)
+                for (std::size_t k = 0; k < zone.size(); ++k) zone[k] *= 1.0 + 0.06 * t.data.t_s[k] / 1800.0;
+    an::AnalysisOptions standard;
+    standard.steady.require_heat_loss_stability = true;
+    const auto r = cl::compute(c, an::analyze_campaign(c, standard), nullptr, nullptr);
+    REQUIRE(r.left_out.size() == 2);
+    CHECK(r.left_out[0].ensemble == "suit");
+    CHECK(r.left_out[0].test == "evaporative");
+    CHECK_THAT(r.left_out[0].reason, Catch::Contains("heat loss still moving"));
+    CHECK(r.without_result.empty());  // its insulation test stands
+    const std::string text = cl::to_text(r);
+    CHECK_THAT(text, Catch::Contains("LEFT OUT: c4-r1 (evaporative test): not steady: heat loss still moving"));
+    CHECK(cl::to_json(r)["left_out"].size() == 2);
+    // The same recordings judged by skin temperature alone keep every trial.
+    CHECK(cl::compute(c, an::analyze_campaign(c), nullptr, nullptr).left_out.empty());
+
+    // Every trial of the suit drifting: no result for it, and a line that says so.
+    for (auto& t : c.trials)
+        if (t.info.ensemble == "suit" && t.info.test == "insulation")
+            for (auto& zone : t.data.heat_flux_w_m2)
+                for (std::size_t k = 0; k < zone.size(); ++k) zone[k] *= 1.0 - 0.06 * t.data.t_s[k] / 1800.0;
+    const auto none = cl::compute(c, an::analyze_campaign(c, standard), nullptr, nullptr);
+    CHECK(none.without_result == std::vector<std::string>{"suit"});
+    CHECK_THAT(cl::to_text(none), Catch::Contains("suit: NO RESULT: every trial of it was left out"));
+}

@@ -32,7 +32,14 @@ TEST_CASE("clothing test on the simulated lab: the world wears the wardrobe's en
     REQUIRE(f.daemon().start_campaign(plan).empty());
     f.daemon().run_virtual();
     auto& db = f.daemon().db();
-    for (const auto& t : db.trials(*db.find_campaign(plan.name))) CHECK(t.state == "done");
+    for (const auto& t : db.trials(*db.find_campaign(plan.name))) {
+        CHECK(t.state == "done");
+        // The standards' stop rule (issue 64): each trial ended on a steady whole-body heat loss.
+        int stopped_steady = 0;
+        for (const auto& e : db.events(t.id))
+            if (e.message.find("heat loss steady") != std::string::npos) ++stopped_steady;
+        CHECK(stopped_steady == 1);
+    }
 
     const auto campaign = manikind::campaign_from_database(db, plan.name);
     REQUIRE(campaign.ensembles.count("coverall") == 1);
@@ -43,8 +50,16 @@ TEST_CASE("clothing test on the simulated lab: the world wears the wardrobe's en
         CHECK_FALSE(t.info.ensemble.empty());
         CHECK((t.info.test == "insulation" || t.info.test == "evaporative"));
     }
-    const auto analysis = an::analyze_campaign(campaign);
+    // The same rule on the recording, as `manikin clothing` applies it: no trial left out.
+    an::AnalysisOptions standard;
+    standard.steady.require_heat_loss_stability = true;
+    const auto analysis = an::analyze_campaign(campaign, standard);
     const auto r = an::clothing::compute(campaign, analysis, nullptr, nullptr);
+    std::string left_out;
+    for (const auto& l : r.left_out) left_out += l.trial + ": " + l.reason + "\n";
+    INFO(left_out);
+    CHECK(r.left_out.empty());
+    CHECK(r.without_result.empty());
     REQUIRE(r.ensembles.size() == 3);
 
     // What the world's physics gives at each test's recorded conditions (the world's own model,
