@@ -187,18 +187,21 @@ Result compute(const Campaign& campaign, const Options& options) {
             // Values no model run could have recorded (a hand-edited or damaged file).
             throw InputError(t.info.file, 0, 0, "model", fmt::format("the recorded model inputs cannot be replayed: {}", e.what()));
         }
-        // Type B: the replay under drawn instrument errors. The heat-flux gain (calibration) is
-        // common to every zone; offsets are per zone; the probes' offsets per draw.
+        // Type B: the replay under drawn instrument errors. The manikin's flux calibration, its
+        // offset and its gain, is one error common to every zone, as `manikin analyze` (its
+        // default, r = 1) and `manikin clothing` model it (issue 63: the same manikin was modelled
+        // with per-zone offsets here); the probes' offsets per draw.
         std::mt19937_64 rng(options.seed ^ (static_cast<std::uint64_t>(t.info.case_id) << 20) ^ static_cast<std::uint64_t>(t.info.replicate));
         std::vector<std::vector<double>> core_draws(used), skin_draws(used), loss_draws(used);
         const InstrumentSpec gain_spec{0.0, flux.accuracy_of_reading, flux.distribution};
         const InstrumentSpec offset_spec{flux.accuracy, 0.0, flux.distribution};
         for (int d = 0; d < options.draws; ++d) {
             const double flux_gain = draw_error(rng, gain_spec, 1.0);  // a fraction of the reading
-            tr::SegmentValues offset_w{};  // per segment: its zones' offsets, area-weighted
+            tr::SegmentValues offset_w{};  // per segment: the common offset over its zones' area
+            const double offset_w_m2 = draw_error(rng, offset_spec, 0.0);
             for (const auto& z : campaign.zone_map.zones)
                 if (const auto it = segment_of.find(z.segment); it != segment_of.end())
-                    offset_w[static_cast<std::size_t>(it->second)] += draw_error(rng, offset_spec, 0.0) * z.area_m2;
+                    offset_w[static_cast<std::size_t>(it->second)] += offset_w_m2 * z.area_m2;
             const double air_e = draw_error(rng, air, envs[0].air_temp_c);
             const double rh_e = draw_error(rng, rh, envs[0].rh_pct);
             const double wall_e = draw_error(rng, wall, envs[0].mrt_c);
