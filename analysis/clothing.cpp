@@ -636,7 +636,8 @@ nlohmann::json value_json(const std::optional<Value>& v) {
             {"u_b", v->u_b}, {"u_c", v->u_c}, {"k", v->k}, {"dof", v->dof > 1e8 ? nlohmann::json() : nlohmann::json(v->dof)},
             {"clo", v->unit == "m2K/W" ? nlohmann::json(v->value / kClo_m2k_w) : nlohmann::json()},
             {"U95_clo", v->unit == "m2K/W" ? nlohmann::json(v->U95 / kClo_m2k_w) : nlohmann::json()},
-            {"value_m2pa_w", v->unit == "m2kPa/W" ? nlohmann::json(v->value * 1000.0) : nlohmann::json()}};
+            {"value_m2pa_w", v->unit == "m2kPa/W" ? nlohmann::json(v->value * 1000.0) : nlohmann::json()},
+            {"U95_m2pa_w", v->unit == "m2kPa/W" ? nlohmann::json(v->U95 * 1000.0) : nlohmann::json()}};
 }
 
 nlohmann::json conditions_json(const std::optional<Conditions>& c) {

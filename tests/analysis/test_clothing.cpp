@@ -542,6 +542,9 @@ TEST_CASE("clothing: at one replicate the re-dressing scatter carried from an ea
     CHECK(suit.insulation_total_parallel->U95 > bare.insulation_total_parallel->U95 * 2.0);
     CHECK_THAT(suit.notes.back(), Catch::Contains("carried from clothing-unit"));
     CHECK(cl::to_json(carried)["redressing_from"]["source"] == "clothing-unit");
+    // Every unit printed has its U95 (issue 63: none in m²Pa/W).
+    const auto it_json = cl::to_json(carried)["ensembles"][1]["insulation"]["total_parallel"];
+    CHECK(it_json["U95_clo"].get<double>() == Approx(it_json["U95"].get<double>() / cl::kClo_m2k_w));
 
     // A test with no replicates has nothing to carry.
     CHECK_THROWS_WITH(cl::redressing_scatter(plain), Catch::Contains("no ensemble has two replicates"));
@@ -586,6 +589,8 @@ TEST_CASE("clothing: the standards' stop rule: a heat loss still moving over the
     const std::string text = cl::to_text(r);
     CHECK_THAT(text, Catch::Contains("LEFT OUT: c4-r1 (evaporative test): not steady: heat loss still moving"));
     CHECK(cl::to_json(r)["left_out"].size() == 2);
+    const auto ret_json = cl::to_json(r)["ensembles"][0]["evaporative"]["total_parallel"];
+    CHECK(ret_json["U95_m2pa_w"].get<double>() == Approx(1000.0 * ret_json["U95"].get<double>()));
     // The same recordings judged by skin temperature alone keep every trial.
     CHECK(cl::compute(c, an::analyze_campaign(c), nullptr, nullptr).left_out.empty());
 
