@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <initializer_list>
+#include <set>
 #include <string_view>
 #include <vector>
 
@@ -31,6 +32,11 @@ nlohmann::json case_conditions_json(const PlannedCase& c) {
     if (!c.ensemble.empty()) j["ensemble"] = c.ensemble;
     if (!c.test.empty()) j["test"] = c.test;
     // Only physiological cases carry these: earlier campaigns' stored conditions stay equal.
+    if (c.heat_flux_w_m2) {
+        j["control"] = "constant-heat-flux";
+        j["heat_flux_w_m2"] = *c.heat_flux_w_m2;
+        if (!c.heat_flux_by_region_w_m2.empty()) j["heat_flux_by_region_w_m2"] = c.heat_flux_by_region_w_m2;
+    }
     if (c.model) {
         j["control"] = "physiological";
         nlohmann::json phases = nlohmann::json::array();
@@ -77,7 +83,7 @@ CampaignPlan table_s3_plan(const std::string& name) {
     p.name = name;
     for (const auto& c : sim::table_s3_cases()) {
         p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
-                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt});
+                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}});
     }
     return p;
 }
@@ -143,10 +149,57 @@ void parse_physiological(const toml::table& t, const toml::node& node, PlannedCa
     if (const auto* v = t.get("control")) {
         if (!v->is_string()) throw UserError(fmt::format("{}: cases.control: expected a string", where(*v)));
         control = v->as_string()->get();
-        if (control != "constant-skin" && control != "physiological")
+        if (control != "constant-skin" && control != "physiological" && control != "constant-heat-flux")
             throw UserError(fmt::format("{}: cases.control: \"{}\" is not a control mode (\"constant-skin\", the default, "
-                                        "or \"physiological\")",
+                                        "\"constant-heat-flux\" or \"physiological\")",
                                         where(*v), control));
+    }
+    // Constant heat flux (issue 65): each zone's heating fixed, its skin temperature measured.
+    const auto* flux = t.get("heat_flux_w_m2");
+    const auto* by_region = t.get("heat_flux_by_region_w_m2");
+    if (control != "constant-heat-flux") {
+        for (const auto* n : {flux, by_region})
+            if (n)
+                throw UserError(fmt::format("{}: cases.{}: a heat flux setpoint is for control = \"constant-heat-flux\" (add it "
+                                            "to the case)",
+                                            where(*n), n == flux ? "heat_flux_w_m2" : "heat_flux_by_region_w_m2"));
+    } else {
+        if (!flux)
+            throw UserError(fmt::format("{}: cases: control = \"constant-heat-flux\" needs heat_flux_w_m2 (every zone's "
+                                        "heating, W/m²)",
+                                        where(node)));
+        if (const auto* v = t.get("skin_setpoint_c"))
+            throw UserError(fmt::format("{}: cases.skin_setpoint_c: under constant heat flux the skin temperature is measured, "
+                                        "not set (remove it)",
+                                        where(*v)));
+        auto flux_value = [&](const toml::node& n, const std::string& key) {
+            if (!n.is_number()) throw UserError(fmt::format("{}: cases.{}: expected a number (W/m²)", where(n), key));
+            const double v = n.is_integer() ? static_cast<double>(n.as_integer()->get()) : n.as_floating_point()->get();
+            // Heat the zones give; the coolant loop's negative power is for constant skin only.
+            if (!(v > 0.0 && v <= 1000.0))
+                throw UserError(fmt::format("{}: cases.{}: {} W/m² is outside 0..1000 (the zones' heating; [safety] "
+                                            "max_heater_power_w_m2 limits it further)",
+                                            where(n), key, v));
+            return v;
+        };
+        c.heat_flux_w_m2 = flux_value(*flux, "heat_flux_w_m2");
+        if (by_region) {
+            const auto* tab = by_region->as_table();
+            if (!tab)
+                throw UserError(fmt::format("{}: cases.heat_flux_by_region_w_m2: expected a table of region = W/m²", where(*by_region)));
+            std::set<std::string> regions;
+            for (const auto& z : analysis::andi35_zone_map().zones) regions.insert(z.region);
+            for (const auto& [key, n] : *tab) {
+                const std::string region(key.str());
+                if (!regions.count(region)) {
+                    std::string known;
+                    for (const auto& r : regions) known += (known.empty() ? "" : ", ") + r;
+                    throw UserError(fmt::format("{}: cases.heat_flux_by_region_w_m2.{}: no such region in the zone map ({})",
+                                                where(n), region, known));
+                }
+                c.heat_flux_by_region_w_m2[region] = flux_value(n, "heat_flux_by_region_w_m2." + region);
+            }
+        }
     }
     const auto* model = t.get("model");
     if (control != "physiological") {
@@ -262,6 +315,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             const auto* t = node.as_table();
             if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
             refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h",
+                                     "heat_flux_w_m2", "heat_flux_by_region_w_m2",
                                      "enclosure_temp_c", "enclosure_rh_pct", "ensemble", "test", "control", "model"},
                                 source, "cases.");
             PlannedCase c;
@@ -365,6 +419,16 @@ std::string check_plan_against_limits(const CampaignPlan& plan, const config::Sa
                                        "{}..{} % (safety.min/max_chamber_rh_pct)",
                                        c.id, ph.after_s / 60, ph.chamber_rh_pct, l.min_chamber_rh_pct, l.max_chamber_rh_pct);
             }
+        if (c.heat_flux_w_m2) {
+            // Constant heat flux: the heating is the setpoint; the skin's limits stop the trial
+            // if it climbs past them (the recorder enforces max_skin_temp_c on every reading).
+            double highest = *c.heat_flux_w_m2;
+            for (const auto& [region, q] : c.heat_flux_by_region_w_m2) highest = std::max(highest, q);
+            if (highest > l.max_heater_power_w_m2)
+                return fmt::format("case {}: heat_flux_w_m2 {} is above the safety limit {} W/m² (safety.max_heater_power_w_m2)",
+                                   c.id, highest, l.max_heater_power_w_m2);
+            continue;
+        }
         if (!c.model && (c.skin_setpoint_c < l.min_skin_temp_c || c.skin_setpoint_c > l.max_skin_temp_c))
             return fmt::format("case {}: skin_setpoint_c {} is outside the safety limits {}..{} °C (safety.min/max_skin_temp_c)",
                                c.id, c.skin_setpoint_c, l.min_skin_temp_c, l.max_skin_temp_c);

@@ -52,6 +52,11 @@ struct PlannedCase {
     std::string test;
     // Set for control = "physiological": skin_setpoint_c, wet and the sweat rate are then the model's.
     std::optional<PhysiologicalModel> model;
+    // Set for control = "constant-heat-flux" (issue 65): every zone's heating fixed at this flux,
+    // W/m², its skin temperature measured; `heat_flux_by_region_w_m2` overrides it per zone-map
+    // region. skin_setpoint_c is then not a setpoint.
+    std::optional<double> heat_flux_w_m2;
+    std::map<std::string, double> heat_flux_by_region_w_m2;
 };
 
 

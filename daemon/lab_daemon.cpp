@@ -438,6 +438,12 @@ nlohmann::json LabDaemon::status_json() {
         nlohmann::json zone_sp = nlohmann::json::array();
         if (loop_) {
             for (const double v : loop_->zone_setpoints_c()) zone_sp.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr));
+        } else if (current_->c.heat_flux_w_m2) {
+            // Constant heat flux: the heating is the setpoint, the skin is measured (no skin setpoint).
+            j["trial"]["control"] = "constant-heat-flux";
+            j["trial"]["heat_flux_setpoint_w_m2"] = *current_->c.heat_flux_w_m2;
+            if (!current_->c.heat_flux_by_region_w_m2.empty())
+                j["trial"]["heat_flux_by_region_w_m2"] = current_->c.heat_flux_by_region_w_m2;
         } else if (!current_->c.model) {
             j["trial"]["skin_setpoint_c"] = current_->c.skin_setpoint_c;
         }

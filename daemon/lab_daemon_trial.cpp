@@ -426,7 +426,26 @@ void LabDaemon::advance_locked() {
             sp.value = current_->c.skin_setpoint_c;
             sp.sweating = current_->c.wet;
             sp.sweat_rate_g_m2_h = current_->c.sweat_rate_g_m2_h;
-            if (!acq_->manikin().send(sp) || !acq_->manikin().set_run(true)) {
+            std::vector<mc::Setpoint> setpoints{sp};
+            std::string control = fmt::format("skin {} °C", sp.value);
+            if (const auto& flux = current_->c.heat_flux_w_m2) {
+                // Constant heat flux (issue 65): every zone's heating fixed, a region's own where given.
+                setpoints.front().mode = mc::ControlMode::constant_heat_flux;
+                setpoints.front().value = *flux;
+                const auto& by_region = current_->c.heat_flux_by_region_w_m2;
+                for (const auto& z : analysis::andi35_zone_map().zones)
+                    if (const auto it = by_region.find(z.region); it != by_region.end()) {
+                        mc::Setpoint own = setpoints.front();
+                        own.zone = z.zone;
+                        own.value = it->second;
+                        setpoints.push_back(own);
+                    }
+                control = fmt::format("constant heat flux {} W/m²{}", *flux,
+                                      by_region.empty() ? "" : fmt::format(" ({} regions their own)", by_region.size()));
+            }
+            bool sent = true;
+            for (const auto& one : setpoints) sent = sent && acq_->manikin().send(one);
+            if (!sent || !acq_->manikin().set_run(true)) {
                 setpoint_refused("the manikin bus refused the setpoint", "");  // a bus-off recovers in seconds
                 return;
             }
@@ -439,7 +458,7 @@ void LabDaemon::advance_locked() {
             acquiring_since_ns_ = now;
             off_target_since_ns_.reset();
             in_excursion_ = false;
-            enter(Stage::acquiring, fmt::format("skin {} °C, {}", sp.value, sp.sweating ? "wet" : "dry"));
+            enter(Stage::acquiring, fmt::format("{}, {}", control, sp.sweating ? "wet" : "dry"));
             return;
         }
         case Stage::acquiring: {

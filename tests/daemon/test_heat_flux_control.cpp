@@ -1,0 +1,104 @@
+// Issue 65: the manikin's constant-heat-flux control mode. Each zone's heating is fixed (a region
+// may have its own), its skin temperature measured: the campaign file's keys and their mistakes,
+// the safety limit, and a trial on the simulated lab where every zone's skin settles where the
+// world's physics loses exactly the heat given.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <string>
+
+#include "analysis/analyze.hpp"
+#include "base/user_error.hpp"
+#include "daemon/campaign_plan.hpp"
+#include "daemon/simulated_lab.hpp"
+#include "daemon_fixture.hpp"
+#include "physics/twin/twin.hpp"
+#include "store/database_export.hpp"
+
+namespace {
+const std::string header = "name = \"flux\"\nreplicates = 1\ntrial_duration_min = 40\n";
+
+std::string refusal(const std::string& cases) {
+    try {
+        (void)manikind::parse_campaign_plan(header + cases, "flux.toml");
+    } catch (const manikind::UserError& e) {
+        return e.what();
+    }
+    return "accepted";
+}
+}  // namespace
+
+TEST_CASE("constant heat flux: the case's keys parse, and every mistake is refused by file, line and key",
+          "[daemon][comfort]") {
+    const auto plan = manikind::parse_campaign_plan(
+        header + "[[cases]]\nid = 1\nchamber_temp_c = 20\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
+                 "heat_flux_w_m2 = 60\nheat_flux_by_region_w_m2 = { head = 80, hand_l = 90 }\n",
+        "flux.toml");
+    REQUIRE(plan.cases.size() == 1);
+    REQUIRE(plan.cases[0].heat_flux_w_m2.has_value());
+    CHECK(*plan.cases[0].heat_flux_w_m2 == 60.0);
+    CHECK(plan.cases[0].heat_flux_by_region_w_m2.at("head") == 80.0);
+    CHECK(manikind::case_conditions_json(plan.cases[0])["control"] == "constant-heat-flux");
+
+    const std::string base = "[[cases]]\nid = 1\nchamber_temp_c = 20\nchamber_rh_pct = 40\n";
+    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\n"), Catch::Contains("flux.toml:4") && Catch::Contains("needs heat_flux_w_m2"));
+    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = 60\nskin_setpoint_c = 34\n"),
+               Catch::Contains("flux.toml:10") && Catch::Contains("measured, not set"));
+    CHECK_THAT(refusal(base + "heat_flux_w_m2 = 60\n"), Catch::Contains("cases.heat_flux_w_m2") &&
+                                                           Catch::Contains("is for control = \"constant-heat-flux\""));
+    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = -5\n"), Catch::Contains("outside 0..1000"));
+    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = 60\nheat_flux_by_region_w_m2 = { tail = 5 }\n"),
+               Catch::Contains("no such region") && Catch::Contains("head"));
+    CHECK_THAT(refusal(base + "control = \"comfy\"\n"), Catch::Contains("\"constant-heat-flux\""));
+
+    // The daemon's limit: heating above safety.max_heater_power_w_m2 is refused before the start.
+    auto hot = plan;
+    hot.cases[0].heat_flux_by_region_w_m2["head"] = 900.0;
+    manikind::config::SafetyLimits limits;
+    CHECK_THAT(manikind::check_plan_against_limits(hot, limits), Catch::Contains("max_heater_power_w_m2"));
+    CHECK(manikind::check_plan_against_limits(plan, limits).empty());
+}
+
+TEST_CASE("constant heat flux on the simulated lab: every zone is heated at its setpoint and its skin settles where the "
+          "world's physics loses that heat", "[daemon][comfort][proof]") {
+    manikind::test::DaemonFixture f;
+    const auto plan = manikind::parse_campaign_plan(
+        header + "[[cases]]\nid = 1\nchamber_temp_c = 24\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
+                 "heat_flux_w_m2 = 45\nheat_flux_by_region_w_m2 = { head = 60 }\n",
+        "flux.toml");
+    REQUIRE(f.daemon().start_campaign(plan).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    const auto trials = db.trials(*db.find_campaign(plan.name));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+
+    const auto campaign = manikind::campaign_from_database(db, plan.name);
+    const auto analysis = manikind::analysis::analyze_campaign(campaign);
+    REQUIRE(analysis.cases.size() == 1);
+    REQUIRE(analysis.cases[0].trials.size() == 1);
+    const auto& t = analysis.cases[0].trials[0];
+    REQUIRE(t.included);
+    const auto world = manikind::simulated_lab_options(f.daemon().config()).world;
+    const auto& map = campaign.zone_map;
+    double lowest_skin = 99.0, highest_skin = 0.0;
+    for (std::size_t z = 0; z < map.size(); ++z) {
+        const double set_w_m2 = map.zones[z].region == "head" ? 60.0 : 45.0;
+        INFO("zone " << map.zones[z].zone << " " << map.zones[z].name);
+        // The heating is what was asked (the recorded flux is the heaters' power).
+        CHECK(t.zone_q_w_m2[z] == Approx(set_w_m2).margin(1.5));
+        // The skin floats: at the world's steady state its own loss at that skin equals the heating.
+        manikind::physics::twin::TrialConditions c;
+        c.air_temp_c = t.air_temp_c;
+        c.air_rh_pct = t.air_rh_pct;
+        c.wall_temp_c = t.wall_temp_c;
+        c.air_speed_m_s = t.air_speed_m_s;
+        c.zones = {{map.zones[z].zone, map.zones[z].segment, map.zones[z].region, map.zones[z].area_m2, t.zone_skin_temp_c[z]}};
+        const double loss = manikind::physics::twin::predict(world.physics, c).at(0).q_total_w_m2;
+        CHECK(loss == Approx(set_w_m2).margin(0.15 * set_w_m2));
+        lowest_skin = std::min(lowest_skin, t.zone_skin_temp_c[z]);
+        highest_skin = std::max(highest_skin, t.zone_skin_temp_c[z]);
+    }
+    INFO("skin " << lowest_skin << " .. " << highest_skin << " °C");
+    CHECK(highest_skin - lowest_skin > 0.5);  // not a skin setpoint: each zone where its own exchange puts it
+}
