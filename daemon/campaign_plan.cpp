@@ -37,6 +37,11 @@ nlohmann::json case_conditions_json(const PlannedCase& c) {
         j["heat_flux_w_m2"] = *c.heat_flux_w_m2;
         if (!c.heat_flux_by_region_w_m2.empty()) j["heat_flux_by_region_w_m2"] = c.heat_flux_by_region_w_m2;
     }
+    if (c.comfort) {
+        j["control"] = "comfort";
+        j["comfort_a_c"] = c.comfort->a_c;
+        j["comfort_b_c_m2_w"] = c.comfort->b_c_m2_w;
+    }
     if (c.model) {
         j["control"] = "physiological";
         nlohmann::json phases = nlohmann::json::array();
@@ -83,7 +88,7 @@ CampaignPlan table_s3_plan(const std::string& name) {
     p.name = name;
     for (const auto& c : sim::table_s3_cases()) {
         p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
-                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}});
+                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt});
     }
     return p;
 }
@@ -149,10 +154,35 @@ void parse_physiological(const toml::table& t, const toml::node& node, PlannedCa
     if (const auto* v = t.get("control")) {
         if (!v->is_string()) throw UserError(fmt::format("{}: cases.control: expected a string", where(*v)));
         control = v->as_string()->get();
-        if (control != "constant-skin" && control != "physiological" && control != "constant-heat-flux")
+        if (control != "constant-skin" && control != "physiological" && control != "constant-heat-flux" && control != "comfort")
             throw UserError(fmt::format("{}: cases.control: \"{}\" is not a control mode (\"constant-skin\", the default, "
-                                        "\"constant-heat-flux\" or \"physiological\")",
+                                        "\"constant-heat-flux\", \"comfort\" or \"physiological\")",
                                         where(*v), control));
+    }
+    // Comfort mode (issue 65): t_sk = a - b q per zone, the coefficients the case's or the defaults.
+    const auto* comfort_a = t.get("comfort_a_c");
+    const auto* comfort_b = t.get("comfort_b_c_m2_w");
+    if (control != "comfort") {
+        for (const auto* n : {comfort_a, comfort_b})
+            if (n)
+                throw UserError(fmt::format("{}: cases.{}: a comfort equation's coefficient is for control = \"comfort\"",
+                                            where(*n), n == comfort_a ? "comfort_a_c" : "comfort_b_c_m2_w"));
+    } else {
+        if (const auto* v = t.get("skin_setpoint_c"))
+            throw UserError(fmt::format("{}: cases.skin_setpoint_c: in comfort mode each zone's skin follows its own heat loss "
+                                        "(t_sk = comfort_a_c - comfort_b_c_m2_w q; remove it)",
+                                        where(*v)));
+        ComfortEquation eq;
+        auto coefficient = [&](const toml::node* n, const char* key, double fallback, double lo, double hi) {
+            if (!n) return fallback;
+            if (!n->is_number()) throw UserError(fmt::format("{}: cases.{}: expected a number", where(*n), key));
+            const double v = n->is_integer() ? static_cast<double>(n->as_integer()->get()) : n->as_floating_point()->get();
+            if (!(v >= lo && v <= hi)) throw UserError(fmt::format("{}: cases.{}: {} is outside {}..{}", where(*n), key, v, lo, hi));
+            return v;
+        };
+        eq.a_c = coefficient(comfort_a, "comfort_a_c", eq.a_c, 30.0, 40.0);
+        eq.b_c_m2_w = coefficient(comfort_b, "comfort_b_c_m2_w", eq.b_c_m2_w, 0.0, 0.2);
+        c.comfort = eq;
     }
     // Constant heat flux (issue 65): each zone's heating fixed, its skin temperature measured.
     const auto* flux = t.get("heat_flux_w_m2");
@@ -315,7 +345,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             const auto* t = node.as_table();
             if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
             refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h",
-                                     "heat_flux_w_m2", "heat_flux_by_region_w_m2",
+                                     "heat_flux_w_m2", "heat_flux_by_region_w_m2", "comfort_a_c", "comfort_b_c_m2_w",
                                      "enclosure_temp_c", "enclosure_rh_pct", "ensemble", "test", "control", "model"},
                                 source, "cases.");
             PlannedCase c;
@@ -429,6 +459,7 @@ std::string check_plan_against_limits(const CampaignPlan& plan, const config::Sa
                                    c.id, highest, l.max_heater_power_w_m2);
             continue;
         }
+        if (c.comfort) continue;  // the setpoints stay within [physiological] min/max_skin_setpoint_c, checked against [safety]
         if (!c.model && (c.skin_setpoint_c < l.min_skin_temp_c || c.skin_setpoint_c > l.max_skin_temp_c))
             return fmt::format("case {}: skin_setpoint_c {} is outside the safety limits {}..{} °C (safety.min/max_skin_temp_c)",
                                c.id, c.skin_setpoint_c, l.min_skin_temp_c, l.max_skin_temp_c);

@@ -33,6 +33,13 @@ struct PhysiologicalModel {
     std::vector<ChamberPhase> phases;
 };
 
+// Comfort mode's equation t_sk = a - b q (daemon/comfort_loop.hpp has the source of the defaults).
+struct ComfortEquation {
+    double a_c = 36.4;          // skin temperature at no heat loss, °C
+    double b_c_m2_w = 0.054;    // how much cooler per W/m² lost
+    double skin_c(double q_w_m2) const { return a_c - b_c_m2_w * q_w_m2; }
+};
+
 struct PlannedCase {
     int id = 0;
     double chamber_temp_c = 0.0;
@@ -57,6 +64,8 @@ struct PlannedCase {
     // region. skin_setpoint_c is then not a setpoint.
     std::optional<double> heat_flux_w_m2;
     std::map<std::string, double> heat_flux_by_region_w_m2;
+    // Set for control = "comfort" (issue 65): each zone's skin from its own loss, t_sk = a - b q.
+    std::optional<ComfortEquation> comfort;
 };
 
 

@@ -438,6 +438,11 @@ nlohmann::json LabDaemon::status_json() {
         nlohmann::json zone_sp = nlohmann::json::array();
         if (loop_) {
             for (const double v : loop_->zone_setpoints_c()) zone_sp.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr));
+        } else if (comfort_) {
+            // Comfort mode: each zone's setpoint from its own loss (the console's deviation view).
+            j["trial"]["control"] = "comfort";
+            j["trial"]["comfort_equation"] = {{"a_c", comfort_->equation().a_c}, {"b_c_m2_w", comfort_->equation().b_c_m2_w}};
+            for (const double v : comfort_->zone_setpoints_c()) zone_sp.push_back(std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr));
         } else if (current_->c.heat_flux_w_m2) {
             // Constant heat flux: the heating is the setpoint, the skin is measured (no skin setpoint).
             j["trial"]["control"] = "constant-heat-flux";

@@ -30,6 +30,7 @@
 #include "daemon/acquisition.hpp"
 #include "daemon/alarm_book.hpp"
 #include "daemon/campaign_plan.hpp"
+#include "daemon/comfort_loop.hpp"
 #include "daemon/physiological_loop.hpp"
 #include "daemon/config.hpp"
 #include "daemon/instance_lock.hpp"
@@ -322,6 +323,9 @@ private:
     EnclosureTarget target_;  // the running trial's enclosure target, resolved when it starts settling
     std::optional<std::int64_t> on_target_since_ns_;
     std::unique_ptr<PhysiologicalLoop> loop_;  // the running trial's, when it is physiological
+    std::unique_ptr<ComfortLoop> comfort_;     // ... when it runs in comfort mode
+    LoopInputs loop_inputs_locked(std::int64_t now);
+    void comfort_tick_locked(std::int64_t now);
     std::optional<std::int64_t> off_target_since_ns_;  // acquiring: when the enclosure left its target
     bool in_excursion_ = false;                         // ... for longer than the plan allows
     bool settle_timeout_alarmed_ = false;

@@ -188,6 +188,7 @@ void LabDaemon::finish_trial(const std::string& state, const std::string& reason
     trial_id_ = 0;
     current_.reset();
     loop_.reset();
+    comfort_.reset();
     ++trials_done_;
     stage_ = Stage::idle;
     if (state == "done" && interim_results_.value_or(!o_.virtual_clock) && !queue_.empty()) start_interim_results();
@@ -443,6 +444,14 @@ void LabDaemon::advance_locked() {
                 control = fmt::format("constant heat flux {} W/m²{}", *flux,
                                       by_region.empty() ? "" : fmt::format(" ({} regions their own)", by_region.size()));
             }
+            if (const auto& eq = current_->c.comfort) {
+                // Comfort mode (issue 65): the loop sets each zone from its own loss, starting where
+                // the zone is; until its first step the zones hold the equation's value at 40 W/m².
+                comfort_ = std::make_unique<ComfortLoop>(*eq, o_.config.physiological, analysis::andi35_zone_map());
+                setpoints.front().value = std::clamp(eq->skin_c(40.0), o_.config.physiological.min_skin_setpoint_c,
+                                                     o_.config.physiological.max_skin_setpoint_c);
+                control = fmt::format("comfort mode, t_sk = {} - {} q", eq->a_c, eq->b_c_m2_w);
+            }
             bool sent = true;
             for (const auto& one : setpoints) sent = sent && acq_->manikin().send(one);
             if (!sent || !acq_->manikin().set_run(true)) {
@@ -466,6 +475,7 @@ void LabDaemon::advance_locked() {
                 physiological_tick_locked(now);
                 return;
             }
+            if (comfort_) comfort_tick_locked(now);  // then judged steady like any trial: the zones settle
             // Excursions (issue 31): the enclosure off its target for longer than the plan allows.
             {
                 const EnclosureTarget& target = target_;
@@ -544,6 +554,7 @@ void LabDaemon::advance_locked() {
             acq_->manikin().set_run(false);
             const bool physiological = loop_ != nullptr;
             loop_.reset();
+            comfort_.reset();
             finish_trial("done", physiological || steady_since_ns_ ? "" : "never steady");
             return;
         }
@@ -551,9 +562,8 @@ void LabDaemon::advance_locked() {
     }
 }
 
-// One tick of a physiological trial: the loop gets the zones' latest readings and the
-// enclosure's, and what it returns is sent (setpoints), recorded (device "model") and raised.
-void LabDaemon::physiological_tick_locked(std::int64_t now) {
+// The zones' latest readings and the enclosure's, as the loops take them.
+LoopInputs LabDaemon::loop_inputs_locked(std::int64_t now) {
     const auto& zones = analysis::andi35_zone_map().zones;
     LoopInputs in;
     in.now_ns = now;
@@ -579,6 +589,31 @@ void LabDaemon::physiological_tick_locked(std::int64_t now) {
     in.wall_temp_c = enclosure_wall_c();
     const auto speed = live_.find("windsonic/air_speed_m_s");
     in.air_speed_m_s = speed != live_.end() && speed->second.quality == drivers::Quality::good ? speed->second.value : 0.0;
+    return in;
+}
+
+// Comfort mode: each zone's skin setpoint from its own loss (ComfortLoop), sent when it steps.
+void LabDaemon::comfort_tick_locked(std::int64_t now) {
+    const auto commands = comfort_->tick(loop_inputs_locked(now));
+    for (const auto& cmd : commands) {
+        mc::Setpoint sp;
+        sp.zone = cmd.zone;
+        sp.mode = mc::ControlMode::constant_skin_temp;
+        sp.value = cmd.skin_setpoint_c;
+        sp.sweating = current_->c.wet;
+        sp.sweat_rate_g_m2_h = current_->c.sweat_rate_g_m2_h;
+        if (!acq_->manikin().send(sp)) {
+            event("warn", "comfort", fmt::format("zone {}: the manikin bus refused its comfort setpoint; it is sent again at "
+                                                 "the next step", cmd.zone));
+            return;
+        }
+    }
+}
+
+// One tick of a physiological trial: the loop gets the zones' latest readings and the
+// enclosure's, and what it returns is sent (setpoints), recorded (device "model") and raised.
+void LabDaemon::physiological_tick_locked(std::int64_t now) {
+    const LoopInputs in = loop_inputs_locked(now);
     LoopOutput out;
     try {
         out = loop_->tick(in);

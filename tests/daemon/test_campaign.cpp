@@ -338,7 +338,7 @@ TEST_CASE("results so far are stored after each trial, marked interim, with the 
     manikind::LabDaemon daemon({c, true, 1.0});
     daemon.set_interim_results(true);
     auto plan = quick_plan("interim");
-    plan.cases.push_back({2, 35.0, 27.0, 35.0, false, 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}});  // a dry case after the wet one
+    plan.cases.push_back({2, 35.0, 27.0, 35.0, false, 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt});  // a dry case after the wet one
     REQUIRE(daemon.start_campaign(plan).empty());
     // Step until the first trial has ended, then wait for its analysis (its own thread).
     while (daemon.status_json()["trials_done"].get<int>() < 1) daemon.step_virtual(1.0);

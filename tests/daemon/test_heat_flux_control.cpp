@@ -1,4 +1,4 @@
-// Issue 65: the manikin's constant-heat-flux control mode. Each zone's heating is fixed (a region
+// Issue 65: the manikin's constant-heat-flux and comfort control modes. Each zone's heating is fixed (a region
 // may have its own), its skin temperature measured: the campaign file's keys and their mistakes,
 // the safety limit, and a trial on the simulated lab where every zone's skin settles where the
 // world's physics loses exactly the heat given.
@@ -10,6 +10,7 @@
 #include "analysis/analyze.hpp"
 #include "base/user_error.hpp"
 #include "daemon/campaign_plan.hpp"
+#include "daemon/comfort_loop.hpp"
 #include "daemon/simulated_lab.hpp"
 #include "daemon_fixture.hpp"
 #include "physics/twin/twin.hpp"
@@ -101,4 +102,81 @@ TEST_CASE("constant heat flux on the simulated lab: every zone is heated at its 
     }
     INFO("skin " << lowest_skin << " .. " << highest_skin << " °C");
     CHECK(highest_skin - lowest_skin > 0.5);  // not a skin setpoint: each zone where its own exchange puts it
+}
+
+TEST_CASE("comfort mode: the coefficients parse with their defaults, and mistakes are refused by file, line and key",
+          "[daemon][comfort]") {
+    const std::string base = "[[cases]]\nid = 1\nchamber_temp_c = 20\nchamber_rh_pct = 40\n";
+    const auto plan = manikind::parse_campaign_plan(header + base + "control = \"comfort\"\n", "flux.toml");
+    REQUIRE(plan.cases[0].comfort.has_value());
+    CHECK(plan.cases[0].comfort->a_c == 36.4);
+    CHECK(plan.cases[0].comfort->b_c_m2_w == 0.054);
+    CHECK(plan.cases[0].comfort->skin_c(50.0) == Approx(33.7));
+    CHECK(manikind::case_conditions_json(plan.cases[0])["control"] == "comfort");
+    const auto own = manikind::parse_campaign_plan(header + base + "control = \"comfort\"\ncomfort_a_c = 36\ncomfort_b_c_m2_w = 0.05\n",
+                                                   "flux.toml");
+    CHECK(own.cases[0].comfort->a_c == 36.0);
+    CHECK_THAT(refusal(base + "control = \"comfort\"\nskin_setpoint_c = 34\n"),
+               Catch::Contains("flux.toml:9") && Catch::Contains("follows its own heat loss"));
+    CHECK_THAT(refusal(base + "comfort_a_c = 36\n"), Catch::Contains("is for control = \"comfort\""));
+    CHECK_THAT(refusal(base + "control = \"comfort\"\ncomfort_b_c_m2_w = 3\n"), Catch::Contains("outside 0..0.2"));
+}
+
+TEST_CASE("comfort mode loop: each zone's setpoint moves towards a - b q of its own measured loss at no more than the "
+          "allowed rate, from where the zone is", "[daemon][comfort]") {
+    const auto& map = manikind::analysis::andi35_zone_map();
+    manikind::config::PhysiologicalConfig limits;
+    manikind::ComfortLoop loop({36.4, 0.054}, limits, map);
+    manikind::LoopInputs in;
+    in.zones.resize(map.size());
+    for (std::size_t z = 0; z < map.size(); ++z) in.zones[z] = {34.0, z < 3 ? 100.0 : 40.0, 0, true, false};
+    auto first = loop.tick(in);
+    REQUIRE(first.size() == map.size());
+    CHECK(first[0].skin_setpoint_c == Approx(34.0));  // from where it is: no jump
+    // Twenty steps later the head zones (100 W/m²) head for 31.0 °C, the others for 34.24 °C.
+    for (int i = 1; i <= 40; ++i) {
+        in.now_ns = static_cast<std::int64_t>(i * limits.coupling_period_s * 1e9);
+        for (auto& r : in.zones) r.flux_mono_ns = in.now_ns;
+        const auto out = loop.tick(in);
+        REQUIRE(out.size() == map.size());
+        if (i == 1) CHECK(out[0].skin_setpoint_c == Approx(34.0 - limits.max_setpoint_rate_c_min * limits.coupling_period_s / 60.0));
+    }
+    CHECK(loop.zone_setpoints_c()[0] == Approx(36.4 - 0.054 * 100.0));
+    CHECK(loop.zone_setpoints_c()[10] == Approx(36.4 - 0.054 * 40.0));
+    // Not a step between periods.
+    in.now_ns += 1'000'000'000;
+    CHECK(loop.tick(in).empty());
+}
+
+TEST_CASE("comfort mode on the simulated lab: every zone's skin settles on the comfort equation of its own heat loss",
+          "[daemon][comfort][proof]") {
+    manikind::test::DaemonFixture f;
+    const auto plan = manikind::parse_campaign_plan(
+        header + "[[cases]]\nid = 1\nchamber_temp_c = 22\nchamber_rh_pct = 40\ncontrol = \"comfort\"\n", "flux.toml");
+    REQUIRE(f.daemon().start_campaign(plan).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    const auto trials = db.trials(*db.find_campaign(plan.name));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+    const auto campaign = manikind::campaign_from_database(db, plan.name);
+    const auto analysis = manikind::analysis::analyze_campaign(campaign);
+    for (const auto& c : analysis.unanalysed_cases)
+        for (const auto& u : c.trials) INFO(u.id << ": " << u.exclusion_reason << " / " << u.steady.reason);
+    std::string why;
+    for (const auto& c : analysis.unanalysed_cases)
+        for (const auto& u : c.trials) why += u.id + ": " + u.steady.reason + "\n";
+    INFO(why);
+    REQUIRE(analysis.cases.size() == 1);
+    const auto& t = analysis.cases[0].trials.at(0);
+    REQUIRE(t.included);
+    double worst = 0.0, lowest = 99.0, highest = 0.0;
+    for (std::size_t z = 0; z < campaign.zone_map.size(); ++z) {
+        worst = std::max(worst, std::abs(t.zone_skin_temp_c[z] - (36.4 - 0.054 * t.zone_q_w_m2[z])));
+        lowest = std::min(lowest, t.zone_skin_temp_c[z]);
+        highest = std::max(highest, t.zone_skin_temp_c[z]);
+    }
+    INFO("largest departure from t_sk = 36.4 - 0.054 q: " << worst << " °C; skin " << lowest << " .. " << highest);
+    CHECK(worst < 0.1);
+    CHECK(highest - lowest > 0.3);  // the zones that lose more are cooler
 }
