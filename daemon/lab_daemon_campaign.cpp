@@ -10,6 +10,7 @@
 #include <set>
 
 #include "analysis/analyze.hpp"
+#include "analysis/clothing.hpp"
 #include "analysis/physio.hpp"
 #include "analysis/recording.hpp"
 #include "store/database_export.hpp"
@@ -268,6 +269,20 @@ void LabDaemon::finish_campaign(const std::string& state) {
             few.draws = 50;
             if (const auto physio = analysis::physio::compute(campaign, few); !physio.trials.empty())
                 j["physiological"] = analysis::physio::results_json(physio);
+            // Clothing tests: clo and Ret per ensemble, as `manikin clothing` gives them (the
+            // standards' stop rule; fewer Monte Carlo draws: the full run is the command's).
+            if (std::any_of(campaign.trials.begin(), campaign.trials.end(), [](const auto& t) { return !t.info.test.empty(); })) {
+                analysis::AnalysisOptions standard;
+                standard.steady.require_heat_loss_stability = true;
+                analysis::clothing::Options co;
+                co.monte_carlo_draws = 500;
+                try {
+                    j["clothing"] = analysis::clothing::to_json(
+                        analysis::clothing::compute(campaign, analysis::analyze_campaign(campaign, standard), nullptr, nullptr, co));
+                } catch (const std::invalid_argument& e) {
+                    event("warn", "results", std::string("clothing results: ") + e.what());
+                }
+            }
             write([=, campaign = campaign_id_, text = j.dump(), utc_ns = clock_->utc_ns()](recorder::Database& db) {
                 db.store_result(campaign, text, utc_ns);
             });

@@ -54,6 +54,24 @@ void print_results_summary(manikind::LabDaemon& daemon, const std::string& campa
                         wb.value("ci_low_w_m2", 0.0), wb.value("ci_high_w_m2", 0.0));
         }
         if (r.contains("physiological")) std::printf("%s", manikind::analysis::physio::summary_text(r["physiological"]).c_str());
+        // A clothing campaign ends with its answer in clo and Ret (issue 64), not only W/m² per case.
+        if (const auto cl = r.find("clothing"); cl != r.end() && cl->is_object()) {
+            std::printf("clothing (ASTM F1291 / ISO 15831 / ASTM F2370; full table: manikin clothing --db ... --campaign %s)\n"
+                        "  ensemble        It total, clo    Icl, clo         Ret total, m²Pa/W\n", campaign.c_str());
+            auto cell = [](const nlohmann::json& v, const char* value, const char* u95, double scale) {
+                if (!v.is_object() || !v[value].is_number()) return std::string("-");
+                return fmt::format("{:.2f} ± {:.2f}", v[value].get<double>() * scale, v[u95].get<double>() * scale);
+            };
+            for (const auto& e : (*cl)["ensembles"]) {
+                const auto& ins = e["insulation"];
+                const auto& evap = e["evaporative"];
+                std::printf("  %-14s  %-15s  %-15s  %s\n", e.value("id", "?").c_str(), cell(ins["total_parallel"], "clo", "U95_clo", 1.0).c_str(),
+                            cell(ins["intrinsic_parallel"], "clo", "U95_clo", 1.0).c_str(),
+                            cell(evap["total_parallel"], "value_m2pa_w", "U95_m2pa_w", 1.0).c_str());
+            }
+            if ((*cl)["left_out"].is_array() && !(*cl)["left_out"].empty())
+                std::printf("  %zu trial(s) left out by the standards' stop rule (manikin clothing says which)\n", (*cl)["left_out"].size());
+        }
         if (const auto ex = r.find("excluded_trials"); ex != r.end() && ex->is_array() && !ex->empty())
             std::printf("  %zu trial(s) excluded (see `manikin results --json`)\n", ex->size());
     } catch (const std::exception& e) {

@@ -41,6 +41,11 @@ TEST_CASE("clothing test on the simulated lab: the world wears the wardrobe's en
         CHECK(stopped_steady == 1);
     }
 
+    // The campaign's stored results carry clo and Ret per ensemble (what manikind prints at its end).
+    const auto stored = f.daemon().results_json(plan.name);
+    REQUIRE(stored.contains("clothing"));
+    CHECK(stored["clothing"]["ensembles"].size() == 3);
+    CHECK(stored["clothing"]["ensembles"][1]["insulation"]["total_parallel"]["clo"].is_number());
     const auto campaign = manikind::campaign_from_database(db, plan.name);
     REQUIRE(campaign.ensembles.count("coverall") == 1);
     CHECK(campaign.ensembles.at("coverall").fcl == 1.26);
