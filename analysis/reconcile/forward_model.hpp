@@ -132,14 +132,16 @@ struct TrialInput {
     std::vector<double> q_w_m2;                  // per zone, aligned with the case's zones
     std::string id;                              // c03-r2, for what is said about the recording
     // Per zone, how far the flux moved over the steady window (|slope| x window, the steady-state
-    // check's measure); empty when unknown. A zone drifting beyond kFluxDriftLimit_w_m2 in any
-    // replicate of a case leaves that case's point out of the fit: a recording still settling
-    // says nothing about physics (docs/reconcile.md, "What a recording cannot settle").
+    // check's measure); empty when unknown. A zone drifting beyond kFluxDriftLimit_w_m2 and
+    // kFluxDriftOutlier times its trial's median zone, in any replicate of a case, leaves that
+    // case's point out of the fit: a zone still settling says nothing about physics (docs/reconcile.md).
     std::vector<double> flux_drift_w_m2;
 };
 
-// The steady-state check's default flux-drift limit (analysis/steady_state.hpp).
+// The steady-state check's default flux-drift limit (analysis/steady_state.hpp), and how far a
+// zone must stand out of its trial's median zone to be its own (ours).
 inline constexpr double kFluxDriftLimit_w_m2 = 2.0;
+inline constexpr double kFluxDriftOutlier = 3.0;
 
 // The twin over recorded cases: one point per case and zone.
 struct CaseInput {

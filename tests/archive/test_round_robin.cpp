@@ -174,6 +174,7 @@ TEST_CASE("two labs, one archive: the cross-lab report shows the between-lab spr
     // the 2.0 °C put in; lab A has nothing to explain.
     const auto rec_a = run_manikin("reconcile --archive " + archive + " --lab lab-a --campaign round-robin --json");
     const auto rec_b = run_manikin("reconcile --archive " + archive + " --lab lab-b --campaign round-robin --json");
+    INFO(rec_a.out.substr(0, 600) << rec_b.out.substr(0, 600));
     REQUIRE(rec_a.status == 0);
     REQUIRE(rec_b.status == 0);
     const auto ja = nlohmann::json::parse(rec_a.out), jb = nlohmann::json::parse(rec_b.out);
