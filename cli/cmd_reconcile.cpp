@@ -206,6 +206,13 @@ void add_reconcile_command(CLI::App& app) {
             return;
         }
         opt.new_version_name = fmt::format("{}+reconciled", base.name);
+        if (model->points().empty()) {
+            // Nothing to fit is the campaign's state, not a bug: say why (issue 61's screen can leave none).
+            std::string why;
+            for (const auto& m : model->measurement()) why += "; " + m;
+            throw UserError(fmt::format("{}: no case and zone has a finite flux with an uncertainty to reconcile{}", campaign_label,
+                                        why));
+        }
         auto report = rc::reconcile(*model, opt);
         const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         if (!o->plots.empty()) {
