@@ -94,7 +94,7 @@ double mean_of(const std::vector<double>& v) {
 }
 
 Quantities evaluate(const std::vector<TestTrial>& trials, const ZoneMap& map, const std::set<std::string>& regions,
-                    const std::map<std::string, std::optional<double>>& given_fcl, const Draw& d) {
+                    const std::map<std::string, std::optional<double>>& given_fcl, const Draw& d, double fabric_r_m2k_w = 0.0) {
     Quantities out;
     // Insulation first: the evaporative test's dry part needs each zone's It.
     std::map<std::string, std::vector<std::vector<double>>> zone_it;  // ensemble -> replicate -> zone
@@ -129,7 +129,8 @@ Quantities evaluate(const std::vector<TestTrial>& trials, const ZoneMap& map, co
         if (t.test != "evaporative") continue;
         const Perturbed p = perturb(t, d);
         const Weights w = weights(map, p);
-        const double p_air_kpa = physics::vapour_pressure_pa(p.air_temp_c, p.air_rh_pct) / 1000.0;
+        // IAPWS's saturation pressure, not the twin's seed formula (0.39 % low at 35 °C: issue 63).
+        const double p_air_kpa = p.air_rh_pct / 100.0 * physics::saturation_vapour_pressure_iapws_pa(p.air_temp_c) / 1000.0;
         // The dry part of each zone's loss (ASTM F2370, non-isothermal option): (T_z - T_a)/It_z
         // with the ensemble's own It per zone; none in the isothermal test (T_z = T_a).
         std::vector<double> it_z(map.zones.size(), kNaN);
@@ -145,7 +146,9 @@ Quantities evaluate(const std::vector<TestTrial>& trials, const ZoneMap& map, co
             const std::size_t z = w.zones[i];
             const double dry = std::isfinite(it_z[z]) && it_z[z] > 0.0 ? (p.skin_c[z] - p.air_temp_c) / it_z[z] : 0.0;
             qe_z[z] = p.q_w_m2[z] - dry;
-            ps_z[z] = physics::saturation_vapour_pressure_pa(p.skin_c[z]) / 1000.0;
+            // The wet fabric's surface, where the water evaporates, is below the sensor by q R_fabric
+            // (the total flux through the skin fabric's resistance; 0: the sensor's temperature).
+            ps_z[z] = physics::saturation_vapour_pressure_iapws_pa(p.skin_c[z] - p.q_w_m2[z] * fabric_r_m2k_w) / 1000.0;
             ps += w.f[i] * ps_z[z];
             qe += w.f[i] * qe_z[z];
             serial += w.f[i] * (ps_z[z] - p_air_kpa) / qe_z[z];
@@ -384,10 +387,10 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
     const ZoneMap& map = campaign.zone_map;
     std::set<std::string> regions;
     for (const auto& z : map.zones) regions.insert(z.region);
-    std::map<std::string, std::optional<double>> given_fcl;
-    for (const auto& [id, e] : campaign.ensembles) given_fcl[id] = e.fcl;
+    std::map<std::string, std::optional<double>> given_fcl, given_fcl_u;
+    for (const auto& [id, e] : campaign.ensembles) given_fcl[id] = e.fcl, given_fcl_u[id] = e.fcl_u;
 
-    const Quantities measured = evaluate(trials, map, regions, given_fcl, Draw{});
+    const Quantities measured = evaluate(trials, map, regions, given_fcl, Draw{}, options.fabric_resistance_m2k_w);
     // Monte Carlo over the shared instrument errors (GUM Supplement 1): the Type B standard
     // uncertainty of every quantity is its standard deviation over the draws.
     std::mt19937_64 rng(options.seed);
@@ -401,7 +404,7 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         d.air = standardised_error_draw(dist("air_temp_c"), rng);
         d.skin = standardised_error_draw(dist("skin_temp_c"), rng);
         d.rh = standardised_error_draw(dist("air_rh_pct"), rng);
-        const Quantities q = evaluate(trials, map, regions, given_fcl, d);
+        const Quantities q = evaluate(trials, map, regions, given_fcl, d, options.fabric_resistance_m2k_w);
         for (const auto& [ensemble, keys] : q.value)
             for (const auto& [key, v] : keys) {
                 if (!std::isfinite(v)) continue;
@@ -463,7 +466,13 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         } else if (given_fcl.count(id) && given_fcl.at(id)) {
             e.fcl = *given_fcl.at(id);
             e.fcl_source = "given";
-            e.fcl_reason = "given in campaign.json (measured by the lab; its uncertainty is not in campaign.json and is left out of U)";
+            if (given_fcl_u.count(id) && given_fcl_u.at(id)) {
+                e.fcl_u = *given_fcl_u.at(id);
+                e.fcl_reason = fmt::format("given in campaign.json (measured by the lab), u(fcl) = {:.3g} in U of Icl and Recl", e.fcl_u);
+            } else {
+                e.fcl_reason = "given in campaign.json (measured by the lab) without fcl_u: its uncertainty is left out of U of "
+                               "Icl and Recl (give ensembles.<id>.fcl_u)";
+            }
         } else if (measured.fcl.count(id) && std::isfinite(measured.fcl.at(id))) {
             e.fcl = measured.fcl.at(id);
             e.fcl_source = "ISO 9920 estimate";
@@ -526,8 +535,8 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
                     gap, kIsothermalTolerance_k);
                 out.warnings.push_back(fmt::format("{}: Ret withheld: {}", id, e.evaporative_withheld_reason));
             } else if (!own_it && gap != 0.0) {
-                const double dp_kpa = (physics::saturation_vapour_pressure_pa(c.mean_skin_temp_c) -
-                                       physics::vapour_pressure_pa(c.air_temp_c, c.air_rh_pct)) / 1000.0;
+                const double dp_kpa = (physics::saturation_vapour_pressure_iapws_pa(c.mean_skin_temp_c) -
+                                       c.air_rh_pct / 100.0 * physics::saturation_vapour_pressure_iapws_pa(c.air_temp_c)) / 1000.0;
                 // Ret_measured / Ret - 1 = -(gap/It) Ret_measured / dp; It >= Ia bounds it.
                 if (std::isfinite(ia) && ia > 0.0 && dp_kpa > 0.0) {
                     e.evaporative_dry_bias_bound = -gap / ia * value_of("Ret_par") / dp_kpa;
@@ -710,7 +719,12 @@ nlohmann::json to_json(const Result& r) {
         j["redressing_from"] = nullptr;
     }
     j["method"] = {{"insulation", "ASTM F1291 / ISO 15831: parallel (global) and serial; effective and intrinsic per ISO 9920"},
-                   {"evaporative", "ASTM F2370: parallel and serial, fully wet skin at the zone's skin temperature"},
+                   {"evaporative", r.options.fabric_resistance_m2k_w > 0.0
+                                       ? fmt::format("ASTM F2370: parallel and serial, fully wet skin at the wet fabric's surface "
+                                                     "(the sensor's temperature less q x {} m²K/W); IAPWS saturation pressure",
+                                                     r.options.fabric_resistance_m2k_w)
+                                       : std::string("ASTM F2370: parallel and serial, fully wet skin at the sensor's temperature "
+                                                     "(no fabric resistance given: Ret may read high); IAPWS saturation pressure")},
                    {"type_a", r.options.redressing
                                   ? "re-dressed replicates: s/sqrt(n), n - 1 dof; at one replicate the re-dressing scatter carried from " +
                                         r.options.redressing->source

@@ -63,6 +63,11 @@ struct Options {
     // Where an ensemble has one replicate: its Type A from this scatter (value x relative sd on
     // the pooled dof); none: the interval excludes re-dressing, and the result says so.
     std::optional<RedressingScatter> redressing;
+    // The wet skin fabric's thermal resistance, m²K/W: the water evaporates at the fabric's
+    // surface, q R below the sensor, so the skin's vapour pressure is taken there (published
+    // manikin work finds Ret 9-14 % high when it is taken at the sensor). 0: at the sensor, said
+    // in the method; the lab gives its fabric's (`manikin clothing --fabric-resistance`).
+    double fabric_resistance_m2k_w = 0.0;
 };
 
 // A result with its uncertainty: value, combined standard uncertainty from Type A (replicates)
@@ -112,7 +117,7 @@ struct EnsembleResult {
     double fcl = kNaN;
     std::string fcl_source;                      // "given", "ISO 9920 estimate", "none" or "nude"
     std::string fcl_reason;                      // why, in words (the text and report print it)
-    double fcl_u = 0.0;                          // standard uncertainty put into Icl's and Recl's U (estimate only)
+    double fcl_u = 0.0;                          // standard uncertainty put into Icl's and Recl's U (the estimate's, or a given fcl_u)
     bool fcl_capped = false;                     // the estimate stopped at Icl = 2 clo
     std::optional<Conditions> insulation_conditions, evaporative_conditions;
     std::vector<Check> insulation_checks, evaporative_checks;
@@ -163,8 +168,23 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
 
 nlohmann::json to_json(const Result& r);
 std::string to_text(const Result& r);
+
+// What a customer's report carries beyond the numbers (issue 64 part 4; `manikin clothing
+// --report-info report.toml`, docs/clothing.md "The report"): who made it, for whom, of what,
+// by which standard and edition, and who signs it. Empty fields are printed as "not given".
+struct ReportInfo {
+    std::string lab_name, lab_address, accreditation;
+    std::string logo_data_uri;                   // data:image/...;base64,... (embedded: the page loads nothing)
+    std::string report_number, report_date;      // report_date YYYY-MM-DD
+    std::string customer, sample;
+    std::string manikin, chamber;                // identity (make, model, serial)
+    std::string insulation_standard, evaporative_standard;  // as followed, with edition: "ASTM F1291-16"
+    std::string operator_name, approver;
+};
+
 // A one-page report per ensemble (HTML with inline SVG: values with intervals, conditions, the
-// replicate criterion, a body map of local insulation).
-std::string to_html(const Result& r, const ZoneMap& map);
+// replicate criterion, a body map of local insulation), headed by `info`, with the campaign's
+// test dates, per-replicate values and notebook notes when `campaign` is given.
+std::string to_html(const Result& r, const ZoneMap& map, const Campaign* campaign = nullptr, const ReportInfo& info = {});
 
 }  // namespace manikind::analysis::clothing

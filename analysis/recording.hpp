@@ -86,6 +86,7 @@ struct TrialInfo {
 struct Ensemble {
     std::string description;
     std::optional<double> fcl;         // clothing area factor; absent: ISO 9920's estimate from the insulation
+    std::optional<double> fcl_u;       // a given fcl's standard uncertainty (the lab's measurement); enters U of Icl, Recl
 };
 
 // A lab-notebook entry carried with the recording (docs/formats.md, "notes"): who wrote what, when,

@@ -813,6 +813,12 @@ Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOp
                 if (!(fcl >= 1.0 && fcl <= 3.0)) cj.fail(path + "fcl", fmt::format("must be within 1..3, found {}", fcl), at);
                 ensemble.fcl = fcl;
             }
+            if (e.contains("fcl_u")) {
+                const double u = cj.number(e, "fcl_u", path, at);
+                if (!(u >= 0.0 && u <= 1.0)) cj.fail(path + "fcl_u", fmt::format("must be within 0..1, found {}", u), at);
+                if (!ensemble.fcl) cj.fail(path + "fcl_u", "is the uncertainty of a given fcl: give fcl too", at);
+                ensemble.fcl_u = u;
+            }
             campaign.ensembles[id] = ensemble;
         }
     }

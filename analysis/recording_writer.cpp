@@ -157,6 +157,7 @@ nlohmann::json ensembles_json(const std::map<std::string, Ensemble>& ensembles) 
     for (const auto& [id, e] : ensembles) {
         out[id] = {{"description", e.description}};
         if (e.fcl) out[id]["fcl"] = *e.fcl;
+        if (e.fcl_u) out[id]["fcl_u"] = *e.fcl_u;
     }
     return out;
 }

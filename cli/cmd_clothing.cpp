@@ -2,6 +2,10 @@
 // standard clothing test (ASTM F1291, ISO 15831, ASTM F2370; analysis/clothing.hpp), with 95 %
 // intervals, the replicate criterion and a one-page report per ensemble.
 #include <cstdio>
+#include <map>
+#include <ctime>
+#include <cctype>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -14,6 +18,8 @@
 
 #include "analysis/analyze.hpp"
 #include "analysis/clothing.hpp"
+#include "base/text.hpp"
+#include "base/toml_input.hpp"
 #include "base/user_error.hpp"
 #include "cli/campaign_source.hpp"
 #include "cli/commands.hpp"
@@ -21,10 +27,88 @@
 
 namespace manikind::cli {
 
+namespace {
+
+std::string base64(const std::string& bytes) {
+    static constexpr char table[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string out;
+    std::size_t i = 0;
+    for (; i + 2 < bytes.size(); i += 3) {
+        const unsigned v = (static_cast<unsigned char>(bytes[i]) << 16) | (static_cast<unsigned char>(bytes[i + 1]) << 8) |
+                           static_cast<unsigned char>(bytes[i + 2]);
+        for (int s : {18, 12, 6, 0}) out += table[(v >> s) & 63];
+    }
+    if (i < bytes.size()) {
+        unsigned v = static_cast<unsigned char>(bytes[i]) << 16;
+        if (i + 1 < bytes.size()) v |= static_cast<unsigned char>(bytes[i + 1]) << 8;
+        out += table[(v >> 18) & 63];
+        out += table[(v >> 12) & 63];
+        out += i + 1 < bytes.size() ? table[(v >> 6) & 63] : '=';
+        out += '=';
+    }
+    return out;
+}
+
+// `--report-info report.toml` (docs/clothing.md, "The report"): [lab] and [report] tables of text.
+analysis::clothing::ReportInfo read_report_info(const std::string& file) {
+    const std::filesystem::path path(file);
+    const auto root = toml_input::parse(toml_input::read_text_file(path, "a report-info TOML file"), file);
+    analysis::clothing::ReportInfo info;
+    std::string logo;
+    const std::map<std::string, std::map<std::string, std::string*>> keys = {
+        {"lab", {{"name", &info.lab_name}, {"address", &info.lab_address}, {"accreditation", &info.accreditation},
+                 {"logo", &logo}, {"manikin", &info.manikin}, {"chamber", &info.chamber}}},
+        {"report", {{"number", &info.report_number}, {"date", &info.report_date}, {"customer", &info.customer},
+                    {"sample", &info.sample}, {"operator", &info.operator_name}, {"approver", &info.approver},
+                    {"insulation_standard", &info.insulation_standard}, {"evaporative_standard", &info.evaporative_standard}}}};
+    for (const auto& [name, node] : root) {
+        const auto table = keys.find(std::string(name.str()));
+        if (table == keys.end() || !node.is_table())
+            throw UserError(fmt::format("{}: {}: expected [lab] or [report]", toml_input::where(file, name.source()), name.str()));
+        for (const auto& [key, value] : *node.as_table()) {
+            const auto field = table->second.find(std::string(key.str()));
+            if (field == table->second.end()) {
+                std::string known;
+                for (const auto& [k, p] : table->second) known += (known.empty() ? "" : ", ") + k;
+                throw UserError(fmt::format("{}: {}.{}: unknown key (known: {})", toml_input::where(file, key.source()), name.str(),
+                                            key.str(), known));
+            }
+            if (!value.is_string())
+                throw UserError(fmt::format("{}: {}.{}: expected text", toml_input::where(file, value), name.str(), key.str()));
+            const std::string text = value.as_string()->get();
+            if (text.size() > 400 || !is_utf8(text))
+                throw UserError(fmt::format("{}: {}.{}: expected UTF-8 text of at most 400 bytes", toml_input::where(file, value),
+                                            name.str(), key.str()));
+            *field->second = text;
+        }
+    }
+    if (!info.report_date.empty() && (info.report_date.size() != 10 || info.report_date[4] != '-' || info.report_date[7] != '-'))
+        throw UserError(fmt::format("{}: report.date: expected YYYY-MM-DD, found '{}'", file, info.report_date));
+    if (info.report_date.empty()) {
+        const std::time_t now = std::time(nullptr);
+        std::tm utc{};
+        gmtime_r(&now, &utc);
+        info.report_date = fmt::format("{:04}-{:02}-{:02}", utc.tm_year + 1900, utc.tm_mon + 1, utc.tm_mday);
+    }
+    if (!logo.empty()) {
+        // Embedded, so the page loads nothing from elsewhere: PNG, JPEG or SVG of at most 300 kB.
+        const std::filesystem::path logo_path = path.parent_path() / logo;
+        std::string ext = logo_path.extension().string();
+        std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+        const char* mime = ext == ".png" ? "image/png" : ext == ".jpg" || ext == ".jpeg" ? "image/jpeg" : ext == ".svg" ? "image/svg+xml" : nullptr;
+        if (!mime) throw UserError(fmt::format("{}: lab.logo: '{}' is not a .png, .jpg or .svg file", file, logo));
+        const std::string bytes = toml_input::read_text_file(logo_path, "a logo image", 300 * 1024);
+        info.logo_data_uri = fmt::format("data:{};base64,{}", mime, base64(bytes));
+    }
+    return info;
+}
+
+}  // namespace
+
 void add_clothing_command(CLI::App& app) {
     struct Opts {
         CampaignSource source;
-        std::string baseline, report, redress_from;
+        std::string baseline, report, redress_from, report_info;
         bool json = false, force = false;
         bool require_flux_stability = false;
         bool skin_steadiness_only = false;
@@ -47,6 +131,11 @@ void add_clothing_command(CLI::App& app) {
     cmd->add_option("--report", o->report, "Write the one-page-per-ensemble report (HTML with SVG) to this file (new; "
                                            "never inside a campaign folder it reads, never over a database)");
     cmd->add_flag("--force", o->force, "Replace an existing report file");
+    cmd->add_option("--report-info", o->report_info,
+                    "A TOML file with the report's header and identity: [lab] name, address, accreditation, logo (a .png, "
+                    ".jpg or .svg beside it), manikin, chamber; [report] number, date, customer, sample, operator, approver, "
+                    "insulation_standard, evaporative_standard (with edition, e.g. \"ASTM F1291-16\")")
+        ->check(CLI::ExistingFile);
     cmd->add_option("--cv-limit-insulation", o->cv_limit_insulation_pct,
                     "Largest coefficient of variation of the re-dressed replicates' total insulation, in % (5 = 5 %)")
         ->check(CLI::Range(0.1, 100.0))
@@ -62,6 +151,11 @@ void add_clothing_command(CLI::App& app) {
     cmd->add_flag("--require-flux-stability", o->require_flux_stability,
                   "Stricter still: every zone's flux drift and scatter over the window within manikin analyze's limits "
                   "(2 W/m², 5 W/m²)");
+    cmd->add_option("--fabric-resistance", o->options.fabric_resistance_m2k_w,
+                    "The wet skin fabric's thermal resistance, m²K/W: the skin's vapour pressure is taken at the fabric's "
+                    "surface, q R below the sensor (default 0: at the sensor, where Ret reads high)")
+        ->check(CLI::Range(0.0, 0.2))
+        ->capture_default_str();
     cmd->add_option("--draws", o->options.monte_carlo_draws, "Monte Carlo draws for the Type B uncertainty")
         ->check(CLI::Range(100, 1000000))
         ->capture_default_str();
@@ -86,8 +180,10 @@ void add_clothing_command(CLI::App& app) {
                 from.campaign = *other;
                 for (auto& p : source_inputs(from)) inputs.push_back(std::move(p));
             }
+            if (!o->report_info.empty()) inputs.emplace_back(o->report_info);  // never over what it reads
             target.emplace(o->report, ExportShape::file, o->force, inputs);
         }
+        const analysis::clothing::ReportInfo info = o->report_info.empty() ? analysis::clothing::ReportInfo{} : read_report_info(o->report_info);
         const analysis::Campaign campaign = read_campaign_source(o->source);
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
         analysis::AnalysisOptions analysis_options;
@@ -138,7 +234,7 @@ void add_clothing_command(CLI::App& app) {
         if (target) {
             {
                 std::ofstream out(target->staging(), std::ios::binary | std::ios::trunc);
-                out << analysis::clothing::to_html(r, campaign.zone_map);
+                out << analysis::clothing::to_html(r, campaign.zone_map, &campaign, info);
                 out.flush();
                 if (!out) throw UserError(fmt::format("--report {}: write failed", o->report), "write_failed");
             }

@@ -402,13 +402,18 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             if (id == "nude" || id.empty() || id.size() > 60)
                 throw UserError(fmt::format("{}: ensembles.{}: an ensemble id must be 1-60 characters and not \"nude\" (the "
                                             "bare manikin needs no entry)", where(node), id));
-            refuse_unknown_keys(*e, {"description", "fcl"}, source, "ensembles." + id + ".");
+            refuse_unknown_keys(*e, {"description", "fcl", "fcl_u"}, source, "ensembles." + id + ".");
             analysis::Ensemble pe;
             if (const auto* d = e->get("description")) {
                 if (!d->is_string()) throw UserError(fmt::format("{}: ensembles.{}.description: expected a string", where(*d), id));
                 pe.description = d->as_string()->get();
             }
             if (e->get("fcl")) pe.fcl = number(*e, "fcl", 1.0, 1.0, 3.0);
+            if (const auto* u = e->get("fcl_u")) {
+                if (!pe.fcl)
+                    throw UserError(fmt::format("{}: ensembles.{}.fcl_u: the uncertainty of a given fcl (give fcl too)", where(*u), id));
+                pe.fcl_u = number(*e, "fcl_u", 0.0, 0.0, 1.0);
+            }
             p.ensembles[id] = pe;
         }
     }

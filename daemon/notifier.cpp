@@ -17,7 +17,7 @@ namespace manikind {
 
 namespace {
 
-using SteadyClock = std::chrono::steady_clock;
+using NotifierClock = std::chrono::steady_clock;
 
 // libcurl, loaded when notifications are configured, not at every program's start
 // (base/lazy_library.hpp). Each member is the curl_ function of the same name without "curl_".
@@ -200,12 +200,12 @@ nlohmann::json Notifier::status_json() const {
 }
 
 bool Notifier::drain(std::chrono::milliseconds within) {
-    const auto until = SteadyClock::now() + within;
+    const auto until = NotifierClock::now() + within;
     std::unique_lock lk(lock_);
     for (;;) {
         const bool empty = std::all_of(dest_.begin(), dest_.end(), [](const Destination& d) { return d.waiting.empty(); });
         if (empty && !busy_) return true;
-        if (SteadyClock::now() >= until) return false;
+        if (NotifierClock::now() >= until) return false;
         lk.unlock();
         wake_.notify_all();
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -217,7 +217,7 @@ void Notifier::run() {
     std::unique_lock lk(lock_);
     for (;;) {
         // The next destination with something to send whose interval has passed.
-        const auto now = SteadyClock::now();
+        const auto now = NotifierClock::now();
         Destination* ready = nullptr;
         auto next_wake = now + std::chrono::hours(1);
         for (auto& d : dest_) {
@@ -257,7 +257,7 @@ void Notifier::run() {
             ready->failed += batch.size();
             ready->last_error = error;
         }
-        ready->next_allowed = SteadyClock::now() + std::chrono::milliseconds(static_cast<long long>(o_.min_interval_s * 1000));
+        ready->next_allowed = NotifierClock::now() + std::chrono::milliseconds(static_cast<long long>(o_.min_interval_s * 1000));
     }
 }
 

@@ -38,7 +38,7 @@ namespace beast = boost::beast;
 namespace http = beast::http;
 namespace websocket = beast::websocket;
 using tcp = asio::ip::tcp;
-using SteadyClock = std::chrono::steady_clock;
+using WebClock = std::chrono::steady_clock;
 
 namespace {
 
@@ -173,7 +173,7 @@ struct WebServer::Impl {
     std::atomic<double> pending_since_utc_ms{0};  // wall time the oldest unsent sample reached the daemon
     std::size_t clients = 0;  // HTTP and WebSocket sessions (server thread only)
     std::list<std::weak_ptr<WsSession>> sockets;
-    SteadyClock::time_point last_push{};
+    WebClock::time_point last_push{};
     bool push_scheduled = false;
     console::DeviceSeverity severity;
     console::ChamberHistory history;
@@ -194,7 +194,7 @@ struct WebServer::Impl {
     // --- what the page reads ------------------------------------------------------------
     nlohmann::json status() {
         auto s = daemon.status_json();
-        if (s.contains("devices")) severity.annotate(s["devices"], std::chrono::duration<double>(SteadyClock::now().time_since_epoch()).count());
+        if (s.contains("devices")) severity.annotate(s["devices"], std::chrono::duration<double>(WebClock::now().time_since_epoch()).count());
         return s;
     }
 
@@ -358,7 +358,7 @@ struct WebServer::Impl {
     // goes only when every place is one, again the longest without progress (one that never
     // reads). So a flood of connections cannot take the live view off the page.
     struct Client {
-        SteadyClock::time_point last_progress = SteadyClock::now();
+        WebClock::time_point last_progress = WebClock::now();
         virtual ~Client() = default;
         virtual void drop() = 0;
         virtual int keep_priority() const { return 0; }  // higher: evicted later
@@ -415,7 +415,7 @@ struct WebServer::Impl {
             ws.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
                 if (ec) return;
                 self->open = true;
-                self->last_progress = SteadyClock::now();
+                self->last_progress = WebClock::now();
                 self->owner.admit(self);
                 self->owner.sockets.push_back(self);
                 self->send(std::make_shared<const std::string>(dump_json(self->owner.update_message())));
@@ -453,7 +453,7 @@ struct WebServer::Impl {
                 }
                 self->outgoing_bytes -= self->outgoing.front()->size();
                 self->outgoing.pop_front();
-                self->last_progress = SteadyClock::now();
+                self->last_progress = WebClock::now();
                 if (!self->outgoing.empty()) self->write();
             });
         }
@@ -523,7 +523,7 @@ struct WebServer::Impl {
                     self->stream.socket().shutdown(tcp::socket::shutdown_send, ignored);
                     return;
                 }
-                self->last_progress = SteadyClock::now();
+                self->last_progress = WebClock::now();
                 self->read();
             });
         }
@@ -555,7 +555,7 @@ struct WebServer::Impl {
     // Per-address token buckets for new connections (server thread only).
     struct Bucket {
         double tokens = 0;
-        SteadyClock::time_point refilled{};
+        WebClock::time_point refilled{};
     };
     std::map<std::string, Bucket> connection_buckets;
     std::uint64_t rate_limited = 0;
@@ -563,7 +563,7 @@ struct WebServer::Impl {
         beast::error_code ec;
         const auto remote = socket.remote_endpoint(ec);
         if (ec) return true;  // already gone: the session's first read says so
-        const auto now = SteadyClock::now();
+        const auto now = WebClock::now();
         if (connection_buckets.size() > 1024)  // forget addresses whose bucket has refilled
             std::erase_if(connection_buckets, [&](const auto& kv) {
                 return kv.second.tokens + std::chrono::duration<double>(now - kv.second.refilled).count() *
@@ -608,7 +608,7 @@ struct WebServer::Impl {
 
     // Updates go out when a sample arrives (a burst coalesced over 20 ms: the issue asks under 50 ms from sample to screen) and at least once a second.
     void broadcast() {
-        last_push = SteadyClock::now();
+        last_push = WebClock::now();
         // The oldest sample in this update reached the daemon then: the page (and bench_console)
         // measures sample-to-screen latency from it.
         const double oldest_sample_utc_ms = sample_pending.exchange(false) ? pending_since_utc_ms.load() : 0.0;
@@ -626,7 +626,7 @@ struct WebServer::Impl {
     void on_sample_posted() {
         if (push_scheduled) return;
         const auto due = last_push + std::chrono::milliseconds(20);
-        if (SteadyClock::now() >= due) return broadcast();
+        if (WebClock::now() >= due) return broadcast();
         push_scheduled = true;
         push_timer->expires_at(due);
         push_timer->async_wait([this](beast::error_code ec) {
@@ -635,7 +635,7 @@ struct WebServer::Impl {
         });
     }
     void tick() {
-        if (SteadyClock::now() - last_push >= std::chrono::milliseconds(900)) broadcast();
+        if (WebClock::now() - last_push >= std::chrono::milliseconds(900)) broadcast();
         else record_history(daemon.live_json(), daemon.status_json());
         tick_timer->expires_after(std::chrono::seconds(1));
         tick_timer->async_wait([this](beast::error_code ec) {

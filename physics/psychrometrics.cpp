@@ -14,6 +14,18 @@ double saturation_vapour_pressure_pa(double temp_c) {
     return std::exp(77.3450 + 0.0057 * t_k - 7235.0 / t_k) / std::pow(t_k, 8.2);
 }
 
+double saturation_vapour_pressure_iapws_pa(double temp_c) {
+    require_in_range("temperature", temp_c, 0.0, 200.0, "degC");
+    // ln(p/pc) = (Tc/T)(a1 t + a2 t^1.5 + a3 t^3 + a4 t^3.5 + a5 t^4 + a6 t^7.5), t = 1 - T/Tc.
+    constexpr double tc_k = 647.096, pc_pa = 22.064e6;
+    constexpr double a1 = -7.85951783, a2 = 1.84408259, a3 = -11.7866497, a4 = 22.6807411, a5 = -15.9618719, a6 = 1.80122502;
+    const double t_k = temp_c + kelvin_offset;
+    const double t = 1.0 - t_k / tc_k;
+    const double sum = a1 * t + a2 * std::pow(t, 1.5) + a3 * t * t * t + a4 * std::pow(t, 3.5) + a5 * t * t * t * t +
+                       a6 * std::pow(t, 7.5);
+    return pc_pa * std::exp(tc_k / t_k * sum);
+}
+
 double vapour_pressure_pa(double temp_c, double rh_pct) {
     require_in_range("relative humidity", rh_pct, 0.0, 100.0, "%");
     return rh_pct / 100.0 * saturation_vapour_pressure_pa(temp_c);

@@ -9,6 +9,12 @@ namespace manikind::physics {
 // throws std::domain_error outside -40..200 °C.
 double saturation_vapour_pressure_pa(double temp_c);
 
+// Saturation vapour pressure over liquid water, Pa, by IAPWS's saturation-pressure equation
+// (Wagner & Pruss 1993, the IAPWS 1992 supplementary release; within 0.01 % of IAPWS-95 from 0 to
+// 100 °C). The clothing tests' Ret uses it (issue 63: the seed formula sits 0.39 % below at
+// 35 °C, a bias on Ret, Rea and Recl no interval showed); the twin keeps the paper's formula above.
+double saturation_vapour_pressure_iapws_pa(double temp_c);
+
 // Partial pressure of water vapour at the given relative humidity (0..100 %), Pa.
 double vapour_pressure_pa(double temp_c, double rh_pct);
 

@@ -94,6 +94,7 @@ CampaignReader::CampaignReader(recorder::Database& db, const std::string& name, 
                     if (e.is_object() && e.contains("description") && e.at("description").is_string())
                         ens.description = e.at("description").get<std::string>();
                     if (e.is_object() && e.contains("fcl") && e.at("fcl").is_number()) ens.fcl = e.at("fcl").get<double>();
+                    if (e.is_object() && e.contains("fcl_u") && e.at("fcl_u").is_number()) ens.fcl_u = e.at("fcl_u").get<double>();
                     c.ensembles[id] = ens;
                 }
         }

@@ -73,8 +73,8 @@ struct Lab {
         c.name = "clothing-unit";
         c.zone_map = map;
         c.instruments = an::default_instrument_specs();
-        c.ensembles["suit"] = {"two-piece suit", fcl};
-        const double dp_kpa = (1.0 - 0.4) * manikind::physics::saturation_vapour_pressure_pa(35.0) / 1000.0;
+        c.ensembles["suit"] = {"two-piece suit", fcl, std::nullopt};
+        const double dp_kpa = (1.0 - 0.4) * manikind::physics::saturation_vapour_pressure_iapws_pa(35.0) / 1000.0;  // nature's (IAPWS)
         int case_id = 0;
         for (const std::string ensemble : {"nude", "suit"}) {
             const auto& r_dry = ensemble == "nude" ? ia : it;
@@ -100,8 +100,8 @@ struct Lab {
                   double air_c, double rh_pct, double speed_m_s = 0.4) const {
         const auto& r_dry = ensemble == "nude" ? ia : it;
         const auto& r_wet = ensemble == "nude" ? rea : ret;
-        const double dp_kpa = (manikind::physics::saturation_vapour_pressure_pa(skin_c) -
-                               manikind::physics::vapour_pressure_pa(air_c, rh_pct)) / 1000.0;
+        const double dp_kpa = (manikind::physics::saturation_vapour_pressure_iapws_pa(skin_c) -
+                               rh_pct / 100.0 * manikind::physics::saturation_vapour_pressure_iapws_pa(air_c)) / 1000.0;
         std::vector<double> skin(map.size(), skin_c), q;
         for (std::size_t z = 0; z < map.size(); ++z)
             q.push_back((test == "evaporative" ? dp_kpa / r_wet[z] : 0.0) + (skin_c - air_c) / r_dry[z]);
@@ -114,7 +114,7 @@ struct Lab {
         c.name = "clothing-unit";
         c.zone_map = map;
         c.instruments = an::default_instrument_specs();
-        c.ensembles["suit"] = {"two-piece suit", fcl};
+        c.ensembles["suit"] = {"two-piece suit", fcl, std::nullopt};
         return c;
     }
     static std::string fmt(const char* p, int c, int r) { return std::string(p) + std::to_string(c) + "-r" + std::to_string(r); }
@@ -392,8 +392,8 @@ TEST_CASE("clothing: a wet test within 0.5 K of isothermal without It warns with
         const auto& suit = ensemble(r, "suit");
         REQUIRE(suit.evaporative_total_parallel.has_value());
         const double measured = suit.evaporative_total_parallel->value;
-        const double dp_kpa = (manikind::physics::saturation_vapour_pressure_pa(35.0) -
-                               manikind::physics::vapour_pressure_pa(34.7, 40.0)) / 1000.0;
+        const double dp_kpa = (manikind::physics::saturation_vapour_pressure_iapws_pa(35.0) -
+                               0.40 * manikind::physics::saturation_vapour_pressure_iapws_pa(34.7)) / 1000.0;
         // Parallel, uniform gap: Ret_measured/Ret - 1 = -(gap/It) Ret_measured/dp exactly.
         CHECK(measured / ret - 1.0 == Approx(-0.3 / it * measured / dp_kpa).epsilon(1e-6));
         REQUIRE(suit.evaporative_dry_bias_bound.has_value());
@@ -602,4 +602,54 @@ TEST_CASE("clothing: the standards' stop rule: a heat loss still moving over the
     const auto none = cl::compute(c, an::analyze_campaign(c, standard), nullptr, nullptr);
     CHECK(none.without_result == std::vector<std::string>{"suit"});
     CHECK_THAT(cl::to_text(none), Catch::Contains("suit: NO RESULT: every trial of it was left out"));
+}
+
+TEST_CASE("clothing: a given fcl with its uncertainty (fcl_u) widens U of Icl, and one without says it is left out "
+          "(issue 63: a given fcl's uncertainty was in no term)", "[clothing]") {
+    const Lab lab;
+    an::Campaign c = lab.campaign(3, 1.2);
+    const auto a = an::analyze_campaign(c);
+    const auto without = cl::compute(c, a, nullptr, nullptr);
+    c.ensembles["suit"].fcl_u = 0.05;
+    const auto with = cl::compute(c, a, nullptr, nullptr);
+    const auto& s0 = ensemble(without, "suit");
+    const auto& s1 = ensemble(with, "suit");
+    CHECK_THAT(s0.fcl_reason, Catch::Contains("left out of U"));
+    CHECK_THAT(s1.fcl_reason, Catch::Contains("u(fcl) = 0.05"));
+    REQUIRE(s0.insulation_intrinsic_parallel);
+    REQUIRE(s1.insulation_intrinsic_parallel);
+    // Icl = It - Ia/fcl moves by Ia/fcl^2 per unit fcl.
+    const double ia = ensemble(with, "nude").insulation_total_parallel->value;
+    const double expected_u_b = std::hypot(s0.insulation_intrinsic_parallel->u_b, ia / (1.2 * 1.2) * 0.05);
+    CHECK(s1.insulation_intrinsic_parallel->u_b == Approx(expected_u_b).epsilon(1e-9));
+    CHECK(s1.insulation_total_parallel->U95 == Approx(s0.insulation_total_parallel->U95));  // It does not use fcl
+    // The recording format round-trips it and refuses it without a given fcl.
+    CHECK(an::ensembles_json(c.ensembles)["suit"]["fcl_u"] == 0.05);
+}
+
+TEST_CASE("clothing: with the skin fabric's resistance given, the skin's vapour pressure is taken at the wet fabric's "
+          "surface, q R below the sensor, and Ret follows its definition there", "[clothing]") {
+    const Lab lab;
+    const an::Campaign c = lab.campaign(2, 1.2);
+    const auto a = an::analyze_campaign(c);
+    cl::Options o;
+    o.fabric_resistance_m2k_w = 0.01;
+    const auto at_sensor = cl::compute(c, a, nullptr, nullptr);
+    const auto at_surface = cl::compute(c, a, nullptr, nullptr, o);
+    const auto& nude = ensemble(at_surface, "nude");
+    REQUIRE(nude.evaporative_total_parallel);
+    // The definition at the surface: (sum f p_sat(T - q R) - p_a) / sum f q, the nude wet test's fluxes.
+    const double dp_kpa = (1.0 - 0.4) * manikind::physics::saturation_vapour_pressure_iapws_pa(35.0) / 1000.0;
+    double ps = 0.0, q = 0.0;
+    for (std::size_t z = 0; z < lab.map.size(); ++z) {
+        const double f = lab.map.zones[z].area_m2 / lab.map.total_area_m2();
+        const double qz = dp_kpa / lab.rea[z];
+        ps += f * manikind::physics::saturation_vapour_pressure_iapws_pa(35.0 - qz * 0.01) / 1000.0;
+        q += f * qz;
+    }
+    const double p_air = 0.4 * manikind::physics::saturation_vapour_pressure_iapws_pa(35.0) / 1000.0;
+    CHECK(nude.evaporative_total_parallel->value == Approx((ps - p_air) / q).epsilon(1e-9));
+    CHECK(nude.evaporative_total_parallel->value < ensemble(at_sensor, "nude").evaporative_total_parallel->value);
+    CHECK_THAT(cl::to_json(at_surface)["method"]["evaporative"].get<std::string>(), Catch::Contains("wet fabric's surface"));
+    CHECK_THAT(cl::to_json(at_sensor)["method"]["evaporative"].get<std::string>(), Catch::Contains("Ret may read high"));
 }

@@ -88,6 +88,38 @@ def main():
             if again.returncode != 2 or "--force" not in again.stderr or forced.returncode != 0:
                 print(f"an existing report: {again.returncode} {again.stderr} / --force {forced.returncode}")
                 sys.exit(1)
+            # The customer's report (issue 64 part 4): header, identity, standards with edition,
+            # per-replicate values, regions head to foot in plain words, signatures, page x of y.
+            info = os.path.join(work, "info.toml")
+            with open(os.path.join(work, "logo.svg"), "w") as f:
+                f.write("<svg xmlns='http://www.w3.org/2000/svg' width='40' height='20'><rect width='40' height='20'/></svg>")
+            with open(info, "w") as f:
+                f.write('[lab]\nname = "Textile Lab Nord"\naddress = "Hafenstr. 1, Kiel"\naccreditation = "ISO/IEC 17025, D-PL-1234"\n'
+                        'logo = "logo.svg"\nmanikin = "ANDI-35 s/n 17"\nchamber = "CC-3"\n'
+                        '[report]\nnumber = "TR-2026-114"\ncustomer = "Acme Outdoor"\nsample = "Parka P-7, lot 44"\n'
+                        'operator = "J. Doe"\napprover = "A. Smith"\ninsulation_standard = "ASTM F1291-16"\n'
+                        'evaporative_standard = "ASTM F2370-16"\n')
+            customer = os.path.join(work, "customer.html")
+            c = subprocess.run([manikin, "clothing", out, "--report", customer, "--report-info", info, "--force"],
+                               capture_output=True, text=True)
+            html = open(customer, encoding="utf-8").read() if c.returncode == 0 else ""
+            for needle in ("Textile Lab Nord", "ISO/IEC 17025, D-PL-1234", "data:image/svg+xml;base64,", "Report TR-2026-114",
+                           "Acme Outdoor", "Parka P-7, lot 44", "ANDI-35 s/n 17", "insulation: ASTM F1291-16",
+                           "evaporative: ASTM F2370-16", "Replicate values", "Approved by: A. Smith", "Tested by: J. Doe",
+                           "counter(pages)", "upper arm (left)", "ensemble 1 of 3"):
+                if needle not in html:
+                    print(f"the customer's report lacks {needle!r} ({c.returncode}: {c.stderr})")
+                    sys.exit(1)
+            if html.find(">head<") > html.find(">foot (left)<"):
+                print("the region table is not head to foot")
+                sys.exit(1)
+            with open(info, "a") as f:
+                f.write('colour = "blue"\n')
+            bad = subprocess.run([manikin, "clothing", out, "--report", customer, "--report-info", info, "--force"],
+                                 capture_output=True, text=True)
+            if bad.returncode != 2 or "info.toml:16" not in bad.stderr or "report.colour: unknown key" not in bad.stderr:
+                print(f"an unknown report-info key: {bad.returncode} {bad.stderr}")
+                sys.exit(1)
             # Steady in heat flux too (the standards' steady heat loss): these trials are.
             f = subprocess.run([manikin, "clothing", out, "--json", "--require-flux-stability"], capture_output=True, text=True)
             strict = json.loads(f.stdout)

@@ -17,11 +17,11 @@
 #include "store/database_export.hpp"
 
 namespace {
-const std::string header = "name = \"flux\"\nreplicates = 1\ntrial_duration_min = 40\n";
+const std::string flux_plan_header = "name = \"flux\"\nreplicates = 1\ntrial_duration_min = 40\n";
 
-std::string refusal(const std::string& cases) {
+std::string flux_plan_refusal(const std::string& cases) {
     try {
-        (void)manikind::parse_campaign_plan(header + cases, "flux.toml");
+        (void)manikind::parse_campaign_plan(flux_plan_header + cases, "flux.toml");
     } catch (const manikind::UserError& e) {
         return e.what();
     }
@@ -32,7 +32,7 @@ std::string refusal(const std::string& cases) {
 TEST_CASE("constant heat flux: the case's keys parse, and every mistake is refused by file, line and key",
           "[daemon][comfort]") {
     const auto plan = manikind::parse_campaign_plan(
-        header + "[[cases]]\nid = 1\nchamber_temp_c = 20\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
+        flux_plan_header + "[[cases]]\nid = 1\nchamber_temp_c = 20\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
                  "heat_flux_w_m2 = 60\nheat_flux_by_region_w_m2 = { head = 80, hand_l = 90 }\n",
         "flux.toml");
     REQUIRE(plan.cases.size() == 1);
@@ -42,15 +42,15 @@ TEST_CASE("constant heat flux: the case's keys parse, and every mistake is refus
     CHECK(manikind::case_conditions_json(plan.cases[0])["control"] == "constant-heat-flux");
 
     const std::string base = "[[cases]]\nid = 1\nchamber_temp_c = 20\nchamber_rh_pct = 40\n";
-    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\n"), Catch::Contains("flux.toml:4") && Catch::Contains("needs heat_flux_w_m2"));
-    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = 60\nskin_setpoint_c = 34\n"),
+    CHECK_THAT(flux_plan_refusal(base + "control = \"constant-heat-flux\"\n"), Catch::Contains("flux.toml:4") && Catch::Contains("needs heat_flux_w_m2"));
+    CHECK_THAT(flux_plan_refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = 60\nskin_setpoint_c = 34\n"),
                Catch::Contains("flux.toml:10") && Catch::Contains("measured, not set"));
-    CHECK_THAT(refusal(base + "heat_flux_w_m2 = 60\n"), Catch::Contains("cases.heat_flux_w_m2") &&
+    CHECK_THAT(flux_plan_refusal(base + "heat_flux_w_m2 = 60\n"), Catch::Contains("cases.heat_flux_w_m2") &&
                                                            Catch::Contains("is for control = \"constant-heat-flux\""));
-    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = -5\n"), Catch::Contains("outside 0..1000"));
-    CHECK_THAT(refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = 60\nheat_flux_by_region_w_m2 = { tail = 5 }\n"),
+    CHECK_THAT(flux_plan_refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = -5\n"), Catch::Contains("outside 0..1000"));
+    CHECK_THAT(flux_plan_refusal(base + "control = \"constant-heat-flux\"\nheat_flux_w_m2 = 60\nheat_flux_by_region_w_m2 = { tail = 5 }\n"),
                Catch::Contains("no such region") && Catch::Contains("head"));
-    CHECK_THAT(refusal(base + "control = \"comfy\"\n"), Catch::Contains("\"constant-heat-flux\""));
+    CHECK_THAT(flux_plan_refusal(base + "control = \"comfy\"\n"), Catch::Contains("\"constant-heat-flux\""));
 
     // The daemon's limit: heating above safety.max_heater_power_w_m2 is refused before the start.
     auto hot = plan;
@@ -64,7 +64,7 @@ TEST_CASE("constant heat flux on the simulated lab: every zone is heated at its 
           "world's physics loses that heat", "[daemon][comfort][proof]") {
     manikind::test::DaemonFixture f;
     const auto plan = manikind::parse_campaign_plan(
-        header + "[[cases]]\nid = 1\nchamber_temp_c = 24\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
+        flux_plan_header + "[[cases]]\nid = 1\nchamber_temp_c = 24\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
                  "heat_flux_w_m2 = 45\nheat_flux_by_region_w_m2 = { head = 60 }\n",
         "flux.toml");
     REQUIRE(f.daemon().start_campaign(plan).empty());
@@ -107,19 +107,19 @@ TEST_CASE("constant heat flux on the simulated lab: every zone is heated at its 
 TEST_CASE("comfort mode: the coefficients parse with their defaults, and mistakes are refused by file, line and key",
           "[daemon][comfort]") {
     const std::string base = "[[cases]]\nid = 1\nchamber_temp_c = 20\nchamber_rh_pct = 40\n";
-    const auto plan = manikind::parse_campaign_plan(header + base + "control = \"comfort\"\n", "flux.toml");
+    const auto plan = manikind::parse_campaign_plan(flux_plan_header + base + "control = \"comfort\"\n", "flux.toml");
     REQUIRE(plan.cases[0].comfort.has_value());
     CHECK(plan.cases[0].comfort->a_c == 36.4);
     CHECK(plan.cases[0].comfort->b_c_m2_w == 0.054);
     CHECK(plan.cases[0].comfort->skin_c(50.0) == Approx(33.7));
     CHECK(manikind::case_conditions_json(plan.cases[0])["control"] == "comfort");
-    const auto own = manikind::parse_campaign_plan(header + base + "control = \"comfort\"\ncomfort_a_c = 36\ncomfort_b_c_m2_w = 0.05\n",
+    const auto own = manikind::parse_campaign_plan(flux_plan_header + base + "control = \"comfort\"\ncomfort_a_c = 36\ncomfort_b_c_m2_w = 0.05\n",
                                                    "flux.toml");
     CHECK(own.cases[0].comfort->a_c == 36.0);
-    CHECK_THAT(refusal(base + "control = \"comfort\"\nskin_setpoint_c = 34\n"),
+    CHECK_THAT(flux_plan_refusal(base + "control = \"comfort\"\nskin_setpoint_c = 34\n"),
                Catch::Contains("flux.toml:9") && Catch::Contains("follows its own heat loss"));
-    CHECK_THAT(refusal(base + "comfort_a_c = 36\n"), Catch::Contains("is for control = \"comfort\""));
-    CHECK_THAT(refusal(base + "control = \"comfort\"\ncomfort_b_c_m2_w = 3\n"), Catch::Contains("outside 0..0.2"));
+    CHECK_THAT(flux_plan_refusal(base + "comfort_a_c = 36\n"), Catch::Contains("is for control = \"comfort\""));
+    CHECK_THAT(flux_plan_refusal(base + "control = \"comfort\"\ncomfort_b_c_m2_w = 3\n"), Catch::Contains("outside 0..0.2"));
 }
 
 TEST_CASE("comfort mode loop: each zone's setpoint moves towards a - b q of its own measured loss at no more than the "
@@ -152,7 +152,7 @@ TEST_CASE("comfort mode on the simulated lab: every zone's skin settles on the c
           "[daemon][comfort][proof]") {
     manikind::test::DaemonFixture f;
     const auto plan = manikind::parse_campaign_plan(
-        header + "[[cases]]\nid = 1\nchamber_temp_c = 22\nchamber_rh_pct = 40\ncontrol = \"comfort\"\n", "flux.toml");
+        flux_plan_header + "[[cases]]\nid = 1\nchamber_temp_c = 22\nchamber_rh_pct = 40\ncontrol = \"comfort\"\n", "flux.toml");
     REQUIRE(f.daemon().start_campaign(plan).empty());
     f.daemon().run_virtual();
     auto& db = f.daemon().db();

@@ -71,3 +71,14 @@ TEST_CASE("Humidity ratio: Text S3's 12.55 g/kg at case 1 (40.4 C) is ~27 % RH",
     const double w = humidity_ratio_kg_kg(vapour_pressure_pa(40.4, 27.6));
     CHECK(relative_humidity_from_ratio_pct(40.4, w) == Approx(27.6).margin(1e-9));
 }
+
+TEST_CASE("IAPWS saturation pressure (Wagner & Pruss) matches IAPWS-95's printed values within 0.01 %, where the seed "
+          "formula is 0.39 % low at 35 C (issue 63: the clothing tests' Ret uses it)", "[physics][psychro]") {
+    const std::pair<double, double> iapws[] = {{0.01, 611.657}, {20.0, 2339.3}, {35.0, 5629.0}, {50.0, 12352.0}, {100.0, 101418.0}};
+    for (const auto& [temp_c, p_pa] : iapws) {
+        INFO(temp_c << " C");
+        CHECK(manikind::physics::saturation_vapour_pressure_iapws_pa(temp_c) == Approx(p_pa).epsilon(1e-4));
+    }
+    const double seed = manikind::physics::saturation_vapour_pressure_pa(35.0);
+    CHECK(seed / manikind::physics::saturation_vapour_pressure_iapws_pa(35.0) - 1.0 == Approx(-0.0039).margin(0.0005));
+}

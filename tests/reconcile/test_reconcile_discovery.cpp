@@ -22,10 +22,7 @@ namespace tw = manikind::physics::twin;
 namespace {
 
 // Prints what the tool said (the table in docs/reconcile.md, "Discovery beyond the list").
-rc::Report discover(const tw::TwinVersion& world, test::SyntheticOptions o, const char* what) {
-    const auto model = rc::make_twin_model(test::make_campaign(world, o), tw::TwinVersion{});
-    auto rep = rc::reconcile(*model);
-    std::printf("%s, %d replicates, seed %u: ", what, o.replicates, o.seed);
+void print_claim(const rc::Report& rep) {
     if (!rep.explanation) std::printf("no claim\n");
     else {
         std::size_t k = 0;
@@ -37,6 +34,13 @@ rc::Report discover(const tw::TwinVersion& world, test::SyntheticOptions o, cons
         std::printf("%s\n", rep.explanation_partial ? " (partial)" : "");
     }
     std::printf("  %s\n", rep.statement.c_str());
+}
+
+rc::Report discover(const tw::TwinVersion& world, test::SyntheticOptions o, const char* what) {
+    const auto model = rc::make_twin_model(test::make_campaign(world, o), tw::TwinVersion{});
+    auto rep = rc::reconcile(*model);
+    std::printf("%s, %d replicates, seed %u: ", what, o.replicates, o.seed);
+    print_claim(rep);
     return rep;
 }
 
@@ -75,28 +79,50 @@ TEST_CASE("discovery: a vertical air gradient of 1.5 K/m is described as a gradi
     }
 }
 
+namespace {
+// At one replicate the lab's scatter is carried from an earlier 3-replicate campaign of it (--noise-from).
+rc::Report discover_at(const tw::TwinVersion& world, test::SyntheticOptions o, const char* what) {
+    if (o.replicates > 1) return discover(world, o, what);
+    test::SyntheticOptions earlier;
+    earlier.seed = o.seed + 100;
+    earlier.replicates = 3;
+    const auto source = rc::make_twin_model(test::make_campaign(tw::TwinVersion{}, earlier), tw::TwinVersion{});
+    const auto model = rc::make_twin_model(test::make_campaign(world, o), tw::TwinVersion{},
+                                           rc::carried_noise(*source, rc::Options{}.instruments, "an earlier campaign"));
+    auto rep = rc::reconcile(*model);
+    std::printf("%s, 1 replicate with --noise-from, seed %u: ", what, o.seed);
+    print_claim(rep);
+    return rep;
+}
+}  // namespace
+
 TEST_CASE("discovery: the surfaces in front of the body 3 K warmer than the probed wall are described as radiant "
-          "asymmetry at the front with the truth in its interval",
+          "asymmetry at the front with the truth in its interval, at 1 (--noise-from), 2 and 3 replicates",
           "[reconcile][discovery][proof]") {
-    test::SyntheticOptions o;
-    o.seed = 32;
-    o.front_wall_offset_c = 3.0;
-    const auto rep = discover(tw::TwinVersion{"world", {}}, o, "front surfaces 3 K warmer");
-    INFO(rep.statement);
-    REQUIRE(rep.explanation.has_value());
-    CHECK(labels(*rep.explanation) == std::set<std::string>{"input_pattern:wall_temp_c/front"});
-    CHECK(holds(*rep.explanation, "input_pattern:wall_temp_c/front", 3.0));
-    CHECK(rep.statement.find("radiant asymmetry") != std::string::npos);
+    for (int replicates : {1, 2, 3}) {
+        test::SyntheticOptions o;
+        o.seed = 32;
+        o.replicates = replicates;
+        o.front_wall_offset_c = 3.0;
+        const auto rep = discover_at(tw::TwinVersion{"world", {}}, o, "front surfaces 3 K warmer");
+        INFO(replicates << " replicates: " << rep.statement);
+        REQUIRE(rep.explanation.has_value());
+        CHECK(labels(*rep.explanation) == std::set<std::string>{"input_pattern:wall_temp_c/front"});
+        CHECK(holds(*rep.explanation, "input_pattern:wall_temp_c/front", 3.0));
+        CHECK(rep.statement.find("radiant asymmetry") != std::string::npos);
+    }
 }
 
 TEST_CASE("discovery: one leg drier (wettedness 0.4 on the left thigh, calf and foot) is answered with wettedness on "
-          "the left or not at all, never with another term",
+          "the left or not at all, never with another term, at 1 (--noise-from), 2 and 3 replicates",
           "[reconcile][discovery][proof]") {
+  for (int replicates : {1, 2, 3}) {
     test::SyntheticOptions o;
     o.seed = 33;
+    o.replicates = replicates;
     o.left_leg_wettedness = 0.4;
-    const auto rep = discover(tw::TwinVersion{"world", {}}, o, "left leg wettedness 0.4");
-    INFO(rep.statement);
+    const auto rep = discover_at(tw::TwinVersion{"world", {}}, o, "left leg wettedness 0.4");
+    INFO(replicates << " replicates: " << rep.statement);
     if (rep.explanation)
         for (const auto& t : rep.explanation->terms) {
             INFO(t.label());
@@ -104,6 +130,7 @@ TEST_CASE("discovery: one leg drier (wettedness 0.4 on the left thigh, calf and 
                                   (t.generated() && t.input == "wettedness" && t.pattern == "left");
             CHECK(left_wet);
         }
+  }
 }
 
 TEST_CASE("discovery: humidity buoyancy (gamma 146) with a 1 K/m gradient is answered humidity buoyancy, then a "
