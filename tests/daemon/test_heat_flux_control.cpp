@@ -27,6 +27,32 @@ std::string flux_plan_refusal(const std::string& cases) {
     }
     return "accepted";
 }
+// One case of the plan run on the simulated lab's virtual clock: it must end done and its one
+// trial be steady and used (why not, when it is not).
+struct RanTrial {
+    manikind::analysis::Campaign campaign;
+    manikind::analysis::CampaignResult analysis;
+    const manikind::analysis::TrialResult& trial() const { return analysis.cases.at(0).trials.at(0); }
+};
+RanTrial run_one_case(manikind::test::DaemonFixture& f, const std::string& cases) {
+    const auto plan = manikind::parse_campaign_plan(flux_plan_header + cases, "flux.toml");
+    REQUIRE(f.daemon().start_campaign(plan).empty());
+    f.daemon().run_virtual();
+    auto& db = f.daemon().db();
+    const auto trials = db.trials(*db.find_campaign(plan.name));
+    REQUIRE(trials.size() == 1);
+    CHECK(trials[0].state == "done");
+    RanTrial out{manikind::campaign_from_database(db, plan.name), {}};
+    out.analysis = manikind::analysis::analyze_campaign(out.campaign);
+    std::string why;
+    for (const auto& c : out.analysis.unanalysed_cases)
+        for (const auto& u : c.trials) why += u.id + ": " + u.steady.reason + "\n";
+    INFO(why);
+    REQUIRE(out.analysis.cases.size() == 1);
+    REQUIRE(out.analysis.cases[0].trials.size() == 1);
+    REQUIRE(out.trial().included);
+    return out;
+}
 }  // namespace
 
 TEST_CASE("constant heat flux: the case's keys parse, and every mistake is refused by file, line and key",
@@ -63,23 +89,10 @@ TEST_CASE("constant heat flux: the case's keys parse, and every mistake is refus
 TEST_CASE("constant heat flux on the simulated lab: every zone is heated at its setpoint and its skin settles where the "
           "world's physics loses that heat", "[daemon][comfort][proof]") {
     manikind::test::DaemonFixture f;
-    const auto plan = manikind::parse_campaign_plan(
-        flux_plan_header + "[[cases]]\nid = 1\nchamber_temp_c = 24\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
-                 "heat_flux_w_m2 = 45\nheat_flux_by_region_w_m2 = { head = 60 }\n",
-        "flux.toml");
-    REQUIRE(f.daemon().start_campaign(plan).empty());
-    f.daemon().run_virtual();
-    auto& db = f.daemon().db();
-    const auto trials = db.trials(*db.find_campaign(plan.name));
-    REQUIRE(trials.size() == 1);
-    CHECK(trials[0].state == "done");
-
-    const auto campaign = manikind::campaign_from_database(db, plan.name);
-    const auto analysis = manikind::analysis::analyze_campaign(campaign);
-    REQUIRE(analysis.cases.size() == 1);
-    REQUIRE(analysis.cases[0].trials.size() == 1);
-    const auto& t = analysis.cases[0].trials[0];
-    REQUIRE(t.included);
+    const auto ran = run_one_case(f, "[[cases]]\nid = 1\nchamber_temp_c = 24\nchamber_rh_pct = 40\ncontrol = \"constant-heat-flux\"\n"
+                                     "heat_flux_w_m2 = 45\nheat_flux_by_region_w_m2 = { head = 60 }\n");
+    const auto& campaign = ran.campaign;
+    const auto& t = ran.trial();
     const auto world = manikind::simulated_lab_options(f.daemon().config()).world;
     const auto& map = campaign.zone_map;
     double lowest_skin = 99.0, highest_skin = 0.0;
@@ -151,25 +164,9 @@ TEST_CASE("comfort mode loop: each zone's setpoint moves towards a - b q of its 
 TEST_CASE("comfort mode on the simulated lab: every zone's skin settles on the comfort equation of its own heat loss",
           "[daemon][comfort][proof]") {
     manikind::test::DaemonFixture f;
-    const auto plan = manikind::parse_campaign_plan(
-        flux_plan_header + "[[cases]]\nid = 1\nchamber_temp_c = 22\nchamber_rh_pct = 40\ncontrol = \"comfort\"\n", "flux.toml");
-    REQUIRE(f.daemon().start_campaign(plan).empty());
-    f.daemon().run_virtual();
-    auto& db = f.daemon().db();
-    const auto trials = db.trials(*db.find_campaign(plan.name));
-    REQUIRE(trials.size() == 1);
-    CHECK(trials[0].state == "done");
-    const auto campaign = manikind::campaign_from_database(db, plan.name);
-    const auto analysis = manikind::analysis::analyze_campaign(campaign);
-    for (const auto& c : analysis.unanalysed_cases)
-        for (const auto& u : c.trials) INFO(u.id << ": " << u.exclusion_reason << " / " << u.steady.reason);
-    std::string why;
-    for (const auto& c : analysis.unanalysed_cases)
-        for (const auto& u : c.trials) why += u.id + ": " + u.steady.reason + "\n";
-    INFO(why);
-    REQUIRE(analysis.cases.size() == 1);
-    const auto& t = analysis.cases[0].trials.at(0);
-    REQUIRE(t.included);
+    const auto ran = run_one_case(f, "[[cases]]\nid = 1\nchamber_temp_c = 22\nchamber_rh_pct = 40\ncontrol = \"comfort\"\n");
+    const auto& campaign = ran.campaign;
+    const auto& t = ran.trial();
     double worst = 0.0, lowest = 99.0, highest = 0.0;
     for (std::size_t z = 0; z < campaign.zone_map.size(); ++z) {
         worst = std::max(worst, std::abs(t.zone_skin_temp_c[z] - (36.4 - 0.054 * t.zone_q_w_m2[z])));
