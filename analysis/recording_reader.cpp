@@ -676,8 +676,13 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
     }
     if (t.contains("control")) {
         info.control = cj.string(t, "control", path, at_key("control"));
-        if (info.control != "physiological" && info.control != "constant-skin")
-            cj.fail(path + "control", fmt::format("expected \"physiological\" or \"constant-skin\", found '{}'", info.control),
+        // The daemon's modes (docs/daemon.md): an export of a comfort or constant-heat-flux campaign
+        // carries them, and teq reads it back.
+        if (info.control != "physiological" && info.control != "constant-skin" && info.control != "comfort" &&
+            info.control != "constant-heat-flux")
+            cj.fail(path + "control",
+                    fmt::format("expected \"constant-skin\", \"constant-heat-flux\", \"comfort\" or \"physiological\", found '{}'",
+                                info.control),
                     at_key("control"));
         if (info.control == "constant-skin") info.control.clear();
     }

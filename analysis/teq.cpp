@@ -73,6 +73,54 @@ Fit fit_zone(const Calibration& c, std::size_t z, const Draw& d) {
     return f;
 }
 
+// A zone's exchange against its temperature difference x = t_sk - t_ref: q = a x + b x|x|, so
+// h(x) = a + b|x|. ISO 14505-2's h_cal is constant (b = 0); free convection is not (h ~ x^0.25),
+// and a teq far from the calibration's differences came out biased by more than its U95 (the
+// cabin on the simulated lab: 0.3-0.7 K high). The curve is fitted to the calibration's own
+// points (least squares in q over its trials, two or more distinct differences), read at the
+// zone's own difference.
+struct Curve {
+    double a = kNaN, b = 0.0;
+    double h(double x) const { return a + b * std::abs(x); }
+    // The difference x at which this zone exchanges q: b x|x| + a x = q, solved stably.
+    double difference(double q) const {
+        const double disc = a * a + 4.0 * b * std::abs(q);
+        if (b == 0.0 || !(disc >= 0.0)) return q / a;
+        return 2.0 * q / (a + std::sqrt(disc));
+    }
+};
+
+Curve fit_curve(const Calibration& c, std::size_t z, const Draw& d, bool curved) {
+    Curve out;
+    const Fit line = fit_zone(c, z, d);
+    out.a = line.h;
+    if (!curved || line.n < 2) return out;
+    const auto skin = c.instruments.at("skin_temp_c"), flux = c.instruments.at("heat_flux_w_m2");
+    // Normal equations of q = a x + b x|x| (no intercept).
+    double s11 = 0.0, s12 = 0.0, s22 = 0.0, t1 = 0.0, t2 = 0.0, x_lo = 1e9, x_hi = -1e9;
+    for (const auto& t : c.trials) {
+        if (z >= t.skin_temp_c.size() || !std::isfinite(t.skin_temp_c[z]) || !std::isfinite(t.q_w_m2[z])) continue;
+        const double x = t.skin_temp_c[z] + d.skin * skin.limit(t.skin_temp_c[z]) - reference_c(t, c, d);
+        const double y = perturbed_q(t.q_w_m2[z], flux, d);
+        const double u = x * std::abs(x);
+        s11 += x * x;
+        s12 += x * u;
+        s22 += u * u;
+        t1 += x * y;
+        t2 += u * y;
+        x_lo = std::min(x_lo, x);
+        x_hi = std::max(x_hi, x);
+    }
+    const double det = s11 * s22 - s12 * s12;
+    // Two distinct differences at least 2 K apart, or the curvature is the noise's.
+    if (!(x_hi - x_lo >= 2.0) || !(det > 1e-9 * s11 * s22)) return out;
+    const double a = (t1 * s22 - t2 * s12) / det, b = (s11 * t2 - s12 * t1) / det;
+    if (!(a > 0.0)) return out;
+    out.a = a;
+    out.b = b;
+    return out;
+}
+
 Draw draw_errors(const std::map<std::string, InstrumentSpec>& instruments, std::mt19937_64& rng) {
     const auto dist = [&](const char* ch) {
         const auto it = instruments.find(ch);
@@ -523,7 +571,7 @@ struct PartValues {
     double whole = kNaN;
 };
 
-PartValues part_values(const ReplicateData& rep, const std::vector<double>& h, const ZoneMap& map,
+PartValues part_values(const ReplicateData& rep, const std::vector<Curve>& h, const ZoneMap& map,
                        const std::vector<std::string>& regions, const InstrumentSpec& skin, const InstrumentSpec& flux,
                        const Draw& d) {
     PartValues v;
@@ -534,9 +582,10 @@ PartValues part_values(const ReplicateData& rep, const std::vector<double>& h, c
         if (z >= rep.skin_c.size() || !std::isfinite(rep.skin_c[z]) || !std::isfinite(rep.q_w_m2[z])) continue;
         const double ts = rep.skin_c[z] + d.skin * skin.limit(rep.skin_c[z]);
         const double q = perturbed_q(rep.q_w_m2[z], flux, d);
-        const double teq = ts - q / h[z];  // ISO 14505-2's definition per zone
+        const double x = h[z].difference(q);
+        const double teq = ts - x;  // ISO 14505-2's definition per zone: t_sk - q / h_cal
         v.zone[z] = teq;
-        const double w = map.zones[z].area_m2 * h[z];
+        const double w = map.zones[z].area_m2 * h[z].h(x);
         reg[map.zones[z].region].first += w * teq;
         reg[map.zones[z].region].second += w;
         wn += w * teq;
@@ -585,8 +634,11 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
     std::vector<std::string> regions;
     for (const auto& z : map.zones)
         if (std::find(regions.begin(), regions.end(), z.region) == regions.end()) regions.push_back(z.region);
-    std::vector<double> h_cal;
-    for (const auto& z : calibration.zones) h_cal.push_back(z.h.value);
+    std::vector<Curve> h_cal;
+    for (std::size_t z = 0; z < calibration.zones.size(); ++z) {
+        h_cal.push_back(fit_curve(calibration, z, Draw{}, options.curved_h));
+        if (!options.curved_h || !std::isfinite(h_cal.back().a)) h_cal.back() = Curve{calibration.zones[z].h.value, 0.0};
+    }
 
     for (const auto& cs : analysis.unanalysed_cases) out.warnings.push_back(fmt::format("case {}: no steady trial, left out", cs.case_id));
     for (const auto& cs : analysis.cases) {
@@ -621,8 +673,8 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         // value (the zones' fits are independent: added in quadrature, Welch-Satterthwaite).
         std::vector<PartValues> shifted;  // per zone
         for (std::size_t z = 0; z < map.size(); ++z) {
-            std::vector<double> h = h_cal;
-            if (std::isfinite(calibration.zones[z].h.u_a)) h[z] += calibration.zones[z].h.u_a;
+            std::vector<Curve> h = h_cal;
+            if (std::isfinite(calibration.zones[z].h.u_a)) h[z].a += calibration.zones[z].h.u_a;
             PartValues sum;
             sum.zone.assign(map.size(), 0.0);
             sum.region.assign(regions.size(), 0.0);
@@ -641,10 +693,10 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
         const int draws = std::max(100, options.monte_carlo_draws);
         std::vector<Spread> zone_spread(map.size()), region_spread(regions.size());
         Spread whole_spread;
-        std::vector<double> h(map.size());
+        std::vector<Curve> h(map.size());
         for (int i = 0; i < draws; ++i) {
             const Draw d = draw_errors(calibration.instruments, rng);
-            for (std::size_t z = 0; z < map.size(); ++z) h[z] = fit_zone(calibration, z, d).h;
+            for (std::size_t z = 0; z < map.size(); ++z) h[z] = fit_curve(calibration, z, d, options.curved_h);
             PartValues sum;
             sum.zone.assign(map.size(), 0.0);
             sum.region.assign(regions.size(), 0.0);
@@ -714,6 +766,29 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             c.whole_body = finish("whole_body", values, mean(values), moved, whole_spread.sd(), a, ts, q);
         }
         if (c.replicates == 1) c.notes.push_back("one replicate: Type A from the calibration's fit only");
+        // h_cal is a straight line through the calibration's points; free convection is not
+        // straight (h ~ dT^0.25), so a teq beyond the references the calibration saw rests on an
+        // extrapolation its U95 does not carry (ISO 14505-2 calibrates over the range measured).
+        if (!calibration.trials.empty()) {
+            double ref_lo = 1e9, ref_hi = -1e9;
+            for (const auto& t : calibration.trials) {
+                const double ref = 0.5 * (t.air_temp_c + t.wall_temp_c);
+                ref_lo = std::min(ref_lo, ref);
+                ref_hi = std::max(ref_hi, ref);
+            }
+            std::string beyond;
+            int count = 0;
+            for (const auto& z : c.zones)
+                if (z.teq.value < ref_lo - 1.0 || z.teq.value > ref_hi + 1.0) {
+                    beyond += fmt::format("{}{} {:.1f}", count ? ", " : "", z.name, z.teq.value);
+                    ++count;
+                }
+            if (count)
+                c.notes.push_back(fmt::format("{} zone{} beyond the calibration's references ({:.1f}-{:.1f} °C) by more than 1 K: "
+                                              "{}; h_cal is extrapolated there, by a straight line where free convection "
+                                              "is not, and U95 does not carry that (calibrate over the range measured)",
+                                              count, count == 1 ? "" : "s", ref_lo, ref_hi, beyond));
+        }
         if (cs.wettedness && *cs.wettedness > 0.0)
             out.warnings.push_back(fmt::format("case {}: wettedness {:.2f}: q includes evaporation, so teq (a dry-heat index) "
                                                "comes out too high; measure teq with a dry skin",
@@ -747,6 +822,8 @@ nlohmann::json to_json(const Result& r) {
     j["calibration_campaign"] = r.calibration_campaign;
     j["heat_flux_sign"] = kHeatFluxSign;
     j["method"] = {{"zone", "teq = t_skin - q / h_cal (ISO 14505-2)"},
+                   {"h_cal", r.options.curved_h ? "the calibration's curve h(x) = a + b|x|, read at the zone's own difference x = t_skin - teq"
+                                                : "constant (ISO 14505-2)"},
                    {"region_whole_body", "the uniform temperature in which the part loses its zones' heat: teq weighted by A_z h_cal,z"},
                    {"type_a", "replicates s/sqrt(n) and the calibration fit's standard errors, Welch-Satterthwaite"},
                    {"type_b", fmt::format("Monte Carlo over the instruments, {} draws; the manikin's errors shared with the calibration",
@@ -776,7 +853,9 @@ nlohmann::json to_json(const Result& r) {
 std::string to_text(const Result& r) {
     std::ostringstream o;
     o << fmt::format("Equivalent temperature (ISO 14505-2): {} with the calibration from {}\n", r.campaign, r.calibration_campaign);
-    o << fmt::format("teq ± U95 (°C; Type A replicates + calibration fit, Type B instruments); neutral ranges: {}\n", r.ranges.source);
+    o << fmt::format("teq ± U95 (°C; Type A replicates + calibration fit, Type B instruments); h_cal {}; neutral ranges: {}\n",
+                     r.options.curved_h ? "read from the calibration's curve at each zone's difference" : "constant (ISO 14505-2)",
+                     r.ranges.source);
     const auto row = [&](const PartTeq& p) {
         return fmt::format("  {:<18} {:>7} ± {:<5.2f} {:>7} {:>9}  {}\n", p.name, fmt_c(p.teq.value), p.teq.U95, fmt_c(p.skin_temp_c),
                            fmt::format("{:.1f}", p.q_w_m2),
@@ -845,6 +924,57 @@ plot::Figure comfort_figure(const Result& r) {
         f.xy_panels.push_back(std::move(p));
     }
     return f;
+}
+
+std::string report_html(const Result& r, const std::string& generated_utc, const std::string& program) {
+    using plot::xml_escape;
+    const auto value = [](const Value& v) {
+        return std::isfinite(v.value) ? fmt::format("{:.1f} ± {:.1f}", v.value, v.U95) : std::string("–");
+    };
+    const auto range = [](const PartTeq& p) {
+        return p.neutral ? fmt::format("{:.1f}–{:.1f}", p.neutral->cold_limit_c, p.neutral->warm_limit_c) : std::string("–");
+    };
+    const auto row = [&](const PartTeq& p, bool strong) {
+        const std::string name = strong ? "<strong>" + xml_escape(p.name) + "</strong>" : xml_escape(p.name);
+        return fmt::format("<tr><td>{}</td><td class=n>{}</td><td class=n>{:.2f}</td><td class=n>{:.1f}</td><td>{}</td><td>{}</td></tr>\n",
+                           name, value(p.teq), p.skin_temp_c, p.q_w_m2, range(p), xml_escape(p.verdict));
+    };
+    std::string o;
+    o += "<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>Equivalent temperature: " + xml_escape(r.campaign) +
+         "</title>\n<style>body{font:14px/1.35 sans-serif;margin:2em;max-width:60em}table{border-collapse:collapse;margin:.5em 0 1.5em}"
+         "td,th{border-bottom:1px solid #ccc;padding:2px 8px;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}"
+         ".warn{color:#a40}svg{max-width:100%;height:auto}</style></head><body>\n";
+    o += "<h1>Equivalent temperature (ISO 14505-2)</h1>\n<table>\n";
+    o += "<tr><th>campaign</th><td>" + xml_escape(r.campaign) + "</td></tr>\n";
+    o += "<tr><th>calibration</th><td>" + xml_escape(r.calibration_campaign) + "</td></tr>\n";
+    o += "<tr><th>method</th><td>teq = t<sub>sk</sub> − q / h<sub>cal</sub> per zone; regions and whole body as the uniform "
+         "temperature in which they lose their zones' heat; h<sub>cal</sub> " +
+         std::string(r.options.curved_h ? "read from the calibration's curve at each zone's own difference" : "constant") +
+         "; 95 % intervals, Type A + B (GUM), " +
+         std::to_string(r.options.monte_carlo_draws) + " Monte Carlo draws</td></tr>\n";
+    o += "<tr><th>neutral ranges</th><td>" +
+         (r.ranges.placeholder ? std::string("<span class=warn>placeholders 21–26 °C, not from a source</span>") : xml_escape(r.ranges.source)) +
+         "</td></tr>\n";
+    o += "<tr><th>written</th><td>" + xml_escape(generated_utc) + " by " + xml_escape(program) + "</td></tr>\n</table>\n";
+    for (const auto& w : r.warnings) o += "<p class=warn>warning: " + xml_escape(w) + "</p>\n";
+    const std::string head = "<table><tr><th>part</th><th>teq ± U95 (°C)</th><th>skin (°C)</th><th>q (W/m²)</th><th>neutral (°C)</th>"
+                             "<th>verdict</th></tr>\n";
+    for (const auto& c : r.cases) {
+        o += fmt::format("<h2>Case {}</h2>\n<p>{} replicate{}; air {:.2f} °C, walls {:.2f} °C, air speed {:.2f} m/s (the probes' means)</p>\n",
+                         c.case_id, c.replicates, c.replicates == 1 ? "" : "s", c.air_temp_c, c.wall_temp_c, c.air_speed_m_s);
+        for (const auto& n : c.notes) o += "<p class=warn>note: " + xml_escape(n) + "</p>\n";
+        o += head + row(c.whole_body, true);
+        for (const auto& p : c.regions) o += row(p, false);
+        o += "</table>\n";
+    }
+    o += "<h2>Comfort-zone diagram</h2>\n" + plot::to_svg(comfort_figure(r)) + "\n";
+    for (const auto& c : r.cases) {
+        o += fmt::format("<h2>Case {}: every zone</h2>\n", c.case_id) + head;
+        for (const auto& p : c.zones) o += row(p, false);
+        o += "</table>\n";
+    }
+    o += "</body></html>\n";
+    return o;
 }
 
 }  // namespace manikind::analysis::teq

@@ -41,6 +41,9 @@ struct Limits {
 
 struct Options {
     int monte_carlo_draws = 2000;
+    // h_cal read at the zone's own temperature difference from the calibration's curve (q = a x +
+    // b x|x| over its trials; docs/comfort.md, "h_cal's curve"); false: ISO 14505-2's constant.
+    bool curved_h = true;
     unsigned seed = 20261129;
     double confidence = 0.95;
 };
@@ -151,5 +154,9 @@ nlohmann::json to_json(const Result& r);
 std::string to_text(const Result& r);
 // The comfort-zone diagram: per case, each zone's teq ± U95 against its neutral range.
 plot::Figure comfort_figure(const Result& r);
+// A page for the reader (`manikin teq --report`): which campaign and calibration, when, by which
+// program and standard, the whole body and regions per case, the diagram, every zone, the notes
+// and warnings. HTML with the diagram's SVG inline, nothing fetched.
+std::string report_html(const Result& r, const std::string& generated_utc, const std::string& program);
 
 }  // namespace manikind::analysis::teq

@@ -90,7 +90,7 @@ void add_calibrate(CLI::App& app) {
 void add_teq(CLI::App& app) {
     struct Opts {
         CampaignSource source;
-        std::string calibration, ranges, plot;
+        std::string calibration, ranges, plot, report;
         bool json = false, force = false;
         analysis::teq::Options options;
     };
@@ -102,7 +102,12 @@ void add_teq(CLI::App& app) {
     cmd->add_option("--ranges", o->ranges, "The lab's neutral ranges: CSV part,cold_limit_c,warm_limit_c (part: a zone, a "
                                            "region or whole_body); without it, placeholders (docs/comfort.md)");
     cmd->add_option("--plot", o->plot, "Write the comfort-zone diagram (SVG) to this file (new, or with --force)");
-    cmd->add_flag("--force", o->force, "Replace an existing diagram");
+    cmd->add_option("--report", o->report, "Write a page for the reader (HTML with the diagram inline): campaign, calibration, "
+                                           "when, the standard, the whole body and regions per case, every zone, notes");
+    cmd->add_flag("--force", o->force, "Replace an existing diagram or report");
+    cmd->add_flag("--constant-h", [o](std::int64_t) { o->options.curved_h = false; },
+                  "Use each zone's h_cal as one constant, as ISO 14505-2 writes it (default: read from the calibration's curve "
+                  "at the zone's own temperature difference, docs/comfort.md)");
     cmd->add_flag("--json", o->json, "Print one JSON document (docs/formats.md section 7) instead of the table");
     cmd->add_option("--draws", o->options.monte_carlo_draws, "Monte Carlo draws for the Type B uncertainty")
         ->check(CLI::Range(100, 1000000))
@@ -111,12 +116,15 @@ void add_teq(CLI::App& app) {
                 "their zones' heat (docs/comfort.md). Each case of the campaign is one environment.\n"
                 "Example: manikin teq cabin-20261129 --calibration manikin-teq-2026-11.json --ranges lab-ranges.csv --plot teq.svg");
     cmd->callback([o] {
-        std::optional<ExportTarget> target;
-        if (!o->plot.empty()) {
-            auto inputs = source_inputs(o->source);
-            inputs.emplace_back(o->calibration);
-            if (!o->ranges.empty()) inputs.emplace_back(o->ranges);
-            target.emplace(o->plot, ExportShape::file, o->force, inputs);
+        // Both outputs are checked before anything is read (docs/cli.md, the output guard).
+        std::optional<ExportTarget> target, report_target;
+        auto inputs = source_inputs(o->source);
+        inputs.emplace_back(o->calibration);
+        if (!o->ranges.empty()) inputs.emplace_back(o->ranges);
+        if (!o->plot.empty()) target.emplace(o->plot, ExportShape::file, o->force, inputs);
+        if (!o->report.empty()) {
+            if (o->report == o->plot) throw UserError(fmt::format("--report and --plot name the same file: {}", o->report));
+            report_target.emplace(o->report, ExportShape::file, o->force, inputs);
         }
         analysis::teq::Calibration calibration;
         analysis::teq::NeutralRanges ranges;
@@ -138,6 +146,12 @@ void add_teq(CLI::App& app) {
         if (target) {
             write_target(*target, analysis::plot::to_svg(analysis::teq::comfort_figure(r)), o->plot);
             spdlog::info("wrote {}", o->plot);
+        }
+        if (report_target) {
+            const std::string when = analysis::iso_utc_ms(
+                std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+            write_target(*report_target, analysis::teq::report_html(r, when, std::string("manikin ") + MANIKIND_VERSION), o->report);
+            spdlog::info("wrote {}", o->report);
         }
         if (o->json)
             std::printf("%s\n", analysis::teq::to_json(r).dump(2).c_str());

@@ -242,6 +242,7 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*s, "simulation", "step_s", c.simulation.step_s, 0.01, 60.0, "s");
         r.number(*s, "simulation", "manikin_period_s", c.simulation.manikin_period_s, 0.1, 60.0, "s");
         r.number(*s, "simulation", "air_speed_m_s", c.simulation.air_speed_m_s, 0.0, 5.0, "m/s");
+        r.number(*s, "simulation", "wall_below_air_c", c.simulation.wall_below_air_c, -10.0, 10.0, "K");
         r.text(*s, "simulation", "operator_prompts", c.simulation.operator_prompts, {"auto", "wait"});
         sim::ReplicateScatter& sc = c.simulation.scatter;
         r.number(*s, "simulation", "replicate_flux_rel_sd", sc.replicate_flux_rel_sd, 0.0, 0.2, "fraction");
@@ -252,6 +253,32 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
         r.number(*s, "simulation", "probe_air_sd_c", sc.probe_air_sd_c, 0.0, 5.0, "°C");
         r.number(*s, "simulation", "probe_rh_sd_pct", sc.probe_rh_sd_pct, 0.0, 20.0, "%");
         r.number(*s, "simulation", "probe_wall_sd_c", sc.probe_wall_sd_c, 0.0, 5.0, "°C");
+        r.mark("simulation", "local");
+        if (const toml::node* node = s->get("local")) {
+            const auto* arr = node->as_array();
+            if (!arr || !arr->is_array_of_tables())
+                throw UserError(fmt::format("{}: simulation.local: expected [[simulation.local]] tables, found {}",
+                                            where(source_name, node->source()), type_name(*node)));
+            c.simulation.local.clear();
+            for (std::size_t i = 0; i < arr->size(); ++i) {
+                const toml::table& t = *(*arr)[i].as_table();
+                const std::string path = fmt::format("simulation.local[{}]", i);
+                LocalEnvironmentConfig e;
+                e.where = where(source_name, t.source());
+                r.strings(t, path, "zones", e.zones);
+                if (e.zones.empty())
+                    throw UserError(fmt::format("{}: {}.zones: expected the zones, regions or segments it applies to "
+                                                "(e.g. zones = [\"face\", \"hand_l\"])", e.where, path));
+                r.text(t, path, "what", e.what);
+                r.number(t, path, "air_offset_c", e.air_offset_c, -30.0, 30.0, "K");
+                r.number(t, path, "radiant_offset_c", e.radiant_offset_c, -60.0, 60.0, "K");
+                r.number(t, path, "air_speed_m_s", e.air_speed_m_s, 0.0, 10.0, "m/s");
+                r.number(t, path, "contact_w_m2", e.contact_w_m2, -300.0, 300.0, "W/m²");
+                r.number(t, path, "solar_w_m2", e.solar_w_m2, 0.0, 1000.0, "W/m²");
+                r.warn_unknown(t, path);
+                c.simulation.local.push_back(std::move(e));
+            }
+        }
     }
     if (const auto* a = r.table(root, "", "api")) {
         r.text(*a, "api", "socket", c.api.socket);

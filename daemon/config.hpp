@@ -73,6 +73,19 @@ struct DeviceConfig {
 };
 
 // The simulated lab (mode = "simulated"): what the world does that the twin may not know.
+// [[simulation.local]]: where the simulated room is not uniform (docs/comfort.md, "A non-uniform
+// room"). Entries add up on a zone they share; the last air speed named for a zone holds.
+struct LocalEnvironmentConfig {
+    std::vector<std::string> zones;           // zone names, regions or segments of the zone map
+    std::string what;                         // a note: "windscreen in the sun", "vent jet"
+    double air_offset_c = 0.0;                // the air at these zones minus the probes' reading
+    double radiant_offset_c = 0.0;            // their mean radiant temperature minus the walls'
+    double air_speed_m_s = -1.0;              // the air's speed at them; < 0: the room's
+    double contact_w_m2 = 0.0;                // conducted into a surface they touch (< 0: a heated seat)
+    double solar_w_m2 = 0.0;                  // sun absorbed
+    std::string where;                        // file:line of the entry, for errors
+};
+
 struct SimulationConfig {
     std::uint64_t seed = 1;
     std::vector<std::string> world_effects;   // physics terms, as `manikin simulate-campaign --effect`
@@ -81,11 +94,13 @@ struct SimulationConfig {
     double step_s = 1.0;                      // virtual-clock step
     double manikin_period_s = 5.0;            // the manikin's zone report interval (Text S3.2: 5 s)
     double air_speed_m_s = 0.01;              // the enclosure's air speed: sealed < 0.02 (Text S3.1); 0.4 for clothing tests
+    double wall_below_air_c = 0.4;            // the enclosure's walls below its air (Text S3.3); 0 for a teq calibration's uniform room
     // Who answers an operator prompt (dress the manikin for a clothing test): "auto", the simulated
     // operator at once (campaigns run unattended: tests, the demo); "wait", `manikin continue` or
     // the console's button, as on a real lab, where prompts always wait.
     std::string operator_prompts = "auto";
     sim::ReplicateScatter scatter;            // per-trial replicate scatter (keys replicate_*, probe_*)
+    std::vector<LocalEnvironmentConfig> local;  // empty: the uniform enclosure of the paper
 };
 
 struct ApiConfig {

@@ -11,6 +11,7 @@
 
 #include <fmt/core.h>
 
+#include "analysis/zone_map.hpp"
 #include "archive/pg.hpp"
 #include "daemon/config.hpp"
 #include "daemon/notifier.hpp"
@@ -269,11 +270,25 @@ std::string token_problem(const std::string& token) {
     return {};
 }
 
+namespace {
+// [[simulation.local]]: every name it gives is a zone, region or segment of the zone map the
+// simulated manikin wears (simulated_lab.cpp resolves them the same way at start).
+void check_local_environment(const Config& c, std::vector<std::string>& problems) {
+    const auto& map = analysis::andi35_zone_map().zones;
+    for (std::size_t i = 0; i < c.simulation.local.size(); ++i)
+        for (const auto& name : c.simulation.local[i].zones)
+            if (std::none_of(map.begin(), map.end(), [&](const auto& z) { return z.name == name || z.region == name || z.segment == name; }))
+                problems.push_back(fmt::format("{}: simulation.local[{}].zones: '{}' is no zone, region or segment of the zone map "
+                                               "(config/andi35_zone_map.csv)", c.simulation.local[i].where, i, name));
+}
+}  // namespace
+
 std::vector<std::string> validate(const Config& c) {
     std::vector<std::string> problems;
     check_register_maps(c, problems);
     check_entries(c, "simulation.world_effects", c.simulation.world_effects, sim::parse_effect, problems);
     check_entries(c, "simulation.faults", c.simulation.faults, sim::parse_fault, problems);
+    check_local_environment(c, problems);
     check_socket(c, problems);
     if (c.mode == "real") check_real_mode(c, problems);
     check_token(c, problems);

@@ -22,10 +22,38 @@ sim::SimLabOptions simulated_lab_options(const config::Config& config) {
             throw UserError(fmt::format("simulation.world_effects: {}", ex.what()));
         }
     }
+    // [[simulation.local]]: each entry names zones, regions or segments of the zone map; entries
+    // add up where they meet, and the last air speed named for a zone holds.
+    if (!config.simulation.local.empty()) {
+        const auto& map = analysis::andi35_zone_map().zones;
+        o.world.local.assign(map.size(), {});
+        for (std::size_t i = 0; i < config.simulation.local.size(); ++i) {
+            const auto& e = config.simulation.local[i];
+            for (const auto& name : e.zones) {
+                bool found = false;
+                for (std::size_t z = 0; z < map.size(); ++z) {
+                    if (map[z].name != name && map[z].region != name && map[z].segment != name) continue;
+                    found = true;
+                    auto& l = o.world.local[z];
+                    l.air_offset_c += e.air_offset_c;
+                    l.radiant_offset_c += e.radiant_offset_c;
+                    if (e.air_speed_m_s >= 0.0) l.air_speed_m_s = e.air_speed_m_s;
+                    l.contact_w_m2 += e.contact_w_m2;
+                    l.solar_w_m2 += e.solar_w_m2;
+                }
+                if (!found)
+                    throw UserError(fmt::format("{}: simulation.local[{}].zones: '{}' is no zone, region or segment of the "
+                                                "zone map (config/andi35_zone_map.csv: a zone as face, hand_l, thigh_back_r; "
+                                                "a region as chest, upper_arm_l; a segment as thigh)",
+                                                e.where, i, name));
+            }
+        }
+    }
     o.world.seed = config.simulation.seed;
     o.world.scatter = config.simulation.scatter;
     o.manikin_period_s = config.simulation.manikin_period_s;
     o.world.air_speed_m_s = config.simulation.air_speed_m_s;
+    o.world.wall_below_air_c = config.simulation.wall_below_air_c;
     o.world.enclosure_table = sim::table_s3_cases();
     o.world.watchdog_s = config.safety.watchdog_timeout_s;
     o.world.max_heater_power_w_m2 = config.devices.manikin_max_heater_power_w_m2;

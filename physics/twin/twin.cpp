@@ -212,6 +212,19 @@ void predict(const ResolvedVersion& k, const TrialConditions& trial, std::vector
         // here (the air's absolute humidity stays the probe's unless vapour pressure is moved).
         double air_c = air_trial_c, wall_c = wall_trial_c, p_air_pa = p_air_trial_pa, c_air_kg_m3 = c_air_trial_kg_m3;
         double h_forced_zone_w_m2k = h_forced_w_m2k;
+        if (!z.local.uniform()) {
+            // A non-uniform room (LocalEnvironment): the zone's own air and radiant temperature, the
+            // air's absolute humidity the probe's (the vapour spreads where the heat does not). A jet
+            // at the zone is forced convection whatever the twin says of the room (de Dear's
+            // coefficient, mixed with free convection as Eq. 9), scaled as mixed_convection scales it.
+            air_c += z.local.air_offset_c;
+            wall_c += z.local.radiant_offset_c;
+            c_air_kg_m3 = vapour_concentration_kg_m3(p_air_pa, air_c);
+            if (z.local.air_speed_m_s)
+                h_forced_zone_w_m2k = (k.forced_scale > 0.0 ? k.forced_scale : 1.0) *
+                                      h_forced_de_dear_w_m2k(std::max(0.0, *z.local.air_speed_m_s));
+            leak_w_m2 += z.local.contact_w_m2 - z.local.solar_w_m2;
+        }
         if (!k.patterns.empty()) {
             double speed_factor = 1.0;  // air_speed_m_s: relative to the anemometer's reading
             for (const auto& pt : k.patterns) {
@@ -227,7 +240,7 @@ void predict(const ResolvedVersion& k, const TrialConditions& trial, std::vector
             // The air a zone meets moves speed_factor times what the anemometer reads; it matters
             // only where forced convection is in the twin (mixed_convection).
             if (speed_factor != 1.0 && k.forced_scale > 0.0)
-                h_forced_zone_w_m2k = k.forced_scale * h_forced_de_dear_w_m2k(std::max(0.0, speed_m_s * speed_factor));
+                h_forced_zone_w_m2k = k.forced_scale * h_forced_de_dear_w_m2k(std::max(0.0, z.local.air_speed_m_s.value_or(speed_m_s) * speed_factor));
         }
 
         // Fluxes from an exchange surface at surface_c (the textile, when it has resistance).

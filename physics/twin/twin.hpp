@@ -22,6 +22,22 @@ std::optional<SegmentConstants> baseline_segment(const std::string& segment);
 inline constexpr double baseline_skin_emissivity = 0.98;  // Text S3.3
 inline constexpr double baseline_lewis_k_kpa = 16.5;      // Eq. 1
 
+// The room one zone meets where it is not uniform (ISO 14505-2's subject: a vehicle cabin, a desk by
+// a cold window): offsets from what the chamber's probes read, the air's speed at the zone, and
+// heat that is neither convection, radiation nor evaporation. All zero and no speed: the uniform
+// enclosure of the paper. A lab states them per case (campaign `[[cases.local]]`); the simulated
+// world takes its own from `[[simulation.local]]` (docs/comfort.md, "A non-uniform room").
+struct LocalEnvironment {
+    double air_offset_c = 0.0;               // the air at the zone minus the probes' reading
+    double radiant_offset_c = 0.0;           // the zone's mean radiant temperature minus the walls'
+    std::optional<double> air_speed_m_s{};   // the air's speed at the zone (a vent jet); none: the room's
+    double contact_w_m2 = 0.0;               // conducted into what the zone touches (a seat); < 0: a heated seat gives
+    double solar_w_m2 = 0.0;                 // short-wave absorbed (sun through glass), which the zone does not lose
+    bool uniform() const {
+        return air_offset_c == 0.0 && radiant_offset_c == 0.0 && !air_speed_m_s && contact_w_m2 == 0.0 && solar_w_m2 == 0.0;
+    }
+};
+
 struct ZoneInput {
     int zone = 0;
     std::string segment;        // zone map segment (head, chest, ..., foot)
@@ -33,6 +49,7 @@ struct ZoneInput {
     std::optional<double> height_m{};
     int facing = 0;
     int side = 0;
+    LocalEnvironment local{};
 };
 
 struct TrialConditions {

@@ -18,6 +18,10 @@ World::World(WorldOptions options)
     zones_.resize(o_.zones.size());
     for (auto& z : zones_) z.skin_temp_c = o_.initial_temp_c;
     for (const auto& spec : o_.zones) conditions_.zones.push_back(spec.zone);
+    if (!o_.local.empty()) {
+        if (o_.local.size() != o_.zones.size()) throw std::invalid_argument("the simulated room's local environment: one entry per zone, or none");
+        for (std::size_t z = 0; z < o_.zones.size(); ++z) conditions_.zones[z].local = o_.local[z];
+    }
     scatter_.trial = 0;
     draw_trial_scatter();
 }

@@ -28,6 +28,10 @@ struct WorldOptions {
     double wall_time_constant_s = 1200.0;
     double wall_below_air_c = 0.4;               // walls a little cooler than the air (Text S3.3)
     double air_speed_m_s = 0.01;                 // sealed enclosure: < 0.02 m/s (Text S3.1)
+    // A non-uniform room ([[simulation.local]]): per zone [zone - 1], what that zone meets beside
+    // what the probes read (a warm windscreen, a vent jet, a heated seat, the sun); empty: uniform.
+    // The devices never report it: the probes read the room's air and walls as before.
+    std::vector<physics::twin::LocalEnvironment> local;
     double shell_heat_capacity_j_m2k = 2500.0;   // zone shell; ~5 min time constant
     double pi_kp_w_m2k = 120.0;                  // the manikin's own skin-temperature loop
     double pi_ki_w_m2ks = 0.8;

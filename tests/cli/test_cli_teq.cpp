@@ -81,7 +81,7 @@ TEST_CASE("cli teq: calibrate writes a guarded calibration file and refuses a no
     }
 }
 
-TEST_CASE("cli teq: teq prints per zone teq and writes the comfort diagram but never over an input", "[cli][teq]") {
+TEST_CASE("cli teq: teq prints per zone teq and writes the comfort diagram and the report but never over an input", "[cli][teq]") {
     TeqDir dir;
     const lab::Manikin m;
     std::mt19937_64 rng(12);
@@ -107,6 +107,19 @@ TEST_CASE("cli teq: teq prints per zone teq and writes the comfort diagram but n
     CHECK(run_manikin(base + " --plot " + svg.string() + " > /dev/null").exit_code == 0);
     CHECK_THAT(slurp(svg), Catch::StartsWith("<svg") || Catch::Contains("<svg"));
     CHECK_THAT(slurp(svg), Catch::Contains("neutral range"));
+
+    // The page for the reader: who, what, when, which standard, the diagram inline; under the output guard too.
+    const auto page = dir.path / "teq.html";
+    CHECK(run_manikin(base + " --report " + page.string() + " > /dev/null").exit_code == 0);
+    const std::string html = slurp(page);
+    CHECK_THAT(html, Catch::Contains("ISO 14505-2") && Catch::Contains("<svg") && Catch::Contains("calibration") &&
+                         Catch::Contains("whole_body") && Catch::Contains("face") && Catch::Contains("placeholders") &&
+                         Catch::Contains("manikin 0."));
+    r = run_manikin(base + " --report " + page.string() + " --json");
+    CHECK(r.exit_code == 2);  // an existing file without --force
+    CHECK(slurp(page) == html);
+    r = run_manikin(base + " --report " + svg.string() + " --plot " + svg.string() + " --force --json");
+    CHECK(r.exit_code == 2);  // the same file for both
 
     const auto cal_before = slurp(cal);
     r = run_manikin(base + " --plot " + cal.string() + " --force --json");

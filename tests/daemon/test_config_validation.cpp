@@ -141,6 +141,55 @@ TEST_CASE("malformed world-effect and fault entries are refused with file:line, 
                                 Catch::Contains("simulation.faults[1]: 'toaster:on_fire': fault 'toaster:on_fire'"));
 }
 
+TEST_CASE("[[simulation.local]]: a non-uniform simulated room is read entry by entry, an unknown zone, a missing zone "
+          "list or a value out of range is refused with file:line and key, and the shipped templates pass",
+          "[daemon][config][local]") {
+    TempDir dir;
+    const auto good = dir.write("cabin.toml",
+                                "[simulation]\n"
+                                "[[simulation.local]]\n"
+                                "what = \"vents\"\n"
+                                "zones = [\"face\", \"hand\"]\n"
+                                "air_offset_c = -3\n"
+                                "air_speed_m_s = 0.6\n"
+                                "[[simulation.local]]\n"
+                                "zones = [\"head\"]\n"
+                                "radiant_offset_c = 8\n"
+                                "solar_w_m2 = 30\n"
+                                "contact_w_m2 = -20\n");
+    const auto c = config::load_config(good);
+    REQUIRE(c.simulation.local.size() == 2);
+    CHECK(c.simulation.local[0].zones == std::vector<std::string>{"face", "hand"});
+    CHECK(c.simulation.local[0].air_speed_m_s == 0.6);
+    CHECK(c.simulation.local[1].air_speed_m_s < 0.0);  // the room's
+    CHECK(c.simulation.local[1].contact_w_m2 == -20.0);
+    CHECK_THAT(c.simulation.local[1].where, Catch::StartsWith(good.string() + ":7"));
+    CHECK(problems_of(good).empty());
+
+    const auto unknown = dir.write("unknown.toml", "[[simulation.local]]\nzones = [\"face\"]\n[[simulation.local]]\n"
+                                                   "zones = [\"tail\"]\nair_offset_c = 1\n");
+    const auto problems = problems_of(unknown);
+    REQUIRE(problems.size() == 1);
+    CHECK_THAT(problems[0], Catch::StartsWith(unknown.string() + ":3") &&
+                                Catch::Contains("simulation.local[1].zones: 'tail' is no zone, region or segment"));
+    CHECK_THROWS_WITH(config::load_config(dir.write("range.toml", "[[simulation.local]]\nzones = [\"face\"]\nradiant_offset_c = 90\n")),
+                      Catch::Contains("range.toml:3") && Catch::Contains("simulation.local[0].radiant_offset_c: 90 K is outside -60..60"));
+    CHECK_THROWS_WITH(config::load_config(dir.write("nozones.toml", "[[simulation.local]]\nair_offset_c = 1\n")),
+                      Catch::Contains("nozones.toml:1") && Catch::Contains("simulation.local[0].zones: expected the zones"));
+    CHECK_THROWS_WITH(config::load_config(dir.write("table.toml", "[simulation]\nlocal = 3\n")),
+                      Catch::Contains("table.toml:2") && Catch::Contains("expected [[simulation.local]] tables"));
+    const auto typo = config::load_config(dir.write("typo.toml", "[[simulation.local]]\nzones = [\"face\"]\nsolar_wm2 = 3\n"));
+    REQUIRE(typo.warnings.size() == 1);
+    CHECK_THAT(typo.warnings[0], Catch::Contains("simulation.local[0].solar_wm2: unknown key"));
+    for (const char* shipped : {"sim-car-cabin-summer.toml", "sim-office-displacement.toml"}) {
+        INFO(shipped);
+        const auto t = config::load_config(fs::path(MANIKIND_CONFIG_DIR) / shipped);
+        CHECK(t.simulation.local.size() >= 4);
+        CHECK(t.warnings.empty());
+        CHECK(problems_of(fs::path(MANIKIND_CONFIG_DIR) / shipped).empty());
+    }
+}
+
 TEST_CASE("a control socket path over 107 characters (with .token beside it) is refused with its length and the limit", "[daemon][config]") {
     TempDir dir;
     const std::string long_socket = "/tmp/" + std::string(110, 's') + ".sock";  // 120 characters

@@ -5,6 +5,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "physics/convection.hpp"
 #include "physics/psychrometrics.hpp"
 #include "physics/twin/twin.hpp"
 
@@ -181,6 +182,64 @@ TEST_CASE("twin: an input_pattern moves its input at each zone by value x the pa
         CHECK_THROWS_AS(predict(TwinVersion{"v", {Term{"input_pattern", {{"value", 1.0}}, "", {}, "air_temp_c", "height"}}}, no_height),
                         std::invalid_argument);
         CHECK_THROWS_AS(validate_term(Term{"input_pattern", {{"value", 1.0}}, "", {}, "air_speed", "height"}), std::invalid_argument);
+    }
+}
+
+TEST_CASE("twin: a zone's local environment (a non-uniform room) is the room the zone meets: its own air, radiant "
+          "temperature and jet, heat into a contact, sun absorbed, and none of it touches the other zones",
+          "[twin][local]") {
+    // A dry chest and back in a 24 °C room with walls at 23.6 °C: the chest meets what is set here.
+    TrialConditions trial;
+    trial.air_temp_c = 24.0;
+    trial.air_rh_pct = 40.0;
+    trial.wall_temp_c = 23.6;
+    trial.air_speed_m_s = 0.05;
+    ZoneInput chest{4, "chest", "chest", 0.0985, 34.0};
+    ZoneInput back{6, "back", "back", 0.1146, 34.0};
+    trial.zones = {chest, back};
+    const auto plain = predict(TwinVersion{}, trial);
+    auto with_local = [&](LocalEnvironment l) {
+        TrialConditions t = trial;
+        t.zones[0].local = l;
+        const auto q = predict(TwinVersion{}, t);
+        CHECK(q[1].q_total_w_m2 == plain[1].q_total_w_m2);  // the back is in the room as before
+        return q[0];
+    };
+    // The same zone in a uniform room at other temperatures: what an offset must equal.
+    auto in_room = [&](double air_c, double wall_c) {
+        TrialConditions t = trial;
+        const double p_pa = manikind::physics::vapour_pressure_pa(trial.air_temp_c, trial.air_rh_pct);
+        t.air_temp_c = air_c;
+        t.air_rh_pct = 100.0 * p_pa / manikind::physics::saturation_vapour_pressure_pa(air_c);
+        t.wall_temp_c = wall_c;
+        t.zones = {chest};
+        return predict(TwinVersion{}, t).at(0);
+    };
+    CHECK(LocalEnvironment{}.uniform());
+    SECTION("its own air and radiant temperature") {
+        const auto f = with_local({-3.0, 8.0});
+        const auto room = in_room(21.0, 31.6);
+        CHECK(f.q_total_w_m2 == Approx(room.q_total_w_m2).epsilon(1e-12));
+        CHECK(f.q_radiation_w_m2 < plain[0].q_radiation_w_m2);  // hot glass: less lost by radiation
+        CHECK(f.q_convection_w_m2 > plain[0].q_convection_w_m2);  // cooler air: more by convection
+    }
+    SECTION("a jet: forced convection mixed with free (Eq. 9, de Dear's coefficient), the radiation as before") {
+        LocalEnvironment jet;
+        jet.air_speed_m_s = 0.6;
+        const auto f = with_local(jet);
+        const double h_free = plain[0].h_c_w_m2k;
+        const double h_forced = manikind::physics::h_forced_de_dear_w_m2k(0.6);
+        CHECK(f.h_c_w_m2k == Approx(std::cbrt(h_free * h_free * h_free + h_forced * h_forced * h_forced)).epsilon(1e-9));
+        CHECK(f.q_radiation_w_m2 == plain[0].q_radiation_w_m2);
+        CHECK(f.q_total_w_m2 > plain[0].q_total_w_m2 + 10.0);
+    }
+    SECTION("a contact draws heat and the sun gives it, beside the exchange with the room") {
+        LocalEnvironment l;
+        l.contact_w_m2 = 12.0;
+        l.solar_w_m2 = 30.0;
+        const auto f = with_local(l);
+        CHECK(f.q_other_w_m2 == Approx(12.0 - 30.0));
+        CHECK(f.q_total_w_m2 == Approx(plain[0].q_total_w_m2 - 18.0).epsilon(1e-12));
     }
 }
 
