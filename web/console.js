@@ -194,6 +194,26 @@ function renderTrial(s) {
     tl.appendChild(li);
   });
   $("stage").textContent = s.stage;
+  // How the manikin's zones are driven this trial (issue 65): what a reader of the zone chart must
+  // know, since a comfort or constant-heat-flux trial's skin temperatures are not one setpoint.
+  $("control-mode").hidden = !t;
+  if (t) {
+    let name = "constant skin temperature", detail = typeof t.skin_setpoint_c === "number" ? `${fmt(t.skin_setpoint_c, 1)} °C` : "";
+    if (t.model) {
+      name = "thermoregulation model";
+      detail = "each zone's setpoint and sweat from the model";
+    } else if (t.control === "comfort") {
+      const eq = t.comfort_equation || {};
+      name = "comfort mode";
+      detail = `each zone's skin = ${fmt(eq.a_c, 1)} °C − ${fmt(eq.b_c_m2_w, 3)} °C·m²/W × its own heat loss`;
+    } else if (t.control === "constant-heat-flux") {
+      name = "constant heat flux";
+      const regions = Object.entries(t.heat_flux_by_region_w_m2 || {}).map(([r, v]) => `${r} ${fmt(v, 0)}`).join(", ");
+      detail = `${fmt(t.heat_flux_setpoint_w_m2, 0)} W/m² per zone${regions ? ` (${regions})` : ""}; the skin floats`;
+    }
+    $("control-name").textContent = name;
+    $("control-detail").textContent = detail;
+  }
   $("paused-banner").hidden = !s.paused;
   // Chamber settling: what is awaited, how far off each quantity is, and when it may be done.
   const st = t && t.settling;

@@ -3,7 +3,7 @@
 operator waits ([simulation] operator_prompts = "wait"): the console's header shows what to put on,
 on the first screen at 800x600, the trial stays in configuring, and "Done: continue" with the
 token lets it go on. Then a physiological trial: the model's core and mean skin drawn as a trend,
-its phase with the time in it. Exit 77 (skipped) only when the browser or selenium is
+its phase with the time in it; then a comfort-mode trial, named with its equation. Exit 77 (skipped) only when the browser or selenium is
 not installed.
 
 usage: operator_prompt_browser.py <manikind binary> [--screenshot PATH]
@@ -83,10 +83,23 @@ def main():
               f"the phase says how long it has run (and when preconditioning falls back): {phase}")
         check(driver.execute_script("return document.getElementById('steady-section').hidden;"),
               "a physiological trial shows no steady-state bar")
+        control_text = lambda: driver.execute_script(
+            "const c = document.getElementById('control-mode'); return c.hidden ? '' : c.textContent;")
+        check("thermoregulation model" in control_text(), f"the console says how the zones are driven: {control_text()}")
         if screenshot:
             driver.set_window_size(1500, 1300)
             driver.execute_script("document.getElementById('model-panel').scrollIntoView();")
             driver.save_screenshot(screenshot.replace(".png", "-model.png"))
+        # Comfort mode (issue 65): the console names the mode and its equation, not a skin setpoint.
+        aborted = post_command(base, {"cmd": "abort", "token": token, "reason": "next: comfort", "confirm": "model"})
+        check(aborted.get("ok") is True, f"the physiological campaign was aborted ({aborted})")
+        comfort = ('name = "comfort"\nreplicates = 1\nsettle_window_min = 0\nsettle_band_c = 10\nsettle_tolerance_c = 10\n'
+                   'settle_tolerance_rh_pct = 50\ntrial_duration_min = 30\n[[cases]]\nid = 1\nchamber_temp_c = 22\n'
+                   'chamber_rh_pct = 40\ncontrol = "comfort"\n')
+        started = post_command(base, {"cmd": "start_campaign", "token": token, "plan_toml": comfort})
+        check(started.get("ok") is True, f"the comfort campaign was started ({started})")
+        shown = wait_for("the console names comfort mode", lambda: "comfort mode" in control_text() and control_text(), 60)
+        check(bool(shown) and "36.4" in shown and "0.054" in shown, f"comfort mode with its equation: {shown}")
     finally:
         if driver:
             driver.quit()
