@@ -47,6 +47,18 @@ double baseline_by_hand(double a, double f, double ts, double ta, double tw, dou
     return q_conv + q_rad + q_evap;
 }
 
+// One zone of `trial` alone in a uniform room at other temperatures, the air holding the trial's
+// vapour pressure (its RH at the new temperature): what a zone meeting other inputs must equal.
+ZoneFlux in_uniform_room(const TrialConditions& trial, const ZoneInput& zone, double air_c, double wall_c) {
+    TrialConditions t = trial;
+    const double p_pa = manikind::physics::vapour_pressure_pa(trial.air_temp_c, trial.air_rh_pct);
+    t.air_temp_c = air_c;
+    t.air_rh_pct = 100.0 * p_pa / manikind::physics::saturation_vapour_pressure_pa(air_c);
+    t.wall_temp_c = wall_c;
+    t.zones = {zone};
+    return predict(TwinVersion{}, t).at(0);
+}
+
 }  // namespace
 
 TEST_CASE("twin: baseline is docs/twin-baseline.md zone by zone (Table S3 case 9: 39.6 C, 38.3 %, wet)", "[physics][twin]") {
@@ -152,16 +164,7 @@ TEST_CASE("twin: an input_pattern moves its input at each zone by value x the pa
     back.height_m = 1.35;
     back.facing = -1;
     trial.zones = {face, back};
-    auto one_zone_at = [&](const ZoneInput& z, double air_c, double wall_c) {
-        TrialConditions t = trial;
-        // The same vapour pressure in air at another temperature: RH at that temperature.
-        const double p_pa = manikind::physics::vapour_pressure_pa(trial.air_temp_c, trial.air_rh_pct);
-        t.air_temp_c = air_c;
-        t.air_rh_pct = 100.0 * p_pa / manikind::physics::saturation_vapour_pressure_pa(air_c);
-        t.wall_temp_c = wall_c;
-        t.zones = {z};
-        return predict(TwinVersion{}, t).at(0).q_total_w_m2;
-    };
+    auto one_zone_at = [&](const ZoneInput& z, double air_c, double wall_c) { return in_uniform_room(trial, z, air_c, wall_c).q_total_w_m2; };
     SECTION("air temperature by height, 2 K/m above the probe at 1.1 m") {
         Term t{"input_pattern", {{"value", 2.0}}, "", {}, "air_temp_c", "height"};
         const auto q = predict(TwinVersion{"v", {t}}, trial);
@@ -206,15 +209,7 @@ TEST_CASE("twin: a zone's local environment (a non-uniform room) is the room the
         return q[0];
     };
     // The same zone in a uniform room at other temperatures: what an offset must equal.
-    auto in_room = [&](double air_c, double wall_c) {
-        TrialConditions t = trial;
-        const double p_pa = manikind::physics::vapour_pressure_pa(trial.air_temp_c, trial.air_rh_pct);
-        t.air_temp_c = air_c;
-        t.air_rh_pct = 100.0 * p_pa / manikind::physics::saturation_vapour_pressure_pa(air_c);
-        t.wall_temp_c = wall_c;
-        t.zones = {chest};
-        return predict(TwinVersion{}, t).at(0);
-    };
+    auto in_room = [&](double air_c, double wall_c) { return in_uniform_room(trial, chest, air_c, wall_c); };
     CHECK(LocalEnvironment{}.uniform());
     SECTION("its own air and radiant temperature") {
         const auto f = with_local({-3.0, 8.0});

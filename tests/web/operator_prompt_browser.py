@@ -67,13 +67,17 @@ def main():
 
         # A physiological trial next: its model is watched as a trend (core and mean skin) with its
         # phase and how long it has run, where a constant-skin trial shows its steady-state bar.
-        aborted = post_command(base, {"cmd": "abort", "token": token, "reason": "next: the model", "confirm": "dressing"})
-        check(aborted.get("ok") is True, f"the clothing campaign was aborted ({aborted})")
+        def next_campaign(running, plan_toml, what):
+            """Aborts the campaign running (by its name, as abort asks) and starts the next."""
+            aborted = post_command(base, {"cmd": "abort", "token": token, "reason": f"next: {what}", "confirm": running})
+            check(aborted.get("ok") is True, f"the {running} campaign was aborted ({aborted})")
+            started = post_command(base, {"cmd": "start_campaign", "token": token, "plan_toml": plan_toml})
+            check(started.get("ok") is True, f"the {what} campaign was started ({started})")
+
         physio = ('name = "model"\nreplicates = 1\nsettle_window_min = 0\nsettle_band_c = 10\nsettle_tolerance_c = 10\n'
                   'settle_tolerance_rh_pct = 50\n[[cases]]\nid = 1\nchamber_temp_c = 41\nchamber_rh_pct = 20\n'
                   'control = "physiological"\n[cases.model]\nname = "stolwijk-2026"\nmetabolic_met = 1.5\nduration_min = 30\n')
-        started = post_command(base, {"cmd": "start_campaign", "token": token, "plan_toml": physio})
-        check(started.get("ok") is True, f"the physiological campaign was started ({started})")
+        next_campaign("dressing", physio, "physiological")
         trend = wait_for("the model's trend draws core and mean skin", lambda: driver.execute_script(
             "const p = document.getElementById('model-panel'); if (p.hidden) return 0;"
             "return document.querySelectorAll('#chart-model polyline').length;") >= 2, 90)
@@ -91,13 +95,10 @@ def main():
             driver.execute_script("document.getElementById('model-panel').scrollIntoView();")
             driver.save_screenshot(screenshot.replace(".png", "-model.png"))
         # Comfort mode (issue 65): the console names the mode and its equation, not a skin setpoint.
-        aborted = post_command(base, {"cmd": "abort", "token": token, "reason": "next: comfort", "confirm": "model"})
-        check(aborted.get("ok") is True, f"the physiological campaign was aborted ({aborted})")
         comfort = ('name = "comfort"\nreplicates = 1\nsettle_window_min = 0\nsettle_band_c = 10\nsettle_tolerance_c = 10\n'
                    'settle_tolerance_rh_pct = 50\ntrial_duration_min = 30\n[[cases]]\nid = 1\nchamber_temp_c = 22\n'
                    'chamber_rh_pct = 40\ncontrol = "comfort"\n')
-        started = post_command(base, {"cmd": "start_campaign", "token": token, "plan_toml": comfort})
-        check(started.get("ok") is True, f"the comfort campaign was started ({started})")
+        next_campaign("model", comfort, "comfort")
         shown = wait_for("the console names comfort mode", lambda: "comfort mode" in control_text() and control_text(), 60)
         check(bool(shown) and "36.4" in shown and "0.054" in shown, f"comfort mode with its equation: {shown}")
     finally:
