@@ -94,6 +94,13 @@ const ZoneMap& andi35_zone_map() {
     return map;
 }
 
+std::vector<std::size_t> ZoneMap::zones_named(const std::string& part) const {
+    std::vector<std::size_t> out;
+    for (std::size_t i = 0; i < zones.size(); ++i)
+        if (zones[i].name == part || zones[i].region == part || zones[i].segment == part) out.push_back(i);
+    return out;
+}
+
 bool valid_facing(const std::string& facing) {
     return facing.empty() || facing == "front" || facing == "back" || facing == "up" || facing == "down" || facing == "none";
 }

@@ -35,6 +35,9 @@ struct ZoneMap {
     std::vector<std::string> regions() const;
     // Indices into `zones` of the zones in `region`.
     std::vector<std::size_t> zones_in(const std::string& region) const;
+    // Indices of the zones `part` names: a zone by its name, a region or a segment
+    // ([[simulation.local]] entries); empty when it names none.
+    std::vector<std::size_t> zones_named(const std::string& part) const;
 };
 
 // The ANDI 35-zone map (config/andi35_zone_map.csv), compiled in.

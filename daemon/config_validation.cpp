@@ -274,10 +274,10 @@ namespace {
 // [[simulation.local]]: every name it gives is a zone, region or segment of the zone map the
 // simulated manikin wears (simulated_lab.cpp resolves them the same way at start).
 void check_local_environment(const Config& c, std::vector<std::string>& problems) {
-    const auto& map = analysis::andi35_zone_map().zones;
+    const auto& map = analysis::andi35_zone_map();
     for (std::size_t i = 0; i < c.simulation.local.size(); ++i)
         for (const auto& name : c.simulation.local[i].zones)
-            if (std::none_of(map.begin(), map.end(), [&](const auto& z) { return z.name == name || z.region == name || z.segment == name; }))
+            if (map.zones_named(name).empty())
                 problems.push_back(fmt::format("{}: simulation.local[{}].zones: '{}' is no zone, region or segment of the zone map "
                                                "(config/andi35_zone_map.csv)", c.simulation.local[i].where, i, name));
 }

@@ -25,15 +25,13 @@ sim::SimLabOptions simulated_lab_options(const config::Config& config) {
     // [[simulation.local]]: each entry names zones, regions or segments of the zone map; entries
     // add up where they meet, and the last air speed named for a zone holds.
     if (!config.simulation.local.empty()) {
-        const auto& map = analysis::andi35_zone_map().zones;
+        const auto& map = analysis::andi35_zone_map();
         o.world.local.assign(map.size(), {});
         for (std::size_t i = 0; i < config.simulation.local.size(); ++i) {
             const auto& e = config.simulation.local[i];
             for (const auto& name : e.zones) {
-                bool found = false;
-                for (std::size_t z = 0; z < map.size(); ++z) {
-                    if (map[z].name != name && map[z].region != name && map[z].segment != name) continue;
-                    found = true;
+                const auto named = map.zones_named(name);
+                for (const std::size_t z : named) {
                     auto& l = o.world.local[z];
                     l.air_offset_c += e.air_offset_c;
                     l.radiant_offset_c += e.radiant_offset_c;
@@ -41,7 +39,7 @@ sim::SimLabOptions simulated_lab_options(const config::Config& config) {
                     l.contact_w_m2 += e.contact_w_m2;
                     l.solar_w_m2 += e.solar_w_m2;
                 }
-                if (!found)
+                if (named.empty())
                     throw UserError(fmt::format("{}: simulation.local[{}].zones: '{}' is no zone, region or segment of the "
                                                 "zone map (config/andi35_zone_map.csv: a zone as face, hand_l, thigh_back_r; "
                                                 "a region as chest, upper_arm_l; a segment as thigh)",

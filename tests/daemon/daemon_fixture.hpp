@@ -6,6 +6,9 @@
 #include <filesystem>
 #include <memory>
 
+#include <catch2/catch.hpp>
+
+#include "daemon/campaign_plan.hpp"
 #include "daemon/lab_daemon.hpp"
 
 namespace manikind::test {
@@ -30,6 +33,15 @@ public:
         std::filesystem::remove_all(dir_, ec);
     }
     LabDaemon& daemon() { return *daemon_; }
+    // Runs a one-trial plan on the virtual clock to its end: its one trial must be done.
+    recorder::TrialRow run_one_done_trial(const CampaignPlan& plan) {
+        REQUIRE(daemon_->start_campaign(plan).empty());
+        daemon_->run_virtual();
+        const auto trials = daemon_->db().trials(*daemon_->db().find_campaign(plan.name));
+        REQUIRE(trials.size() == 1);
+        CHECK(trials[0].state == "done");
+        return trials[0];
+    }
     const std::filesystem::path& dir() const { return dir_; }
 
 private:

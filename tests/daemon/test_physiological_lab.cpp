@@ -31,14 +31,9 @@ manikind::CampaignPlan physiological_plan(int case_id) {
 // Runs the plan's one trial on the virtual clock: it must end done; `fell_back` says whether the
 // trial must carry the model-fallback flag.
 manikind::recorder::Database& run_one_trial(manikind::test::DaemonFixture& f, const manikind::CampaignPlan& plan, bool fell_back) {
-    REQUIRE(f.daemon().start_campaign(plan).empty());
-    f.daemon().run_virtual();
-    auto& db = f.daemon().db();
-    const auto trials = db.trials(*db.find_campaign(plan.name));
-    REQUIRE(trials.size() == 1);
-    CHECK(trials[0].state == "done");
-    CHECK(((trials[0].quality_flags & manikind::flag_model_fallback) != 0) == fell_back);
-    return db;
+    const auto trial = f.run_one_done_trial(plan);
+    CHECK(((trial.quality_flags & manikind::flag_model_fallback) != 0) == fell_back);
+    return f.daemon().db();
 }
 
 manikind::recorder::Database& run_without_fallback(manikind::test::DaemonFixture& f, const manikind::CampaignPlan& plan) {
