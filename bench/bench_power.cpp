@@ -1,14 +1,17 @@
 // `manikin reconcile --power` against its floor (issue 62, part 2): the planner on the demo's
-// campaign as a user runs it (a child process), on one thread and on all, with both answers
-// printed (they must be the same: each drawn campaign from its own seed); and the floor measured
-// in the same run: the drawn campaigns the plan reconciled, each reconciled once with the claim
-// threshold given and its lab's grids shared (nothing of the planner around it), spread perfectly
-// on the same threads. The goal: the demo's campaign and its seven terms in at most 180 s on two cores.
+// campaign as a user runs it (a child process) on all cores, as it runs by default (a drawn lab's
+// verdict its own verdicts at other values bracket is implied) and with `--power-every-lab` (each
+// reconciled), both answers printed side by side with the labs that broke the order the default
+// assumes; and the floor measured in the same run: the drawn campaigns the default plan
+// reconciled, each reconciled once with the claim threshold given and its lab's grids shared
+// (nothing of the planner around it), spread perfectly on the same threads. The goal: the demo's
+// campaign and its seven terms in at most 180 s on two cores.
 //
 // Usage: bench_power [campaign folder]   (default: `manikin demo` into a temporary folder)
 //   BENCH_POWER_TERMS=a,b       plan only these (--power-terms; default: every candidate)
 //   BENCH_POWER_CAMPAIGNS=n     --power-campaigns (default 40)
-//   BENCH_POWER_ONE_THREAD=0    skip the one-thread run (it is the long one)
+//   BENCH_POWER_EVERY_LAB=0     skip the every-lab run (it is the long one)
+//   BENCH_POWER_ONE_THREAD=1    also run on one thread (the answer must be the same)
 //   BENCH_FLOOR_DRAWS=n         drawn campaigns timed for the floor (default 12)
 #include <algorithm>
 #include <chrono>
@@ -43,8 +46,9 @@ struct Plan {
     nlohmann::json doc;
 };
 
-Plan plan(const std::string& manikin, const std::string& campaign, const fs::path& out, int threads) {
+Plan plan(const std::string& manikin, const std::string& campaign, const fs::path& out, int threads, bool every_lab = false) {
     std::vector<std::string> args{"reconcile", campaign, "--power", "--json", "--threads", std::to_string(threads)};
+    if (every_lab) args.push_back("--power-every-lab");
     if (const char* t = std::getenv("BENCH_POWER_TERMS")) args.insert(args.end(), {"--power-terms", t});
     if (const char* c = std::getenv("BENCH_POWER_CAMPAIGNS")) args.insert(args.end(), {"--power-campaigns", c});
     Plan p;
@@ -60,7 +64,11 @@ void print_limits(const char* name, const nlohmann::json& doc) {
         if (l["method"] != "whole decision") continue;
         std::printf("    %-28s %s", l["term"].get<std::string>().c_str(),
                     l["smallest_effect"].is_null() ? "not reached" : std::to_string(l["smallest_effect"].get<double>()).c_str());
-        for (const auto& t : l["tried"]) std::printf("  [%.4g: %d/%d]", t["value"].get<double>(), t["named"].get<int>(), t["campaigns"].get<int>());
+        for (const auto& t : l["tried"])
+            std::printf("  [%.4g: %d/%d, %d reconciled]", t["value"].get<double>(), t["named"].get<int>(), t["campaigns"].get<int>(),
+                        t.value("reconciled", t["campaigns"].get<int>()));
+        if (l.contains("non_monotone_labs") && !l["non_monotone_labs"].is_null())
+            std::printf("  (%d labs named it at a value and missed it at a larger one)", l["non_monotone_labs"].get<int>());
         std::printf("\n");
     }
 }
@@ -119,34 +127,42 @@ int main(int argc, char** argv) {
         campaign = (dir / "demo" / "campaign").string();
     }
     const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-    const char* one_env = std::getenv("BENCH_POWER_ONE_THREAD");
-    const bool one_thread = !(one_env && std::string(one_env) == "0");
-    Plan one;
-    if (one_thread) one = plan(manikin, campaign, dir / "one.json", 1);
+    auto env_is = [](const char* name, const char* value) {
+        const char* v = std::getenv(name);
+        return v && std::string(v) == value;
+    };
+    const bool every_lab = !env_is("BENCH_POWER_EVERY_LAB", "0");
+    const bool one_thread = env_is("BENCH_POWER_ONE_THREAD", "1");
     const Plan all = plan(manikin, campaign, dir / "all.json", cores);
-    if ((one_thread && one.run.status != 0) || all.run.status != 0) {
+    Plan every, one;
+    if (every_lab) every = plan(manikin, campaign, dir / "every.json", cores, true);
+    if (one_thread) one = plan(manikin, campaign, dir / "one.json", 1);
+    if (all.run.status != 0 || (every_lab && every.run.status != 0) || (one_thread && one.run.status != 0)) {
         std::fprintf(stderr, "bench_power: manikin reconcile --power failed\n");
         return 1;
     }
-    // The floor: the drawn campaigns behind the plan, each reconciled once, on `cores` threads.
+    // The floor: the drawn campaigns the default plan reconciled, each once, on `cores` threads.
     int reconciled = 0;
-    for (const auto& l : all.doc["limits"]) reconciled += l["campaigns"].get<int>();
+    for (const auto& l : all.doc["limits"])
+        for (const auto& t : l["tried"]) reconciled += t.value("reconciled", t["campaigns"].get<int>());
     const int draws = std::getenv("BENCH_FLOOR_DRAWS") ? std::max(1, std::atoi(std::getenv("BENCH_FLOOR_DRAWS"))) : 12;
     const double per = seconds_per_reconcile(campaign, draws);
     const double floor_s = per * reconciled / cores;
 
     std::printf("manikin reconcile --power on %s (%d cores)\n", campaign.c_str(), cores);
-    if (one_thread) std::printf("  --threads 1            %8.1f s wall %8.1f s CPU\n", one.run.wall_s, one.run.cpu_s);
-    std::printf("  --threads %-3d          %8.1f s wall %8.1f s CPU  (goal: at most 180 s for the demo's seven terms)\n", cores,
+    std::printf("  default                %8.1f s wall %8.1f s CPU  (goal: at most 180 s for the demo's seven terms)\n",
                 all.run.wall_s, all.run.cpu_s);
+    if (every_lab) std::printf("  --power-every-lab      %8.1f s wall %8.1f s CPU\n", every.run.wall_s, every.run.cpu_s);
+    if (one_thread) std::printf("  --threads 1            %8.1f s wall %8.1f s CPU\n", one.run.wall_s, one.run.cpu_s);
     std::printf("  floor                  %8.1f s wall  (%d drawn campaigns x %.3f s per reconcile / %d cores)\n", floor_s,
                 reconciled, per, cores);
     std::printf("  planner / floor        %8.2fx\n", all.run.wall_s / std::max(1e-9, floor_s));
+    print_limits("default", all.doc);
+    if (every_lab) print_limits("--power-every-lab", every.doc);
     if (one_thread) {
         print_limits("--threads 1", one.doc);
         std::printf("  the same on one thread and on %d: %s\n", cores, one.doc["limits"] == all.doc["limits"] ? "yes" : "NO");
     }
-    print_limits(("--threads " + std::to_string(cores)).c_str(), all.doc);
     fs::remove_all(dir);
     return one_thread && one.doc["limits"] != all.doc["limits"] ? 1 : 0;
 }

@@ -44,6 +44,7 @@ void add_reconcile_command(CLI::App& app) {
         int simulations = 2000;
         int power_campaigns = 40;
         int threads = 0;
+        bool power_every_lab = false;
         std::vector<int> power_replicates = {3, 5, 10};
         std::vector<std::string> power_terms;
         std::string hypotheses = "default";
@@ -94,6 +95,11 @@ void add_reconcile_command(CLI::App& app) {
                     "model's check only")
         ->check(CLI::Range(0, 1000))
         ->capture_default_str();
+    cmd->add_flag("--power-every-lab", o->power_every_lab,
+                  "Reconcile every drawn campaign at every value tried (with --power). By default a drawn lab that "
+                  "named the term at a value is taken to name it at a larger one, and one that missed it to miss "
+                  "it at a smaller one; with this flag each is reconciled, and --json counts the labs that broke "
+                  "that order (non_monotone_labs)");
     cmd->add_option("--threads", o->threads,
                     "Threads the drawn campaigns are reconciled on (with --power; 0: one per core); the answer does not "
                     "depend on it")
@@ -180,6 +186,7 @@ void add_reconcile_command(CLI::App& app) {
             rc::PowerOptions po;
             po.campaigns = o->power_campaigns;
             po.threads = o->threads;
+            po.every_lab = o->power_every_lab;
             // On stderr, so --json's stdout stays one document: a bar with the time left on a
             // terminal, a line every 10 s in a log.
             auto meter = std::make_shared<PowerProgressMeter>(stderr, ::isatty(STDERR_FILENO) != 0);

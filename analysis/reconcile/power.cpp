@@ -339,17 +339,26 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
         progress.terms = static_cast<int>(walks.size());
         progress.replicates = n;
         std::mutex progress_mutex;
+        // A term's first value reconciles every lab; a later one only the labs their own verdicts do
+        // not bracket (every_lab: all), counted at the share seen so far at later values (half before).
         auto expect = [&] {
-            int settled_values = 0, settled = 0;
-            for (const auto& w : walks)
+            int settled_values = 0, settled = 0, later_values = 0, later_reconciled = 0;
+            for (const auto& w : walks) {
                 if (w.settled) settled_values += static_cast<int>(w.t->d.tried.size()), ++settled;
+                for (std::size_t v = 1; v < w.t->d.tried.size(); ++v) ++later_values, later_reconciled += w.t->d.tried[v].reconciled;
+            }
             const double per_term = settled > 0 ? static_cast<double>(settled_values) / settled : 4.0;
-            double values = 0.0;
-            for (const auto& w : walks)
-                values += w.settled ? static_cast<double>(w.t->d.tried.size())
-                                    : std::max(per_term, static_cast<double>(w.t->d.tried.size()) + 1.0);
+            const double later_share = po.every_lab ? 1.0 : later_values > 0 ? later_reconciled / (double(later_values) * campaigns) : 0.5;
+            double expected = 0.0;
+            for (const auto& w : walks) {
+                for (const auto& pt : w.t->d.tried) expected += pt.reconciled;
+                if (w.settled) continue;
+                const double tried = static_cast<double>(w.t->d.tried.size());
+                const double more = std::max(per_term, tried + 1.0) - tried;  // values still to try
+                expected += campaigns * (tried == 0.0 ? 1.0 + (more - 1.0) * later_share : more * later_share);
+            }
             progress.terms_done = settled;
-            progress.campaigns_expected = std::max(progress.campaigns_done, static_cast<int>(std::lround(campaigns * values)));
+            progress.campaigns_expected = std::max(progress.campaigns_done, static_cast<int>(std::lround(expected)));
         };
         auto settle_walk = [&](Walk& w) {
             DetectionLimit& d = w.t->d;
@@ -365,6 +374,21 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
             const PowerPoint* reported = at_limit(d);
             d.simulated_power = reported ? share(*reported) : 0.0;
             d.method = "whole decision";
+            if (po.every_lab) {
+                // Labs that named the term at a value and missed it at a larger one (d.tried is by
+                // effect): what the implied verdicts of the default assume away.
+                int non_monotone = 0;
+                for (int i = 0; i < campaigns; ++i) {
+                    bool named_nearer = false, broken = false;
+                    for (const auto& pt : d.tried) {
+                        const bool named = pt.draw_named[static_cast<std::size_t>(i)] != 0;
+                        broken = broken || (named_nearer && !named);
+                        named_nearer = named_nearer || named;
+                    }
+                    non_monotone += broken ? 1 : 0;
+                }
+                d.non_monotone_labs = non_monotone;
+            }
             calibration_sensitivity(d, w.labs, power, opt.seed + 104729u * (w.t->k + 1));
             whole_scale[d.label] = d.value ? (*d.value - p.null_value) / (*w.t->fast - p.null_value) : 0.0;
             w.settled = true;
@@ -400,7 +424,20 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
             // textile term never reached 80 % planning from the bench's labs 78 and 80
             // (docs/notes/reconcile-history.md, fourth pass).
             std::vector<std::vector<char>> hit(jobs.size(), std::vector<char>(static_cast<std::size_t>(campaigns), 0));
-            std::vector<std::vector<char>> alone = hit;
+            std::vector<std::vector<char>> alone = hit, ran = hit;
+            // A lab's verdict at theta implied by its own at the values this term tried before: named
+            // at a smaller effect, named here; missed at a larger one, missed here (PowerOptions::every_lab).
+            auto implied = [&](const Job& job, std::size_t lab) -> std::optional<std::pair<char, char>> {
+                if (po.every_lab) return std::nullopt;
+                const DetectionLimit& d = job.w->t->d;
+                const double here = std::abs(job.theta - d.null_value);
+                for (const auto& pt : d.tried) {
+                    const double there = std::abs(pt.value - d.null_value);
+                    if (pt.draw_named[lab] && there <= here) return std::pair<char, char>{1, pt.draw_alone[lab]};
+                    if (!pt.draw_named[lab] && there >= here) return std::pair<char, char>{0, 0};
+                }
+                return std::nullopt;
+            };
             std::atomic<int> next{0};
             std::exception_ptr failed;
             auto work = [&] {
@@ -409,6 +446,12 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                         const auto at_i = static_cast<std::size_t>(i);
                         std::shared_ptr<const std::vector<ev::Grid>> lab_grids;
                         for (std::size_t j = 0; j < jobs.size(); ++j) {
+                            if (const auto verdict = implied(jobs[j], at_i)) {
+                                hit[j][at_i] = verdict->first;
+                                alone[j][at_i] = verdict->second;
+                                continue;
+                            }
+                            ran[j][at_i] = 1;
                             std::vector<physics::twin::Term> calibration;
                             auto& lab = jobs[j].w->labs[at_i];
                             const auto sim = simulator->draw(jobs[j].truth, n, opt.seed + 7919u * static_cast<std::uint64_t>(i + 1),
@@ -449,6 +492,8 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
                     pt.named += hit[j][at_i];
                     pt.named_alone += alone[j][at_i];
                     pt.draw_named.push_back(hit[j][at_i]);
+                    pt.draw_alone.push_back(alone[j][at_i]);
+                    pt.reconciled += ran[j][at_i];
                     ++pt.campaigns;
                 }
                 jobs[j].w->t->d.tried.push_back(std::move(pt));

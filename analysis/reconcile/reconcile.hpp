@@ -194,6 +194,10 @@ struct PowerPoint {
     int named = 0, campaigns = 0;            // simulated campaigns in which reconcile named it (names_concealed)
     int named_alone = 0;                     // of those, named with no partner
     std::vector<char> draw_named;            // per drawn campaign (the same labs at every value tried)
+    std::vector<char> draw_alone;            // per drawn campaign: named with no partner
+    // Drawn campaigns reconciled at this value; the others' verdicts were implied by the lab's own
+    // verdicts at values bracketing it (PowerOptions::every_lab).
+    int reconciled = 0;
 };
 // How a whole-decision limit hangs on one calibration (docs/reconcile.md, "Detection limits"): the
 // drawn labs split by how far that calibration erred, within half its limit or beyond.
@@ -225,6 +229,9 @@ struct DetectionLimit {
     std::vector<PowerPoint> tried;           // whole decision: the values tried, nearest "no effect" first
     std::string method;                      // "whole decision" or "fast model"
     std::vector<CalibrationSensitivity> calibration;  // whole decision only
+    // With every lab reconciled at every value (PowerOptions::every_lab): the drawn labs that named
+    // the term at a value and missed it at a larger one, where the implied verdicts assume none.
+    std::optional<int> non_monotone_labs;
 };
 struct PowerReport {
     int campaign_replicates = 0;
@@ -252,6 +259,11 @@ struct PowerOptions {
     // Threads the drawn campaigns are reconciled on (0: the hardware's). The answer does not depend
     // on it: each campaign's draws come from its own seed and the verdicts are gathered in order.
     int threads = 0;
+    // Reconcile every drawn lab at every value tried. Otherwise a lab that named the term at a value
+    // is taken to name it at a larger one, and one that missed it at a value to miss it at a smaller
+    // one (the same lab, its draws common to every value: a larger concealed effect is more
+    // evidence): only the labs no verdict of their own brackets are reconciled there.
+    bool every_lab = false;
     // Called after each drawn campaign reconciled (from the thread that did it, one call at a time).
     std::function<void(const PowerProgress&)> progress;
 };

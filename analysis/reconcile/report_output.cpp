@@ -151,10 +151,13 @@ nlohmann::json power_to_json(const PowerReport& plan) {
                                {"replicates", d.replicates}, {"smallest_effect", d.value ? nlohmann::json(*d.value) : nlohmann::json()},
                                {"method", d.method},
                                {"simulated_power", d.method == "scaled" ? nlohmann::json() : nlohmann::json(d.simulated_power)},
-                               {"campaigns", d.campaigns}, {"tried", [&] {
+                               {"campaigns", d.campaigns},
+                               {"non_monotone_labs", d.non_monotone_labs ? nlohmann::json(*d.non_monotone_labs) : nlohmann::json()},
+                               {"tried", [&] {
                                     nlohmann::json t = nlohmann::json::array();
                                     for (const auto& pt : d.tried)
-                                        t.push_back({{"value", pt.value}, {"named", pt.named}, {"named_alone", pt.named_alone}, {"campaigns", pt.campaigns}});
+                                        t.push_back({{"value", pt.value}, {"named", pt.named}, {"named_alone", pt.named_alone}, {"campaigns", pt.campaigns},
+                                                   {"reconciled", pt.reconciled}});
                                     return t;
                                 }()},
                                {"calibration", [&] {

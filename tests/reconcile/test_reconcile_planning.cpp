@@ -295,7 +295,7 @@ TEST_CASE("the plan's text says how far its limits held on independent campaigns
     d.replicates = 3;
     d.value = 1.26;
     d.method = "whole decision";
-    d.tried = {{1.125, 25, 40, 24, {}}, {1.26, 32, 40, 32, {}}};
+    d.tried = {{1.125, 25, 40, 24, {}, {}, 40}, {1.26, 32, 40, 32, {}, {}, 40}};
     plan.limits = {d};
     const std::string whole = rc::power_to_text(plan);
     CHECK_THAT(whole, Catch::Contains("checked by running reconcile itself on 40 campaigns"));
@@ -537,10 +537,11 @@ TEST_CASE("planning: the plan is the same on one thread and on two (each drawn c
             CHECK(a.tried[t].value == b.tried[t].value);
             CHECK(a.tried[t].draw_named == b.tried[t].draw_named);
             CHECK(a.tried[t].named_alone == b.tried[t].named_alone);
+            CHECK(a.tried[t].reconciled == b.tried[t].reconciled);
+            if (a.method == "whole decision") whole += a.tried[t].reconciled;  // the implied ones are not reconciled
         }
         REQUIRE(a.calibration.size() == b.calibration.size());
         for (std::size_t c = 0; c < a.calibration.size(); ++c) CHECK(a.calibration[c].p_value == b.calibration[c].p_value);
-        if (a.method == "whole decision") whole += a.campaigns;
     }
     REQUIRE(whole > 0);
     for (const std::vector<rc::PowerProgress>* calls : {&calls_one, static_cast<const std::vector<rc::PowerProgress>*>(&seen)}) {
@@ -552,4 +553,47 @@ TEST_CASE("planning: the plan is the same on one thread and on two (each drawn c
             CHECK((*calls)[i].label == "humidity_buoyancy");
         }
     }
+}
+
+TEST_CASE("planning: a lab's verdict its own verdicts bracket is implied, not reconciled, and where every lab's verdicts "
+          "rise with the effect the plan is the one that reconciles every lab at every value",
+          "[planning][power][proof]") {
+    const auto model = recorded(17);
+    rc::Options opt;
+    opt.null_simulations = 200;  // sameness, not power (as the thread test)
+    rc::PowerOptions po;
+    po.campaigns = 4;
+    po.terms = {"humidity_buoyancy"};
+    po.every_lab = true;
+    const auto every = rc::detection_limits(*model, opt, {3}, po);
+    po.every_lab = false;
+    const auto implied = rc::detection_limits(*model, opt, {3}, po);
+    const auto whole = [](const rc::PowerReport& r) {
+        for (const auto& d : r.limits)
+            if (d.method == "whole decision") return d;
+        FAIL("no whole-decision limit");
+        return rc::DetectionLimit{};
+    };
+    const auto a = whole(every), b = whole(implied);
+    REQUIRE(a.tried.size() >= 2);  // a walk: the implied verdicts need a second value
+    // Every lab reconciled at every value, and its verdicts checked for order.
+    int reconciled_every = 0, reconciled_implied = 0;
+    for (const auto& t : a.tried) {
+        CHECK(t.reconciled == t.campaigns);
+        reconciled_every += t.reconciled;
+    }
+    REQUIRE(a.non_monotone_labs.has_value());
+    REQUIRE(*a.non_monotone_labs == 0);  // this design's labs name gamma more as it grows
+    CHECK_FALSE(b.non_monotone_labs.has_value());
+    // Then the implied verdicts are the reconciled ones, lab by lab, and the limit the same.
+    REQUIRE(a.tried.size() == b.tried.size());
+    for (std::size_t t = 0; t < a.tried.size(); ++t) {
+        CHECK(a.tried[t].value == b.tried[t].value);
+        CHECK(a.tried[t].draw_named == b.tried[t].draw_named);
+        reconciled_implied += b.tried[t].reconciled;
+    }
+    CHECK(a.value == b.value);
+    // Fewer reconciled: at each value after the first only the labs no verdict of theirs brackets.
+    CHECK(reconciled_implied < reconciled_every);
+    CHECK(reconciled_implied >= po.campaigns);  // the first value: every lab
 }
