@@ -345,6 +345,7 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
                const CampaignResult* baseline_analysis, const Options& options) {
     Result out;
     out.campaign = campaign.name;
+    out.standards = campaign.standards;
     out.options = options;
     auto collect = [&](const Campaign& c, const CampaignResult& a, std::vector<TestTrial>& into, bool nude_only) {
         std::map<std::string, const TrialResult*> by_id;
@@ -710,6 +711,7 @@ nlohmann::json to_json(const Result& r) {
     nlohmann::json j;
     j["campaign"] = r.campaign;
     j["baseline"] = r.baseline.empty() ? nlohmann::json() : nlohmann::json(r.baseline);
+    j["standards"] = r.standards;  // {} when the campaign chose none
     if (r.options.redressing) {
         nlohmann::json carried = {{"source", r.options.redressing->source}};
         for (const auto& [name, m] : {std::pair{"dressed", &r.options.redressing->dressed}, std::pair{"nude", &r.options.redressing->nude}})

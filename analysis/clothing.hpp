@@ -142,6 +142,7 @@ struct EnsembleResult {
 struct Result {
     std::string campaign;
     std::string baseline;                        // where the nude values came from ("" = this campaign)
+    std::map<std::string, std::string> standards;  // the campaign's choice per test, with edition (Campaign::standards)
     Options options;
     std::vector<EnsembleResult> ensembles;       // "nude" first when present
     std::vector<std::string> warnings;           // conditions outside a standard's, trials left out

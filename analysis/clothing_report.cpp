@@ -174,9 +174,11 @@ std::string to_html(const Result& r, const ZoneMap& map, const Campaign* campaig
                                  xml_escape(c.status), xml_escape(c.requirement), xml_escape(c.source));
             o << "</table>\n";
         };
-        // The standard the lab says it followed, else both the method fits (said as such).
-        const std::string ins_std = info.insulation_standard.empty() ? "ASTM F1291 / ISO 15831" : info.insulation_standard;
-        const std::string evap_std = info.evaporative_standard.empty() ? "ASTM F2370" : info.evaporative_standard;
+        // The standard the campaign followed (or the report-info file for an older campaign), else
+        // the methods the analysis fits, said as such: never one guessed.
+        const std::string ins_std =
+            info.insulation_standard.empty() ? "the method of ASTM F1291 and ISO 15831; the campaign names neither" : info.insulation_standard;
+        const std::string evap_std = info.evaporative_standard.empty() ? "the method of ASTM F2370; the campaign names no edition" : info.evaporative_standard;
         conditions(("Insulation (" + ins_std + ")").c_str(), e.insulation_conditions);
         checks(e.insulation_checks);
         conditions(e.evaporative_method.empty() ? ("Evaporative resistance (" + evap_std + ")").c_str()

@@ -147,6 +147,9 @@ struct Campaign {
     std::vector<RecordedChannel> channels;                // format 2: every instrument channel in the CSVs
     std::map<std::string, std::string> provenance;        // program, database, twin_version, config_sha256, ...
     std::map<std::string, Ensemble> ensembles;            // clothing tests: what the trials wear, by id
+    // Clothing tests: the standard each test followed, with its edition, as the campaign chose it
+    // ("insulation" -> "ISO 15831:2004", "evaporative" -> "ASTM F2370-16"; docs/formats.md).
+    std::map<std::string, std::string> standards;
     std::vector<Note> notes;                              // the lab notebook, by time
     std::vector<Trial> trials;
     std::vector<std::string> warnings; // unknown keys and the like, with the file named

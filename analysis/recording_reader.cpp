@@ -827,8 +827,21 @@ Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOp
             campaign.ensembles[id] = ensemble;
         }
     }
-    static const std::set<std::string> known_top{"format", "name", "zone_map", "instruments", "trials",
-                                                 "channels", "provenance", "heat_flux_sign", "ensembles", "notes"};
+    if (doc.contains("standards")) {
+        // Clothing tests: the standard each followed, with its edition (docs/formats.md).
+        const auto& st = doc.at("standards");
+        const Located at = locate(cj.text(), "\"standards\"");
+        if (!st.is_object()) cj.fail("standards", "expected an object: {\"insulation\": \"ISO 15831:2004\", \"evaporative\": ...}", at);
+        for (const auto& [test, v] : st.items()) {
+            if (test != "insulation" && test != "evaporative")
+                cj.fail("standards." + test, "not a clothing test (\"insulation\" or \"evaporative\")", at);
+            const std::string standard = cj.string(st, test, "standards.", at);
+            if (standard.empty() || standard.size() > 80) cj.fail("standards." + test, "expected 1 to 80 bytes of text", at);
+            campaign.standards[test] = standard;
+        }
+    }
+    static const std::set<std::string> known_top{"format", "name", "zone_map", "instruments", "trials", "channels",
+                                                 "provenance", "heat_flux_sign", "ensembles", "standards", "notes"};
     for (const auto& [key, value] : doc.items()) {
         (void)value;
         if (!known_top.count(key)) {

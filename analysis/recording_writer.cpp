@@ -215,6 +215,7 @@ void write_campaign_json(const std::filesystem::path& folder, const Campaign& ca
     }
     if (!campaign.provenance.empty()) doc["provenance"] = campaign.provenance;
     if (!campaign.ensembles.empty()) doc["ensembles"] = ensembles_json(campaign.ensembles);
+    if (!campaign.standards.empty()) doc["standards"] = campaign.standards;
     if (!campaign.notes.empty()) doc["notes"] = notes_json(campaign.notes);
     json trials = json::array();
     for (const auto& t : campaign.trials) {

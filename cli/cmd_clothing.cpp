@@ -183,9 +183,19 @@ void add_clothing_command(CLI::App& app) {
             if (!o->report_info.empty()) inputs.emplace_back(o->report_info);  // never over what it reads
             target.emplace(o->report, ExportShape::file, o->force, inputs);
         }
-        const analysis::clothing::ReportInfo info = o->report_info.empty() ? analysis::clothing::ReportInfo{} : read_report_info(o->report_info);
+        analysis::clothing::ReportInfo info = o->report_info.empty() ? analysis::clothing::ReportInfo{} : read_report_info(o->report_info);
         const analysis::Campaign campaign = read_campaign_source(o->source);
         for (const auto& w : campaign.warnings) spdlog::warn("{}", w);
+        // The standard a test followed is the campaign's choice ([standards] in its plan); the
+        // report-info file only fills in what an older campaign did not say.
+        for (auto [test, field] : {std::pair{"insulation", &info.insulation_standard}, std::pair{"evaporative", &info.evaporative_standard}}) {
+            const auto chosen = campaign.standards.find(test);
+            if (chosen == campaign.standards.end()) continue;
+            if (!field->empty() && *field != chosen->second)
+                spdlog::warn("{}: report.{}_standard \"{}\" is not what campaign {} followed; the report names the campaign's \"{}\"",
+                             o->report_info, test, *field, campaign.name, chosen->second);
+            *field = chosen->second;
+        }
         analysis::AnalysisOptions analysis_options;
         analysis_options.steady.require_flux_stability = o->require_flux_stability;
         analysis_options.steady.require_heat_loss_stability = !o->skin_steadiness_only;

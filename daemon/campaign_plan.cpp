@@ -23,6 +23,7 @@ nlohmann::json campaign_definition_json(const CampaignPlan& plan) {
     nlohmann::json j = {{"name", plan.name}, {"replicates", plan.replicates}, {"trial_duration_s", plan.trial_duration_s}};
     // Only clothing campaigns carry ensembles: earlier campaigns' stored definitions stay equal.
     if (!plan.ensembles.empty()) j["ensembles"] = analysis::ensembles_json(plan.ensembles);
+    if (!plan.standards.empty()) j["standards"] = plan.standards;
     return j;
 }
 
@@ -104,6 +105,8 @@ std::string plan_text_problem(const CampaignPlan& plan) {
         if (const auto why = label_problem(e.description, 500); !why.empty())
             return fmt::format("ensembles.{}.description: {}", id, why);
     }
+    for (const auto& [test, standard] : plan.standards)
+        if (const auto why = label_problem(standard, 80); !why.empty()) return fmt::format("standards.{}: {}", test, why);
     for (const auto& c : plan.cases)
         for (const auto* field : {&c.ensemble, &c.test})
             if (!field->empty())
@@ -300,7 +303,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
     refuse_unknown_keys(root,
                         {"name", "replicates", "trial_duration_min", "settle_window_min", "settle_band_c", "settle_tolerance_c",
                          "settle_tolerance_rh_pct", "settle_timeout_min", "excursion_limit_min", "builtin_cases", "cases",
-                         "ensembles"},
+                         "ensembles", "standards"},
                         source, "");
     auto number = [&](const toml::table& t, const char* key, double fallback, double lo, double hi) {
         const auto* n = t.get(key);
@@ -415,6 +418,29 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
                 pe.fcl_u = number(*e, "fcl_u", 0.0, 0.0, 1.0);
             }
             p.ensembles[id] = pe;
+        }
+    }
+    // The standard each clothing test follows, with its edition: chosen here, printed on the report
+    // (ASTM F1291 and ISO 15831 differ in the skin temperature, so the report must not guess).
+    if (const auto* st = root.get("standards")) {
+        const auto* tab = st->as_table();
+        if (!tab)
+            throw UserError(fmt::format("{}: standards: expected a table: [standards] insulation = \"ISO 15831:2004\", "
+                                        "evaporative = \"ASTM F2370-16\"", where(*st)));
+        refuse_unknown_keys(*tab, {"insulation", "evaporative"}, source, "standards.");
+        for (const auto& [key, node] : *tab) {
+            const std::string test(key.str());
+            if (!node.is_string() || node.as_string()->get().empty())
+                throw UserError(fmt::format("{}: standards.{}: expected the standard and its edition as text, e.g. \"{}\"", where(node),
+                                            test, test == "insulation" ? "ASTM F1291-16" : "ASTM F2370-16"));
+            const std::string standard = node.as_string()->get();
+            if (const auto why = label_problem(standard, 80); !why.empty())
+                throw UserError(fmt::format("{}: standards.{}: {} (1 to 80 bytes of text)", where(node), test, why));
+            const bool runs = std::any_of(p.cases.begin(), p.cases.end(), [&](const PlannedCase& c) { return c.test == test; });
+            if (!runs)
+                throw UserError(fmt::format("{}: standards.{}: no case runs an {} test (a case with test = \"{}\")", where(node), test,
+                                            test, test));
+            p.standards[test] = standard;
         }
     }
     for (const auto& c : p.cases)

@@ -99,6 +99,7 @@ struct CampaignPlan {
     double acquire_timeout_s = 4.0 * 3600.0;
     std::vector<PlannedCase> cases;
     std::map<std::string, analysis::Ensemble> ensembles;  // campaign TOML `[ensembles.<id>]`: what cases may wear
+    std::map<std::string, std::string> standards;          // campaign TOML `[standards]`: test -> standard with edition
 };
 
 // What the database stores of a plan (campaigns.definition_json, cases.conditions_json): what a

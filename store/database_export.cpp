@@ -97,6 +97,9 @@ CampaignReader::CampaignReader(recorder::Database& db, const std::string& name, 
                     if (e.is_object() && e.contains("fcl_u") && e.at("fcl_u").is_number()) ens.fcl_u = e.at("fcl_u").get<double>();
                     c.ensembles[id] = ens;
                 }
+            if (def.is_object() && def.contains("standards") && def.at("standards").is_object())
+                for (const auto& [test, standard] : def.at("standards").items())
+                    if (standard.is_string()) c.standards[test] = standard.get<std::string>();
         }
     std::map<std::int64_t, nlohmann::json> conditions;
     std::map<std::int64_t, int> case_number;

@@ -263,10 +263,12 @@ TEST_CASE("clothing: a nude baseline from another campaign, and a campaign witho
 TEST_CASE("clothing: ensembles and each trial's ensemble and test survive a write and read, and hostile values are refused "
           "with the field named", "[clothing][recording]") {
     const Lab lab;
-    const auto campaign = lab.campaign(1, 1.25);
+    auto campaign = lab.campaign(1, 1.25);
+    campaign.standards = {{"insulation", "ISO 15831:2004"}, {"evaporative", "ASTM F2370-16"}};  // the plan's [standards]
     manikind::test::TempDir dir;
     an::write_campaign(dir.path, campaign);
     const auto back = an::read_campaign(dir.path);
+    CHECK(back.standards == campaign.standards);
     REQUIRE(back.ensembles.count("suit") == 1);
     CHECK(back.ensembles.at("suit").description == "two-piece suit");
     CHECK(back.ensembles.at("suit").fcl == 1.25);
@@ -298,6 +300,10 @@ TEST_CASE("clothing: ensembles and each trial's ensemble and test survive a writ
     refused([](auto& d) { d["ensembles"]["suit"]["fcl"] = 0.5; }, "ensembles.suit.fcl");
     refused([](auto& d) { d["ensembles"]["suit"]["fcl"] = "big"; }, "ensembles.suit.fcl");
     refused([](auto& d) { d["ensembles"] = {1, 2}; }, "ensembles");
+    refused([](auto& d) { d["standards"]["insulation"] = 15831; }, "standards.insulation");
+    refused([](auto& d) { d["standards"]["thermal"] = "ISO 15831"; }, "standards.thermal");
+    refused([](auto& d) { d["standards"]["insulation"] = std::string(81, 'x'); }, "standards.insulation");
+    refused([](auto& d) { d["standards"] = "ISO"; }, "standards");
     refused([](auto& d) { d["ensembles"]["suit"] = 3; }, "ensembles.suit");
 }
 

@@ -120,6 +120,32 @@ def main():
             if bad.returncode != 2 or "info.toml:16" not in bad.stderr or "report.colour: unknown key" not in bad.stderr:
                 print(f"an unknown report-info key: {bad.returncode} {bad.stderr}")
                 sys.exit(1)
+            # The standard is the campaign's choice (its plan's [standards], carried in campaign.json):
+            # the report names it even where the report-info file says otherwise, and says so.
+            with open(info, "w") as f:
+                f.write('[report]\ninsulation_standard = "ASTM F1291-16"\n')
+            chosen = json.load(open(os.path.join(out, "campaign.json")))
+            chosen["standards"] = {"insulation": "ISO 15831:2004"}
+            iso = os.path.join(work, "iso")
+            shutil.copytree(out, iso, dirs_exist_ok=True)
+            with open(os.path.join(iso, "campaign.json"), "w") as f:
+                json.dump(chosen, f)
+            c = subprocess.run([manikin, "clothing", iso, "--report", customer, "--report-info", info, "--force"],
+                               capture_output=True, text=True)
+            html = open(customer, encoding="utf-8").read() if c.returncode == 0 else ""
+            j = subprocess.run([manikin, "clothing", iso, "--json"], capture_output=True, text=True)
+            if "insulation: ISO 15831:2004" not in html or "Insulation (ISO 15831:2004)" not in html or \
+                    "ASTM F1291-16" in html or "is not what campaign" not in c.stderr or \
+                    json.loads(j.stdout).get("standards") != {"insulation": "ISO 15831:2004"}:
+                print(f"the campaign's standard is not the report's: {c.returncode} {c.stderr} {j.stdout[:200]}")
+                sys.exit(1)
+            chosen["standards"] = {"insulation": 15831}
+            with open(os.path.join(iso, "campaign.json"), "w") as f:
+                json.dump(chosen, f)
+            bad = subprocess.run([manikin, "clothing", iso, "--json"], capture_output=True, text=True)
+            if bad.returncode != 2 or "standards.insulation" not in bad.stdout + bad.stderr:
+                print(f"a standard that is not text was not refused: {bad.returncode} {bad.stderr}")
+                sys.exit(1)
             # Steady in heat flux too (the standards' steady heat loss): these trials are.
             f = subprocess.run([manikin, "clothing", out, "--json", "--require-flux-stability"], capture_output=True, text=True)
             strict = json.loads(f.stdout)

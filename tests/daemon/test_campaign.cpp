@@ -264,6 +264,28 @@ TEST_CASE("campaign files: counts are whole numbers, case ids unique, a dry case
     CHECK(plan.cases[1].sweat_rate_g_m2_h == 200);
 }
 
+TEST_CASE("a clothing campaign names the standard each test follows with its edition: text, for a test it runs, "
+          "stored in its definition (issue 64)", "[daemon][campaign][clothing]") {
+    const std::string head = "name = \"t\"\n[ensembles.coat]\ndescription = \"a coat\"\n";
+    const std::string cases = "[[cases]]\nchamber_temp_c = 20\nchamber_rh_pct = 50\nskin_setpoint_c = 34\nensemble = \"coat\"\n"
+                              "test = \"insulation\"\n";
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan(head + cases + "[standards]\ninsulation = 15831\n", "s.toml"),
+                      Catch::Contains("s.toml:11") && Catch::Contains("standards.insulation: expected the standard and its edition"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan(head + cases + "[standards]\nthermal = \"ISO 15831:2004\"\n", "s.toml"),
+                      Catch::Contains("standards.thermal: unknown key"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan(head + cases + "[standards]\nevaporative = \"ASTM F2370-16\"\n", "s.toml"),
+                      Catch::Contains("standards.evaporative: no case runs an evaporative test"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan(head + cases + "[standards]\ninsulation = \"" + std::string(81, 'x') + "\"\n", "s.toml"),
+                      Catch::Contains("standards.insulation") && Catch::Contains("80"));
+    CHECK_THROWS_WITH(manikind::parse_campaign_plan("standards = \"ISO\"\n" + head + cases, "s.toml"),
+                      Catch::Contains("s.toml:1") && Catch::Contains("standards: expected a table"));
+    const auto plan = manikind::parse_campaign_plan(head + cases + "[standards]\ninsulation = \"ISO 15831:2004\"\n", "s.toml");
+    CHECK(plan.standards.at("insulation") == "ISO 15831:2004");
+    CHECK(manikind::campaign_definition_json(plan)["standards"]["insulation"] == "ISO 15831:2004");
+    // A plan without it stores the definition it stored before (continued campaigns compare it).
+    CHECK_FALSE(manikind::campaign_definition_json(manikind::parse_campaign_plan(head + cases, "s.toml")).contains("standards"));
+}
+
 TEST_CASE("a misspelt campaign key is refused with file, line, column, key and the nearest known key", "[daemon][campaign]") {
     const std::string text = "name = \"typo\"\nreplicate = 1\nbuiltin_cases = \"table-s3\"\n";
     CHECK_THROWS_WITH(manikind::parse_campaign_plan(text, "typo.toml"),

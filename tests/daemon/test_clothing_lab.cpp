@@ -47,6 +47,8 @@ TEST_CASE("clothing test on the simulated lab: the world wears the wardrobe's en
     CHECK(stored["clothing"]["ensembles"].size() == 3);
     CHECK(stored["clothing"]["ensembles"][1]["insulation"]["total_parallel"]["clo"].is_number());
     const auto campaign = manikind::campaign_from_database(db, plan.name);
+    // The standards the template chose, with their editions, as the report prints them (issue 64).
+    CHECK(campaign.standards == std::map<std::string, std::string>{{"insulation", "ASTM F1291-16"}, {"evaporative", "ASTM F2370-16"}});
     REQUIRE(campaign.ensembles.count("coverall") == 1);
     CHECK(campaign.ensembles.at("coverall").fcl == 1.26);
     CHECK_FALSE(campaign.ensembles.at("jacket").fcl.has_value());
@@ -65,6 +67,8 @@ TEST_CASE("clothing test on the simulated lab: the world wears the wardrobe's en
     INFO(left_out);
     CHECK(r.left_out.empty());
     CHECK(r.without_result.empty());
+    CHECK(r.standards == campaign.standards);
+    CHECK(an::clothing::to_json(r)["standards"]["insulation"] == "ASTM F1291-16");
     REQUIRE(r.ensembles.size() == 3);
 
     // What the world's physics gives at each test's recorded conditions (the world's own model,
