@@ -793,6 +793,11 @@ nlohmann::json to_json(const Result& r) {
 std::string to_text(const Result& r) {
     std::ostringstream o;
     o << fmt::format("Clothing tests: {}{}\n", r.campaign, r.baseline.empty() ? "" : " (nude baseline from " + r.baseline + ")");
+    if (!r.standards.empty()) {  // as the campaign chose them ([standards])
+        std::string followed;
+        for (const auto& [test, standard] : r.standards) followed += (followed.empty() ? "" : "; ") + test + ": " + standard;
+        o << "Standards followed: " << followed << "\n";
+    }
     o << fmt::format("Values ± U95 ({:.0f} %: Type A from re-dressed replicates, Type B from the instruments by Monte Carlo)\n\n",
                      100.0 * r.options.confidence);
     for (const auto& e : r.ensembles) {

@@ -56,8 +56,14 @@ void print_results_summary(manikind::LabDaemon& daemon, const std::string& campa
         if (r.contains("physiological")) std::printf("%s", manikind::analysis::physio::summary_text(r["physiological"]).c_str());
         // A clothing campaign ends with its answer in clo and Ret (issue 64), not only W/m² per case.
         if (const auto cl = r.find("clothing"); cl != r.end() && cl->is_object()) {
-            std::printf("clothing (ASTM F1291 / ISO 15831 / ASTM F2370; full table: manikin clothing --db ... --campaign %s)\n"
-                        "  ensemble        It total, clo    Icl, clo         Ret total, m²Pa/W\n", campaign.c_str());
+            // The standards the campaign chose ([standards]), else the methods, said as such.
+            std::string standards;
+            if (const auto st = cl->find("standards"); st != cl->end() && st->is_object())
+                for (const auto& [test, standard] : st->items())
+                    if (standard.is_string()) standards += (standards.empty() ? "" : "; ") + test + ": " + standard.get<std::string>();
+            if (standards.empty()) standards = "the methods of ASTM F1291 / ISO 15831 / ASTM F2370; the campaign names no standard";
+            std::printf("clothing (%s; full table: manikin clothing --db ... --campaign %s)\n"
+                        "  ensemble        It total, clo    Icl, clo         Ret total, m²Pa/W\n", standards.c_str(), campaign.c_str());
             auto cell = [](const nlohmann::json& v, const char* value, const char* u95, double scale) {
                 if (!v.is_object() || !v[value].is_number()) return std::string("-");
                 return fmt::format("{:.2f} ± {:.2f}", v[value].get<double>() * scale, v[u95].get<double>() * scale);

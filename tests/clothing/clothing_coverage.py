@@ -134,6 +134,10 @@ def main():
                                capture_output=True, text=True)
             html = open(customer, encoding="utf-8").read() if c.returncode == 0 else ""
             j = subprocess.run([manikin, "clothing", iso, "--json"], capture_output=True, text=True)
+            t = subprocess.run([manikin, "clothing", iso], capture_output=True, text=True)
+            if "Standards followed: insulation: ISO 15831:2004" not in t.stdout:
+                print(f"the table does not name the campaign's standard: {t.stdout[:300]}")
+                sys.exit(1)
             if "insulation: ISO 15831:2004" not in html or "Insulation (ISO 15831:2004)" not in html or \
                     "ASTM F1291-16" in html or "is not what campaign" not in c.stderr or \
                     json.loads(j.stdout).get("standards") != {"insulation": "ISO 15831:2004"}:
