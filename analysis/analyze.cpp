@@ -255,6 +255,7 @@ CampaignResult aggregate_trials(const Campaign& campaign, const std::vector<Tria
             used.push_back(&tr);
             if (info.wettedness) wettedness.insert(*info.wettedness);
             if (info.skin_setpoint_c) setpoints.insert(*info.skin_setpoint_c);
+            if (c.local.empty()) c.local = info.local;  // one room per case (the plan states it per case)
         }
         c.n_replicates = static_cast<int>(used.size());
         if (used.empty()) {

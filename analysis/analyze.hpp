@@ -98,6 +98,7 @@ struct CaseResult {
     std::vector<ConditionEstimate> conditions;
     std::optional<double> wettedness;
     std::optional<double> skin_setpoint_c;
+    LocalRoom local;                 // the room the campaign stated for this case, per zone (empty: uniform)
     AreaResult whole_body;
     std::vector<AreaResult> regions;
     std::vector<ZoneResult> zones;

@@ -17,6 +17,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "analysis/local_room.hpp"
 #include "analysis/zone_map.hpp"
 #include "physics/sign_convention.hpp"
 
@@ -79,6 +80,7 @@ struct TrialInfo {
     std::string ensemble;              // clothing worn: an id of Campaign::ensembles, "nude", or empty (not a clothing test)
     std::string test;                  // "insulation", "evaporative", or empty
     std::string control;               // "physiological" (the thermoregulation model's control), or empty
+    LocalRoom local;                   // the room where not uniform, per zone of the map (campaign's [[cases.local]])
     bool partial = false;              // exported while running: up to its last committed reading ("partial": true)
 };
 

@@ -622,7 +622,7 @@ void check_trial_file(const std::filesystem::path& folder, const std::string& fi
 }
 
 TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson& cj, const std::filesystem::path& folder,
-                           std::vector<std::string>& warnings) {
+                           const ZoneMap& map, std::vector<std::string>& warnings) {
     const std::string path = fmt::format("trials[{}].", index);
     if (!t.is_object()) cj.fail(fmt::format("trials[{}]", index), "expected an object");
     if (!t.contains("id")) cj.fail(path + "id", "required key is missing");
@@ -686,6 +686,16 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
                     at_key("control"));
         if (info.control == "constant-skin") info.control.clear();
     }
+    if (t.contains("local")) {
+        // The room the campaign stated for the trial's case, per zone (docs/formats.md).
+        std::string why;
+        info.local = parse_local_room(map, t.at("local"), why);
+        if (!why.empty()) {
+            const auto colon = why.find(": ");
+            cj.fail(path + "local" + (colon == std::string::npos ? "" : why.substr(0, colon)),
+                    colon == std::string::npos ? why : why.substr(colon + 2), at_key("local"));
+        }
+    }
     if (t.contains("partial")) {
         if (!t.at("partial").is_boolean()) cj.fail(path + "partial", fmt::format("expected true or false, found {}", t.at("partial").dump()), at_key("partial"));
         info.partial = t.at("partial").get<bool>();
@@ -697,7 +707,7 @@ TrialInfo parse_trial_info(const json& t, std::size_t index, const CampaignJson&
     }
     static const std::set<std::string> known{"id",        "case",        "replicate", "file",     "skin_setpoint_c",
                                              "wet",       "wettedness",  "chamber_setpoint",      "started_utc",
-                                             "t0_utc",    "ensemble",    "test",      "control",  "partial"};
+                                             "t0_utc",    "ensemble",    "test",      "control",  "partial", "local"};
     for (const auto& [key, value] : t.items()) {
         (void)value;
         if (!known.count(key))
@@ -856,7 +866,7 @@ Campaign read_metadata_checked(const std::filesystem::path& folder, const ReadOp
     std::set<std::string> ids;
     std::vector<TrialInfo> infos;
     for (std::size_t i = 0; i < trials.size(); ++i) {
-        TrialInfo info = parse_trial_info(trials[i], i, cj, folder, campaign.warnings);
+        TrialInfo info = parse_trial_info(trials[i], i, cj, folder, campaign.zone_map, campaign.warnings);
         if (!ids.insert(info.id).second)
             cj.fail(fmt::format("trials[{}].id", i), fmt::format("duplicated trial id '{}'", info.id),
                     locate(cj.text(), "\"" + info.id + "\"", 1));

@@ -226,6 +226,7 @@ void write_campaign_json(const std::filesystem::path& folder, const Campaign& ca
         if (!i.ensemble.empty()) e["ensemble"] = i.ensemble;
         if (!i.test.empty()) e["test"] = i.test;
         if (!i.control.empty()) e["control"] = i.control;
+        if (const auto room = local_room_json(campaign.zone_map, i.local); !room.empty()) e["local"] = room;
         if (i.partial) e["partial"] = true;
         if (i.wettedness) {
             if (*i.wettedness == 0.0 || *i.wettedness == 1.0) e["wet"] = *i.wettedness == 1.0;

@@ -66,8 +66,8 @@ manikind::CampaignPlan soak_plan(int n) {
     p.name = fmt::format("soak-{:03d}", n);
     p.replicates = 3;
     p.trial_duration_s = 75 * 60.0;
-    p.cases.push_back({1, 35.0, 27.0, 35.0, false, 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt});
-    p.cases.push_back({2, 35.0, 27.0, 35.0, true, 300.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt});  // Table S3's dry and wet skin at 35 °C
+    p.cases.push_back({1, 35.0, 27.0, 35.0, false, 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});
+    p.cases.push_back({2, 35.0, 27.0, 35.0, true, 300.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});  // Table S3's dry and wet skin at 35 °C
     return p;
 }
 

@@ -32,6 +32,8 @@ nlohmann::json case_conditions_json(const PlannedCase& c) {
                         {"skin_setpoint_c", c.skin_setpoint_c}, {"wet", c.wet}, {"sweat_rate_g_m2_h", c.sweat_rate_g_m2_h}};
     if (!c.ensemble.empty()) j["ensemble"] = c.ensemble;
     if (!c.test.empty()) j["test"] = c.test;
+    // Only a case that states its room carries it: earlier campaigns' stored conditions stay equal.
+    if (const auto room = analysis::local_room_json(analysis::andi35_zone_map(), c.local); !room.empty()) j["local"] = room;
     // Only physiological cases carry these: earlier campaigns' stored conditions stay equal.
     if (c.heat_flux_w_m2) {
         j["control"] = "constant-heat-flux";
@@ -89,7 +91,7 @@ CampaignPlan table_s3_plan(const std::string& name) {
     p.name = name;
     for (const auto& c : sim::table_s3_cases()) {
         p.cases.push_back({c.case_id, c.chamber_temp_c, c.chamber_rh_pct, c.skin_setpoint_c, c.wettedness > 0.5,
-                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt});
+                           c.wettedness > 0.5 ? 300.0 : 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});
     }
     return p;
 }
@@ -297,6 +299,62 @@ void parse_physiological(const toml::table& t, const toml::node& node, PlannedCa
 
 }  // namespace
 
+// [[cases.local]]: the room this case's trials meet where it is not uniform (issue 65; the same
+// keys as [[simulation.local]]): the daemon's simulated world is that room for the case's trials,
+// and the case's conditions, the export and reconcile's twin carry it. Entries add up where they
+// meet; the last air speed named for a zone holds.
+static void parse_case_room(const toml::table& t, PlannedCase& c, const std::string& source) {
+    const auto* node = t.get("local");
+    if (!node) return;
+    const auto* arr = node->as_array();
+    if (!arr || !arr->is_array_of_tables())
+        throw UserError(fmt::format("{}: cases.local: expected [[cases.local]] tables (zones = [...], air_offset_c, "
+                                    "radiant_offset_c, air_speed_m_s, contact_w_m2, solar_w_m2)", toml_input::where(source, *node)));
+    const auto& map = analysis::andi35_zone_map();
+    c.local.assign(map.size(), {});
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+        const toml::table& e = *(*arr)[i].as_table();
+        const std::string at = toml_input::where(source, e);
+        refuse_unknown_keys(e, {"zones", "what", "air_offset_c", "radiant_offset_c", "air_speed_m_s", "contact_w_m2", "solar_w_m2"},
+                            source, "cases.local.");
+        const auto* zones = e.get("zones");
+        if (!zones || !zones->is_array() || zones->as_array()->empty())
+            throw UserError(fmt::format("{}: cases.local.zones: expected the zones, regions or segments it applies to "
+                                        "(e.g. zones = [\"face\", \"hand_l\"])", at));
+        if (const auto* w = e.get("what"); w && !w->is_string())
+            throw UserError(fmt::format("{}: cases.local.what: expected text (what this is: \"a vent jet\")", at));
+        auto value = [&](const char* key, double lo, double hi, const char* unit) -> std::optional<double> {
+            const auto* n = e.get(key);
+            if (!n) return std::nullopt;
+            if (!n->is_number()) throw UserError(fmt::format("{}: cases.local.{}: expected a number ({})", toml_input::where(source, *n), key, unit));
+            const double v = n->is_integer() ? static_cast<double>(n->as_integer()->get()) : n->as_floating_point()->get();
+            if (!(v >= lo && v <= hi))
+                throw UserError(fmt::format("{}: cases.local.{}: {} {} is outside {}..{}", toml_input::where(source, *n), key, v, unit, lo, hi));
+            return v;
+        };
+        const auto air = value("air_offset_c", -30.0, 30.0, "K"), radiant = value("radiant_offset_c", -60.0, 60.0, "K"),
+                   speed = value("air_speed_m_s", 0.0, 10.0, "m/s"), contact = value("contact_w_m2", -300.0, 300.0, "W/m²"),
+                   solar = value("solar_w_m2", 0.0, 1000.0, "W/m²");
+        for (const auto& z : *zones->as_array()) {
+            if (!z.is_string()) throw UserError(fmt::format("{}: cases.local.zones: expected names (text)", toml_input::where(source, z)));
+            const std::string name = z.as_string()->get();
+            const auto named = map.zones_named(name);
+            if (named.empty())
+                throw UserError(fmt::format("{}: cases.local.zones: '{}' is no zone, region or segment of the zone map "
+                                            "(a zone as face, hand_l; a region as chest, upper_arm_l; a segment as thigh)",
+                                            toml_input::where(source, z), name));
+            for (const std::size_t k : named) {
+                auto& l = c.local[k];
+                l.air_offset_c += air.value_or(0.0);
+                l.radiant_offset_c += radiant.value_or(0.0);
+                if (speed) l.air_speed_m_s = *speed;
+                l.contact_w_m2 += contact.value_or(0.0);
+                l.solar_w_m2 += solar.value_or(0.0);
+            }
+        }
+    }
+}
+
 CampaignPlan parse_campaign_plan(const std::string& text, const std::string& source) {
     const toml::table root = toml_input::parse(text, source);
     auto where = [&](const toml::node& n) { return toml_input::where(source, n); };
@@ -349,7 +407,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             if (!t) throw UserError(fmt::format("{}: cases: expected [[cases]] tables", where(node)));
             refuse_unknown_keys(*t, {"id", "chamber_temp_c", "chamber_rh_pct", "skin_setpoint_c", "wet", "sweat_rate_g_m2_h",
                                      "heat_flux_w_m2", "heat_flux_by_region_w_m2", "comfort_a_c", "comfort_b_c_m2_w",
-                                     "enclosure_temp_c", "enclosure_rh_pct", "ensemble", "test", "control", "model"},
+                                     "enclosure_temp_c", "enclosure_rh_pct", "ensemble", "test", "control", "model", "local"},
                                 source, "cases.");
             PlannedCase c;
             c.id = whole(*t, "id", static_cast<double>(p.cases.size() + 1), 1, 1e6);
@@ -392,6 +450,7 @@ CampaignPlan parse_campaign_plan(const std::string& text, const std::string& sou
             if (c.test == "insulation" && c.wet)
                 throw UserError(fmt::format("{}: cases: an insulation test is dry (wet = false)", where(node)));
             parse_physiological(*t, node, c, source);
+            parse_case_room(*t, c, source);
             p.cases.push_back(c);
         }
     }

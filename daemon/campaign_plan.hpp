@@ -66,6 +66,9 @@ struct PlannedCase {
     std::map<std::string, double> heat_flux_by_region_w_m2;
     // Set for control = "comfort" (issue 65): each zone's skin from its own loss, t_sk = a - b q.
     std::optional<ComfortEquation> comfort;
+    // [[cases.local]] (issue 65): the room the case's trials meet where it is not uniform, per zone of
+    // the andi35 map (empty: uniform, or the simulated lab's own [[simulation.local]]).
+    analysis::LocalRoom local;
 };
 
 

@@ -333,6 +333,10 @@ void LabDaemon::advance_locked() {
             // 64). On the simulated lab the world puts the wardrobe's ensemble on, and its
             // operator answers at once unless [simulation] operator_prompts = "wait".
             auto* lab = acq_ ? acq_->lab() : nullptr;
+            // The room the case states ([[cases.local]]): the simulated world is that room for
+            // the case's trials, else its configured one (issue 65).
+            if (lab && !lab->set_room(current_->c.local))
+                event("warn", "simulation", "the case's room does not fit the simulated manikin's zones: the configured room holds");
             if (lab && current_->c.ensemble.empty()) {
                 lab->dress("");  // not a clothing test: bare
             } else if (!current_->c.ensemble.empty()) {

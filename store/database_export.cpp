@@ -142,6 +142,13 @@ CampaignReader::CampaignReader(recorder::Database& db, const std::string& name, 
         trial.info.ensemble = cond.value("ensemble", "");
         trial.info.test = cond.value("test", "");
         trial.info.control = cond.value("control", "");
+        if (cond.contains("local")) {  // the room the plan stated for the case ([[cases.local]])
+            std::string why;
+            trial.info.local = analysis::parse_local_room(c.zone_map, cond.at("local"), why);
+            if (!why.empty())
+                throw UserError(fmt::format("{}: case {}: its stored room (local{}) cannot be read", db.path().string(),
+                                            trial.info.case_id, why));
+        }
         if (trial.info.control == "physiological") trial.info.skin_setpoint_c.reset();  // the model's, zone by zone
         trial.info.chamber_setpoint_temp_c = cond.value("chamber_temp_c", 0.0);
         trial.info.chamber_setpoint_rh_pct = cond.value("chamber_rh_pct", 0.0);

@@ -47,6 +47,9 @@ std::vector<CaseInput> case_inputs_from_results(const CampaignResult& result, co
             if (heights_known) zi.height_m = zone.centroid_height_m;
             zi.facing = zone.facing == "front" ? 1 : zone.facing == "back" ? -1 : 0;
             zi.side = zone.side == "l" ? -1 : zone.side == "r" ? 1 : 0;
+            // The room the campaign stated for this case ([[cases.local]]): the twin meets each
+            // zone where it is, not only at the probes (issue 65).
+            if (c.local.size() == map.size()) zi.local = c.local[z];
             cond.zones.push_back(std::move(zi));
             in.q_exp_w_m2.push_back(c.zones[z].q.value);
             in.expanded_u_w_m2.push_back(c.zones[z].q.U);

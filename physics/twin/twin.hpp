@@ -36,6 +36,7 @@ struct LocalEnvironment {
     bool uniform() const {
         return air_offset_c == 0.0 && radiant_offset_c == 0.0 && !air_speed_m_s && contact_w_m2 == 0.0 && solar_w_m2 == 0.0;
     }
+    bool operator==(const LocalEnvironment&) const = default;
 };
 
 struct ZoneInput {

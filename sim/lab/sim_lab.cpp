@@ -205,6 +205,11 @@ std::vector<ServedRegister> SimLab::bind_datalogger(const std::vector<RegisterDe
     return out;
 }
 
+bool SimLab::set_room(const std::vector<physics::twin::LocalEnvironment>& room) {
+    std::lock_guard lk(world_lock_);
+    return world_.set_room(room);
+}
+
 bool SimLab::dress(const std::string& ensemble) {
     std::lock_guard lk(world_lock_);
     if (ensemble.empty() || ensemble == "nude") {

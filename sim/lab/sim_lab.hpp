@@ -89,6 +89,8 @@ public:
     // The operator dresses the manikin (clothing tests): a wardrobe ensemble by id ("nude" or
     // empty: bare). Returns false for an id the wardrobe does not have (the manikin stays bare).
     bool dress(const std::string& ensemble);
+    // The room a case states ([[cases.local]], per zone; empty: the configured room). False: wrong size.
+    bool set_room(const std::vector<physics::twin::LocalEnvironment>& room);
     void clear_faults(const std::string& device);
     std::vector<std::string> active_faults() const;
 

@@ -67,6 +67,13 @@ void World::apply_enclosure_offsets() {
         }
 }
 
+bool World::set_room(const std::vector<physics::twin::LocalEnvironment>& room) {
+    if (!room.empty() && room.size() != conditions_.zones.size()) return false;
+    for (std::size_t z = 0; z < conditions_.zones.size(); ++z)
+        conditions_.zones[z].local = !room.empty() ? room[z] : o_.local.empty() ? physics::twin::LocalEnvironment{} : o_.local[z];
+    return true;
+}
+
 void World::wear(std::vector<physics::twin::Term> clothing) {
     clothing_ = std::move(clothing);
     dressed_ = o_.physics;

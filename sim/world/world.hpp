@@ -109,6 +109,9 @@ public:
     // The operator dresses the manikin (clothing tests): `clothing` twin terms over the world's
     // physics from now on; empty = nude.
     void wear(std::vector<physics::twin::Term> clothing);
+    // The room a campaign's case states ([[cases.local]], one entry per zone); empty: the room the
+    // world was made with ([[simulation.local]], or uniform). Returns false for a wrong size.
+    bool set_room(const std::vector<physics::twin::LocalEnvironment>& room);
     bool manikin_running() const { return run_; }
     bool watchdog_tripped() const { return watchdog_tripped_; }
     int zone_count() const { return static_cast<int>(zones_.size()); }

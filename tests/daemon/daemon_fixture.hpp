@@ -55,7 +55,7 @@ inline CampaignPlan quick_plan(const std::string& name, double trial_min = 35.0)
     p.name = name;
     p.replicates = 1;
     p.trial_duration_s = trial_min * 60.0;
-    p.cases.push_back({1, 35.0, 27.0, 35.0, true, 300.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt});
+    p.cases.push_back({1, 35.0, 27.0, 35.0, true, 300.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});
     return p;
 }
 

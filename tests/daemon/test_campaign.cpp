@@ -286,6 +286,58 @@ TEST_CASE("a clothing campaign names the standard each test follows with its edi
     CHECK_FALSE(manikind::campaign_definition_json(manikind::parse_campaign_plan(head + cases, "s.toml")).contains("standards"));
 }
 
+TEST_CASE("a case states its room where it is not uniform ([[cases.local]]): zones by name, region or segment, every "
+          "mistake refused by file, line and key, the room stored with the case (issue 65)", "[daemon][campaign][comfort]") {
+    const std::string head = "name = \"t\"\n[[cases]]\nchamber_temp_c = 25\nchamber_rh_pct = 40\n";
+    const auto plan = manikind::parse_campaign_plan(head + "[[cases.local]]\nzones = [\"chest\", \"face\"]\nwhat = \"sun\"\n"
+                                                           "solar_w_m2 = 120\n[[cases.local]]\nzones = [\"hand\"]\nair_speed_m_s = 1.5\n"
+                                                           "air_offset_c = -3\n",
+                                                    "room.toml");
+    const auto& map = manikind::analysis::andi35_zone_map();
+    REQUIRE(plan.cases.front().local.size() == map.size());
+    int sunny = 0, jets = 0;
+    for (std::size_t z = 0; z < map.size(); ++z) {
+        const auto& l = plan.cases.front().local[z];
+        const bool chest_or_face = map.zones[z].region == "chest" || map.zones[z].name == "face";
+        CHECK(l.solar_w_m2 == (chest_or_face ? 120.0 : 0.0));
+        sunny += chest_or_face ? 1 : 0;
+        if (map.zones[z].segment == "hand") {
+            CHECK(l.air_speed_m_s == 1.5);
+            CHECK(l.air_offset_c == -3.0);
+            ++jets;
+        } else {
+            CHECK_FALSE(l.air_speed_m_s.has_value());
+        }
+    }
+    CHECK(sunny >= 2);
+    CHECK(jets == 2);
+    // Stored with the case: the non-uniform zones by id.
+    const auto stored = manikind::case_conditions_json(plan.cases.front())["local"];
+    CHECK(stored.size() == static_cast<std::size_t>(sunny + jets));
+    std::string why;
+    CHECK(manikind::analysis::parse_local_room(map, stored, why) == plan.cases.front().local);
+    CHECK(why.empty());
+    // A case without it stores what it stored before.
+    CHECK_FALSE(manikind::case_conditions_json(manikind::parse_campaign_plan(head, "room.toml").cases.front()).contains("local"));
+    auto refused = [&](const std::string& room, const std::string& what) {
+        INFO(room);
+        CHECK_THROWS_WITH(manikind::parse_campaign_plan(head + room, "room.toml"), Catch::Contains("room.toml:") && Catch::Contains(what));
+    };
+    refused("[[cases.local]]\nzones = [\"elbow\"]\nsolar_w_m2 = 10\n", "'elbow' is no zone, region or segment");
+    refused("[[cases.local]]\nsolar_w_m2 = 10\n", "cases.local.zones: expected the zones");
+    refused("[[cases.local]]\nzones = [\"face\"]\nsolar_w_m2 = 5000\n", "cases.local.solar_w_m2: 5000");
+    refused("[[cases.local]]\nzones = [\"face\"]\nsolar = 50\n", "cases.local.solar: unknown key");
+    refused("[[cases.local]]\nzones = [\"face\"]\nair_speed_m_s = \"fast\"\n", "cases.local.air_speed_m_s: expected a number");
+    refused("local = 3\n", "cases.local: expected [[cases.local]] tables");
+    // campaign.json's reading of it names the entry and key.
+    CHECK(manikind::analysis::parse_local_room(map, nlohmann::json::parse(R"([{"zone": 99, "solar_w_m2": 1}])"), why).empty());
+    CHECK_THAT(why, Catch::Contains("[0].zone: 99 is no zone"));
+    CHECK(manikind::analysis::parse_local_room(map, nlohmann::json::parse(R"([{"zone": 1, "solar_w_m2": -1}])"), why).empty());
+    CHECK_THAT(why, Catch::Contains("[0].solar_w_m2: expected a number within 0..1000"));
+    CHECK(manikind::analysis::parse_local_room(map, nlohmann::json::parse(R"({"zone": 1})"), why).empty());
+    CHECK_THAT(why, Catch::Contains("expected an array"));
+}
+
 TEST_CASE("a misspelt campaign key is refused with file, line, column, key and the nearest known key", "[daemon][campaign]") {
     const std::string text = "name = \"typo\"\nreplicate = 1\nbuiltin_cases = \"table-s3\"\n";
     CHECK_THROWS_WITH(manikind::parse_campaign_plan(text, "typo.toml"),
@@ -360,7 +412,7 @@ TEST_CASE("results so far are stored after each trial, marked interim, with the 
     manikind::LabDaemon daemon({c, true, 1.0});
     daemon.set_interim_results(true);
     auto plan = quick_plan("interim");
-    plan.cases.push_back({2, 35.0, 27.0, 35.0, false, 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt});  // a dry case after the wet one
+    plan.cases.push_back({2, 35.0, 27.0, 35.0, false, 0.0, std::nullopt, std::nullopt, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});  // a dry case after the wet one
     REQUIRE(daemon.start_campaign(plan).empty());
     // Step until the first trial has ended, then wait for its analysis (its own thread).
     while (daemon.status_json()["trials_done"].get<int>() < 1) daemon.step_virtual(1.0);

@@ -170,13 +170,13 @@ TEST_CASE("limits that fit the manikin: standard clothing-test conditions pass t
     plan.name = "clothing";
     // ISO 15831 insulation (20 °C air, 35 °C skin, dry); ISO 11092-like isothermal (35 °C, wet);
     // the paper's Table S3 cases.
-    plan.cases.push_back({1, 20.0, 50.0, 35.0, false, 0.0, 20.0, 50.0, "", "", std::nullopt, std::nullopt, {}, std::nullopt});
-    plan.cases.push_back({2, 35.0, 40.0, 35.0, true, 300.0, 35.0, 40.0, "", "", std::nullopt, std::nullopt, {}, std::nullopt});
+    plan.cases.push_back({1, 20.0, 50.0, 35.0, false, 0.0, 20.0, 50.0, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});
+    plan.cases.push_back({2, 35.0, 40.0, 35.0, true, 300.0, 35.0, 40.0, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});
     CHECK(manikind::check_plan_against_limits(plan, c.safety).empty());
     CHECK(manikind::check_plan_against_devices(plan, c).empty());
     CHECK(manikind::check_plan_against_devices(manikind::table_s3_plan("s3"), c).empty());
     // 35 °C skin, wet, in 5 °C air at 10 % RH: beyond what 600 W/m² heaters hold.
-    plan.cases.push_back({3, 5.0, 10.0, 35.0, true, 300.0, 5.0, 10.0, "", "", std::nullopt, std::nullopt, {}, std::nullopt});
+    plan.cases.push_back({3, 5.0, 10.0, 35.0, true, 300.0, 5.0, 10.0, "", "", std::nullopt, std::nullopt, {}, std::nullopt, {}});
     const auto why = manikind::check_plan_against_devices(plan, c);
     CHECK(why.find("case 3: holding 35 °C skin wet at 5 °C, 10 % RH needs about") != std::string::npos);
     CHECK(why.find("more than the heaters' rating of 600 W/m²") != std::string::npos);

@@ -1,0 +1,28 @@
+// A trial's room where it is not uniform (issue 65): what each zone meets beside the probes'
+// reading (its own air and radiant temperature, a jet, a seat, the sun), as the campaign states
+// it per case ([[cases.local]], docs/comfort.md). Carried in the database's case conditions and in
+// campaign.json's trials (`local`), read back into the twin's inputs by reconcile.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "analysis/zone_map.hpp"
+#include "physics/twin/twin.hpp"
+
+namespace manikind::analysis {
+
+// One entry per zone of the map, in the map's order; empty: the room is uniform.
+using LocalRoom = std::vector<physics::twin::LocalEnvironment>;
+
+// `[{"zone": 3, "air_offset_c": 1.5, ...}]`: the zones that are not uniform only, by zone id, each
+// key present only where it is not the uniform room's (docs/formats.md, trials[].local).
+nlohmann::json local_room_json(const ZoneMap& map, const LocalRoom& room);
+
+// The inverse, every value checked (a zone of the map, each number within the range the campaign
+// file allows). On a problem: empty, and `why` names the entry and the key.
+LocalRoom parse_local_room(const ZoneMap& map, const nlohmann::json& doc, std::string& why);
+
+}  // namespace manikind::analysis
