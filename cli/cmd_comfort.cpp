@@ -19,6 +19,7 @@
 #include "cli/campaign_source.hpp"
 #include "cli/commands.hpp"
 #include "store/export_target.hpp"
+#include "store/hdf5_export.hpp"
 
 namespace manikind::cli {
 namespace {
@@ -90,7 +91,7 @@ void add_calibrate(CLI::App& app) {
 void add_teq(CLI::App& app) {
     struct Opts {
         CampaignSource source;
-        std::string calibration, ranges, plot, report;
+        std::string calibration, ranges, plot, report, hdf5;
         bool json = false, force = false;
         analysis::teq::Options options;
     };
@@ -104,7 +105,9 @@ void add_teq(CLI::App& app) {
     cmd->add_option("--plot", o->plot, "Write the comfort-zone diagram (SVG) to this file (new, or with --force)");
     cmd->add_option("--report", o->report, "Write a page for the reader (HTML with the diagram inline): campaign, calibration, "
                                            "when, the standard, the whole body and regions per case, every zone, notes");
-    cmd->add_flag("--force", o->force, "Replace an existing diagram or report");
+    cmd->add_option("--hdf5", o->hdf5, "Write teq per case (zones, regions, whole body with u_A, u_B, U95) and the JSON "
+                                       "document to this HDF5 file (manikin-teq-hdf5/1, docs/formats.md 7.3)");
+    cmd->add_flag("--force", o->force, "Replace an existing diagram, report or HDF5 file");
     cmd->add_flag("--constant-h", [o](std::int64_t) { o->options.curved_h = false; },
                   "Use each zone's h_cal as one constant, as ISO 14505-2 writes it (default: read from the calibration's curve "
                   "at the zone's own temperature difference, docs/comfort.md)");
@@ -117,7 +120,7 @@ void add_teq(CLI::App& app) {
                 "Example: manikin teq cabin-20261129 --calibration manikin-teq-2026-11.json --ranges lab-ranges.csv --plot teq.svg");
     cmd->callback([o] {
         // Both outputs are checked before anything is read (docs/cli.md, the output guard).
-        std::optional<ExportTarget> target, report_target;
+        std::optional<ExportTarget> target, report_target, hdf5_target;
         auto inputs = source_inputs(o->source);
         inputs.emplace_back(o->calibration);
         if (!o->ranges.empty()) inputs.emplace_back(o->ranges);
@@ -125,6 +128,11 @@ void add_teq(CLI::App& app) {
         if (!o->report.empty()) {
             if (o->report == o->plot) throw UserError(fmt::format("--report and --plot name the same file: {}", o->report));
             report_target.emplace(o->report, ExportShape::file, o->force, inputs);
+        }
+        if (!o->hdf5.empty()) {
+            if (o->hdf5 == o->plot || o->hdf5 == o->report)
+                throw UserError(fmt::format("--hdf5 names the same file as --{}: {}", o->hdf5 == o->plot ? "plot" : "report", o->hdf5));
+            hdf5_target.emplace(o->hdf5, ExportShape::file, o->force, inputs);
         }
         analysis::teq::Calibration calibration;
         analysis::teq::NeutralRanges ranges;
@@ -152,6 +160,11 @@ void add_teq(CLI::App& app) {
                 std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
             write_target(*report_target, analysis::teq::report_html(r, when, std::string("manikin ") + MANIKIND_VERSION), o->report);
             spdlog::info("wrote {}", o->report);
+        }
+        if (hdf5_target) {
+            write_teq_hdf5(hdf5_target->staging(), r, analysis::teq::to_json(r));
+            hdf5_target->commit();
+            spdlog::info("wrote {}", o->hdf5);
         }
         if (o->json)
             std::printf("%s\n", analysis::teq::to_json(r).dump(2).c_str());

@@ -375,6 +375,8 @@ void write_metadata(Writer& w, const analysis::Campaign& c) {
     w.attribute(w.root(), "campaign", c.name);
     w.attribute(w.root(), "heat_flux_sign", std::string(analysis::kHeatFluxSign));
     for (const auto& [key, value] : c.provenance) w.attribute(w.root(), key, value);
+    // Clothing tests: the standards the campaign chose, as campaign.json's `standards`.
+    for (const auto& [test, standard] : c.standards) w.attribute(w.root(), test + "_standard", standard);
 
     {
         Handle zones = w.group(w.root(), "zone_map");
@@ -435,6 +437,8 @@ void write_trial_group(Writer& w, hid_t trials, const analysis::Campaign& c, con
     if (!t.ensemble.empty()) w.attribute(g.get(), "ensemble", t.ensemble);
     if (!t.test.empty()) w.attribute(g.get(), "test", t.test);
     if (!t.control.empty()) w.attribute(g.get(), "control", t.control);
+    // The room the trial's case stated ([[cases.local]]), as campaign.json's trials[].local (JSON text).
+    if (const auto room = analysis::local_room_json(c.zone_map, t.local); !room.empty()) w.attribute(g.get(), "local", room.dump());
     if (t.partial) w.attribute(g.get(), "partial", std::int64_t{1});  // exported while running
     if (t.t0_utc_ns) w.attribute(g.get(), "t0_utc", analysis::iso_utc_ms(*t.t0_utc_ns));
     w.dataset(g.get(), "t_s", d.t_s, h5().native_double, "s");
@@ -554,6 +558,62 @@ void write_campaign_hdf5(const std::filesystem::path& file, const analysis::Camp
     Hdf5CampaignFile out(file, campaign);
     for (const auto& t : campaign.trials) out.write_trial(campaign, t.info, t.data);
     out.finish(analysis);
+}
+
+void write_teq_hdf5(const std::filesystem::path& file, const analysis::teq::Result& r, const nlohmann::json& doc) {
+    // `manikin teq --hdf5` (docs/formats.md section 7.3): a group per case with the zones', the
+    // regions' and the whole body's teq and its uncertainty as columns, and the JSON document
+    // beside them. `file` is written whole (the caller's staging file, renamed into place).
+    Writer w(file);
+    w.attribute(w.root(), "format", std::string(kTeqHdf5Format));
+    w.attribute(w.root(), "campaign", r.campaign);
+    w.attribute(w.root(), "calibration_campaign", r.calibration_campaign);
+    w.attribute(w.root(), "method", std::string(r.options.curved_h ? "h from the calibration's curve" : "constant h_cal (ISO 14505-2)"));
+    w.attribute(w.root(), "neutral_ranges", r.ranges.source);
+    w.string_dataset(w.root(), "teq_json", doc.dump());
+    Handle cases = w.group(w.root(), "cases");
+    for (const auto& c : r.cases) {
+        Handle g = w.group(cases.get(), fmt::format("case_{:03d}", c.case_id));
+        w.attribute(g.get(), "case", static_cast<std::int64_t>(c.case_id));
+        w.attribute(g.get(), "replicates", static_cast<std::int64_t>(c.replicates));
+        w.attribute(g.get(), "air_temp_c", c.air_temp_c);
+        w.attribute(g.get(), "wall_temp_c", c.wall_temp_c);
+        w.attribute(g.get(), "air_speed_m_s", c.air_speed_m_s);
+        auto table = [&](const std::string& name, const std::vector<analysis::teq::PartTeq>& parts) {
+            Handle t = w.group(g.get(), name);
+            std::vector<std::string> names, verdicts;
+            std::vector<double> teq, u_a, u_b, u_c, k, u95, skin, q, area;
+            for (const auto& p : parts) {
+                names.push_back(p.name);
+                verdicts.push_back(p.verdict);
+                teq.push_back(p.teq.value);
+                u_a.push_back(p.teq.u_a);
+                u_b.push_back(p.teq.u_b);
+                u_c.push_back(p.teq.u_c);
+                k.push_back(p.teq.k);
+                u95.push_back(p.teq.U95);
+                skin.push_back(p.skin_temp_c);
+                q.push_back(p.q_w_m2);
+                area.push_back(p.area_m2);
+            }
+            w.strings_dataset(t.get(), "name", names);
+            w.dataset(t.get(), "teq_c", teq, h5().native_double, "°C");
+            w.dataset(t.get(), "u_a_c", u_a, h5().native_double, "K");
+            w.dataset(t.get(), "u_b_c", u_b, h5().native_double, "K");
+            w.dataset(t.get(), "u_c_c", u_c, h5().native_double, "K");
+            w.dataset(t.get(), "k", k, h5().native_double);
+            w.dataset(t.get(), "U95_c", u95, h5().native_double, "K");
+            w.dataset(t.get(), "skin_temp_c", skin, h5().native_double, "°C");
+            w.dataset(t.get(), "q_w_m2", q, h5().native_double, "W/m²");
+            w.dataset(t.get(), "area_m2", area, h5().native_double, "m²");
+            w.strings_dataset(t.get(), "verdict", verdicts);
+        };
+        table("zones", c.zones);
+        table("regions", c.regions);
+        table("whole_body", {c.whole_body});
+    }
+    w.check(cases.close(), "closing group cases");
+    w.close();
 }
 
 std::vector<double> hdf5_read_doubles(const std::filesystem::path& file, const std::string& dataset) {

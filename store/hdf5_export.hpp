@@ -13,10 +13,17 @@
 
 #include "analysis/analyze.hpp"
 #include "analysis/recording.hpp"
+#include "analysis/teq.hpp"
 
 namespace manikind {
 
 inline constexpr const char* kHdf5Format = "manikin-hdf5/1";
+inline constexpr const char* kTeqHdf5Format = "manikin-teq-hdf5/1";
+
+// `manikin teq --hdf5`: equivalent temperature per case (zones, regions, whole body: teq, u_A, u_B,
+// u_c, k, U95, skin, q, area, verdict) and the `--json` document (docs/formats.md section 7.3).
+// Writes `file` whole; UserError naming it on failure.
+void write_teq_hdf5(const std::filesystem::path& file, const analysis::teq::Result& result, const nlohmann::json& doc);
 
 // An HDF5 export written one trial at a time (memory: one trial's, issue 36). The constructor
 // creates a temporary file beside `file` and writes the campaign's metadata (root attributes, zone

@@ -13,7 +13,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include <fmt/format.h>
+
 #include "run_cli.hpp"
+#include "store/hdf5_export.hpp"
 #include "tests/analysis/teq_lab.hpp"
 
 namespace fs = std::filesystem;
@@ -120,6 +123,25 @@ TEST_CASE("cli teq: teq prints per zone teq and writes the comfort diagram and t
     CHECK(slurp(page) == html);
     r = run_manikin(base + " --report " + svg.string() + " --plot " + svg.string() + " --force --json");
     CHECK(r.exit_code == 2);  // the same file for both
+
+    // HDF5 for scripts (issue 65 part 3): the same numbers as --json, per case and part, with units.
+    const auto h5 = dir.path / "teq.h5";
+    CHECK(run_manikin(base + " --hdf5 " + h5.string() + " > /dev/null").exit_code == 0);
+    CHECK(manikind::hdf5_read_string_attribute(h5, "/", "format") == "manikin-teq-hdf5/1");
+    const std::string group = "cases/case_" + fmt::format("{:03d}", doc["cases"][0]["case"].get<int>());
+    const auto zone_teq = manikind::hdf5_read_doubles(h5, group + "/zones/teq_c");
+    const auto zone_u95 = manikind::hdf5_read_doubles(h5, group + "/zones/U95_c");
+    REQUIRE(zone_teq.size() == 35);
+    REQUIRE(zone_u95.size() == 35);
+    // The Monte Carlo draws from a fixed seed: the file's numbers are the JSON's.
+    CHECK(zone_teq[0] == Approx(doc["cases"][0]["zones"][0]["teq_c"].get<double>()).epsilon(1e-12));
+    CHECK(zone_u95[0] == Approx(doc["cases"][0]["zones"][0]["U95"].get<double>()).epsilon(1e-12));
+    CHECK(manikind::hdf5_read_doubles(h5, group + "/whole_body/teq_c").size() == 1);
+    CHECK(nlohmann::json::parse(manikind::hdf5_read_string(h5, "teq_json"))["cases"].size() == 1);
+    r = run_manikin(base + " --hdf5 " + h5.string() + " --json");
+    CHECK(r.exit_code == 2);  // an existing file without --force
+    r = run_manikin(base + " --hdf5 " + svg.string() + " --plot " + svg.string() + " --force --json");
+    CHECK(r.exit_code == 2);  // the same file as the diagram
 
     const auto cal_before = slurp(cal);
     r = run_manikin(base + " --plot " + cal.string() + " --force --json");
