@@ -19,6 +19,7 @@
 #include "physics/twin/twin.hpp"
 #include "sim/world/wardrobe.hpp"
 #include "store/database_export.hpp"
+#include "store/hdf5_export.hpp"
 
 namespace an = manikind::analysis;
 namespace tw = manikind::physics::twin;
@@ -49,6 +50,11 @@ TEST_CASE("clothing test on the simulated lab: the world wears the wardrobe's en
     const auto campaign = manikind::campaign_from_database(db, plan.name);
     // The standards the template chose, with their editions, as the report prints them (issue 64).
     CHECK(campaign.standards == std::map<std::string, std::string>{{"insulation", "ASTM F1291-16"}, {"evaporative", "ASTM F2370-16"}});
+    {
+        const auto h5 = f.dir() / "clothing.h5";
+        manikind::write_campaign_hdf5(h5, campaign, an::analyze_campaign(campaign));
+        CHECK(manikind::hdf5_read_string_attribute(h5, "/", "insulation_standard") == "ASTM F1291-16");
+    }
     REQUIRE(campaign.ensembles.count("coverall") == 1);
     CHECK(campaign.ensembles.at("coverall").fcl == 1.26);
     CHECK_FALSE(campaign.ensembles.at("jacket").fcl.has_value());

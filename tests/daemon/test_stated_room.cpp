@@ -16,6 +16,7 @@
 #include "daemon/campaign_plan.hpp"
 #include "daemon_fixture.hpp"
 #include "store/database_export.hpp"
+#include "store/hdf5_export.hpp"
 #include "tests/analysis/temp_dir.hpp"
 
 namespace an = manikind::analysis;
@@ -86,6 +87,15 @@ TEST_CASE("a campaign that states its room per case: the simulated world is that
     an::write_campaign(dir.path, campaign);
     const auto back = an::read_campaign(dir.path);
     for (std::size_t i = 0; i < back.trials.size(); ++i) CHECK(back.trials[i].info.local == campaign.trials[i].info.local);
+    // The HDF5 export carries it as the trial group's attribute, the same JSON.
+    const auto h5 = dir.path / "room.h5";
+    manikind::write_campaign_hdf5(h5, campaign, an::analyze_campaign(campaign));
+    for (const auto& t : campaign.trials) {
+        if (t.info.local.empty()) continue;
+        std::string why;
+        const auto room = nlohmann::json::parse(manikind::hdf5_read_string_attribute(h5, "trials/" + t.info.id, "local"));
+        CHECK(an::parse_local_room(campaign.zone_map, room, why) == t.info.local);
+    }
 
     // Reconcile with the room the campaign stated: the twin meets the sun, the radiant surface and the
     // jet where they were, and has nothing left to explain.
