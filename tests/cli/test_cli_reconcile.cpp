@@ -104,7 +104,7 @@ TEST_CASE("cli: reconcile --power checks each limit through reconcile itself at 
     // Two candidates and few campaigns per value keep the test short (with pairs tried, three took
     // 234 s in CI); the figures are bench_reconcile's.
     const auto r = run_manikin("reconcile " + dir +
-                               " --power --json --power-terms humidity_buoyancy,wall_offset --power-campaigns 6");
+                               " --power --json --power-terms humidity_buoyancy,wall_offset --power-campaigns 6 --simulations 500");
     REQUIRE(r.exit_code == 0);
     const auto j = nlohmann::json::parse(r.out);
     CHECK(j["campaign_replicates"] == 3);
