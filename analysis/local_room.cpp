@@ -20,6 +20,17 @@ constexpr Range kRanges[] = {{"air_offset_c", -30.0, 30.0},
                              {"solar_w_m2", 0.0, 1000.0}};
 }  // namespace
 
+void add_to_room(LocalRoom& room, const std::vector<std::size_t>& zones, const physics::twin::LocalEnvironment& entry) {
+    for (const std::size_t z : zones) {
+        auto& l = room.at(z);
+        l.air_offset_c += entry.air_offset_c;
+        l.radiant_offset_c += entry.radiant_offset_c;
+        if (entry.air_speed_m_s) l.air_speed_m_s = entry.air_speed_m_s;
+        l.contact_w_m2 += entry.contact_w_m2;
+        l.solar_w_m2 += entry.solar_w_m2;
+    }
+}
+
 nlohmann::json local_room_json(const ZoneMap& map, const LocalRoom& room) {
     nlohmann::json out = nlohmann::json::array();
     for (std::size_t z = 0; z < room.size() && z < map.zones.size(); ++z) {

@@ -4,6 +4,7 @@
 // campaign.json's trials (`local`), read back into the twin's inputs by reconcile.
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,10 @@ namespace manikind::analysis {
 
 // One entry per zone of the map, in the map's order; empty: the room is uniform.
 using LocalRoom = std::vector<physics::twin::LocalEnvironment>;
+
+// One entry of [[simulation.local]] or [[cases.local]] laid on the zones it names (`zones`, indices
+// into the room): offsets, contact and sun add up where entries meet; the last air speed named holds.
+void add_to_room(LocalRoom& room, const std::vector<std::size_t>& zones, const physics::twin::LocalEnvironment& entry);
 
 // `[{"zone": 3, "air_offset_c": 1.5, ...}]`: the zones that are not uniform only, by zone id, each
 // key present only where it is not the uniform room's (docs/formats.md, trials[].local).

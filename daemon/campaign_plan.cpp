@@ -343,14 +343,7 @@ static void parse_case_room(const toml::table& t, PlannedCase& c, const std::str
                 throw UserError(fmt::format("{}: cases.local.zones: '{}' is no zone, region or segment of the zone map "
                                             "(a zone as face, hand_l; a region as chest, upper_arm_l; a segment as thigh)",
                                             toml_input::where(source, z), name));
-            for (const std::size_t k : named) {
-                auto& l = c.local[k];
-                l.air_offset_c += air.value_or(0.0);
-                l.radiant_offset_c += radiant.value_or(0.0);
-                if (speed) l.air_speed_m_s = *speed;
-                l.contact_w_m2 += contact.value_or(0.0);
-                l.solar_w_m2 += solar.value_or(0.0);
-            }
+            analysis::add_to_room(c.local, named, {air.value_or(0.0), radiant.value_or(0.0), speed, contact.value_or(0.0), solar.value_or(0.0)});
         }
     }
 }

@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include "analysis/local_room.hpp"
 #include "analysis/zone_map.hpp"
 #include "base/user_error.hpp"
 #include "drivers/register_map.hpp"
@@ -31,14 +32,9 @@ sim::SimLabOptions simulated_lab_options(const config::Config& config) {
             const auto& e = config.simulation.local[i];
             for (const auto& name : e.zones) {
                 const auto named = map.zones_named(name);
-                for (const std::size_t z : named) {
-                    auto& l = o.world.local[z];
-                    l.air_offset_c += e.air_offset_c;
-                    l.radiant_offset_c += e.radiant_offset_c;
-                    if (e.air_speed_m_s >= 0.0) l.air_speed_m_s = e.air_speed_m_s;
-                    l.contact_w_m2 += e.contact_w_m2;
-                    l.solar_w_m2 += e.solar_w_m2;
-                }
+                physics::twin::LocalEnvironment entry{e.air_offset_c, e.radiant_offset_c, std::nullopt, e.contact_w_m2, e.solar_w_m2};
+                if (e.air_speed_m_s >= 0.0) entry.air_speed_m_s = e.air_speed_m_s;
+                analysis::add_to_room(o.world.local, named, entry);
                 if (named.empty())
                     throw UserError(fmt::format("{}: simulation.local[{}].zones: '{}' is no zone, region or segment of the "
                                                 "zone map (config/andi35_zone_map.csv: a zone as face, hand_l, thigh_back_r; "
