@@ -38,7 +38,7 @@ Eigen::MatrixXd jacobian(const ResidualFunction& f, const std::vector<double>& p
 }  // namespace
 
 FitResult fit_weighted_least_squares(const ResidualFunction& f, std::vector<double> p, const std::vector<Bounds>& b,
-                                     int max_iterations) {
+                                     int max_iterations, bool with_errors) {
     clamp_to(p, b);
     std::vector<double> r = f(p);
     double chi2 = sum_squares(r);
@@ -81,10 +81,18 @@ FitResult fit_weighted_least_squares(const ResidualFunction& f, std::vector<doub
     out.parameters = p;
     out.chi2 = chi2;
     out.n_points = static_cast<int>(r.size());
+    if (with_errors) out.standard_errors = standard_errors_at(f, p, chi2, out.n_points, b);
+    return out;
+}
+
+std::vector<double> standard_errors_at(const ResidualFunction& f, const std::vector<double>& p, double chi2, int n_points,
+                                       const std::vector<Bounds>& b) {
+    const auto n_params = static_cast<Eigen::Index>(p.size());
+    const auto rows = static_cast<Eigen::Index>(std::max(0, n_points));
     // Covariance from the curvature over a finite step (1/120 of each parameter's range, central):
     // a derivative at a point overstates the information where the physics has a kink
     // (|dT|^(1/4) at dT = 0). Inflated by the Birge ratio when the fit is worse than its noise.
-    Eigen::MatrixXd j(static_cast<Eigen::Index>(r.size()), n_params);
+    Eigen::MatrixXd j(rows, n_params);
     for (Eigen::Index k = 0; k < n_params; ++k) {
         const auto kk = static_cast<std::size_t>(k);
         const double h = (b[kk].hi - b[kk].lo) / 120.0;
@@ -92,20 +100,19 @@ FitResult fit_weighted_least_squares(const ResidualFunction& f, std::vector<doub
         up[kk] = std::min(p[kk] + h, b[kk].hi);
         down[kk] = std::max(p[kk] - h, b[kk].lo);
         const std::vector<double> ru = f(up), rd = f(down);
-        for (std::size_t i = 0; i < r.size(); ++i)
-            j(static_cast<Eigen::Index>(i), k) = (ru[i] - rd[i]) / std::max(up[kk] - down[kk], 1e-300);
+        for (Eigen::Index i = 0; i < rows; ++i)
+            j(i, k) = (ru[static_cast<std::size_t>(i)] - rd[static_cast<std::size_t>(i)]) / std::max(up[kk] - down[kk], 1e-300);
     }
     const Eigen::MatrixXd jtj = j.transpose() * j;
-    const int dof = std::max(1, out.n_points - static_cast<int>(p.size()));
+    const int dof = std::max(1, n_points - static_cast<int>(p.size()));
     const double birge = std::max(1.0, chi2 / dof);
-    out.standard_errors.assign(p.size(), std::numeric_limits<double>::infinity());
+    std::vector<double> se(p.size(), std::numeric_limits<double>::infinity());
     Eigen::FullPivLU<Eigen::MatrixXd> lu(jtj);
     if (lu.isInvertible()) {
         const Eigen::MatrixXd cov = lu.inverse() * birge;
-        for (Eigen::Index i = 0; i < n_params; ++i)
-            out.standard_errors[static_cast<std::size_t>(i)] = std::sqrt(std::max(0.0, cov(i, i)));
+        for (Eigen::Index i = 0; i < n_params; ++i) se[static_cast<std::size_t>(i)] = std::sqrt(std::max(0.0, cov(i, i)));
     }
-    return out;
+    return se;
 }
 
 }  // namespace manikind::analysis::reconcile

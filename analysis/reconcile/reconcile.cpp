@@ -132,6 +132,8 @@ Fitted fit_gls(const ForwardModel& model, const ev::Subset& s, const std::vector
     std::vector<Bounds> bounds;
     for (const auto& t : terms)
         for (const auto& p : t.parameters) bounds.push_back({p.lo, p.hi});
+    // The last few predictions, so the best fit's own is not computed again at the end.
+    std::vector<std::pair<std::vector<double>, std::vector<double>>> recent;
     auto residuals = [&](const std::vector<double>& x) {
         std::vector<double> pred;
         try {
@@ -139,6 +141,8 @@ Fitted fit_gls(const ForwardModel& model, const ev::Subset& s, const std::vector
         } catch (const std::exception&) {
             pred.clear();
         }
+        if (recent.size() == 8) recent.erase(recent.begin());
+        recent.emplace_back(x, pred);
         std::vector<double> r(static_cast<std::size_t>(s.size()), 1e6);
         if (pred.size() != n_points) return r;
         for (double v : pred)
@@ -149,15 +153,27 @@ Fitted fit_gls(const ForwardModel& model, const ev::Subset& s, const std::vector
     };
     Fitted best;
     best.chi2 = std::numeric_limits<double>::infinity();
+    int n_residuals = 0;
+    std::vector<std::vector<double>> tried;  // a start given twice is fitted once (the same fit)
     for (const auto& start : starts) {
-        const FitResult f = fit_weighted_least_squares(residuals, start, bounds);
+        if (std::find(tried.begin(), tried.end(), start) != tried.end()) continue;
+        tried.push_back(start);
+        const FitResult f = fit_weighted_least_squares(residuals, start, bounds, 60, false);
         if (f.chi2 < best.chi2) {
             best.values = f.parameters;
-            best.model_se = f.standard_errors;
             best.chi2 = f.chi2;
+            n_residuals = f.n_points;
         }
     }
-    best.prediction = model.predict(to_twin_terms(terms, best.values));
+    // The errors at the best start only; then its prediction, remembered if it was the last ones.
+    const std::vector<double> at = best.values;
+    if (!at.empty()) best.model_se = standard_errors_at(residuals, at, best.chi2, n_residuals, bounds);
+    for (auto it = recent.rbegin(); it != recent.rend(); ++it)
+        if (it->first == at && it->second.size() == n_points) {
+            best.prediction = it->second;
+            break;
+        }
+    if (best.prediction.empty()) best.prediction = model.predict(to_twin_terms(terms, best.values));
     return best;
 }
 

@@ -59,8 +59,8 @@ double param(const Term& term, const char* key, double fallback) {
 
 // The baseline constants by segment name without copying them (predict looks one up per zone).
 const SegmentConstants* find_segment(const std::string& segment) {
-    for (const auto& s : baseline_segments())
-        if (s.segment == segment) return &s;
+    for (const auto& s : baseline_segments())  // the first letter and length before the whole name
+        if (s.segment.size() == segment.size() && s.segment[0] == segment[0] && s.segment == segment) return &s;
     return nullptr;
 }
 
@@ -172,8 +172,25 @@ ResolvedVersion resolve(const TwinVersion& v) {
         else if (t.name == "clothing")
             k.garments.push_back({t.region, std::max(0.0, param(t, "icl_m2k_w", 0.0)), std::max(0.0, param(t, "recl_m2kpa_w", 0.0)),
                                   std::clamp(param(t, "fcl", 1.0), 1.0, 3.0)});
-        else if (t.name == "input_pattern")
-            k.patterns.push_back({t.input, t.pattern, param(t, "value", 0.0), param(t, "ref_height_m", 1.1)});
+        else if (t.name == "input_pattern") {
+            using P = ResolvedVersion::Pattern;
+            P pt{t.input, t.pattern, param(t, "value", 0.0), param(t, "ref_height_m", 1.1)};
+            pt.input_kind = t.input == "air_temp_c"           ? P::Input::air
+                            : t.input == "wall_temp_c"        ? P::Input::wall
+                            : t.input == "vapour_pressure_pa" ? P::Input::vapour
+                            : t.input == "wettedness"         ? P::Input::wettedness
+                            : t.input == "heat_flux_w_m2"     ? P::Input::heat_flux
+                            : t.input == "air_speed_m_s"      ? P::Input::air_speed
+                                                              : P::Input::other;
+            pt.shape = t.pattern == "uniform"  ? P::Shape::uniform
+                       : t.pattern == "height" ? P::Shape::height
+                       : t.pattern == "front"  ? P::Shape::front
+                       : t.pattern == "back"   ? P::Shape::back
+                       : t.pattern == "left"   ? P::Shape::left
+                       : t.pattern == "right"  ? P::Shape::right
+                                               : P::Shape::other;
+            k.patterns.push_back(std::move(pt));
+        }
     }
     return k;
 }
@@ -227,14 +244,27 @@ void predict(const ResolvedVersion& k, const TrialConditions& trial, std::vector
         }
         if (!k.patterns.empty()) {
             double speed_factor = 1.0;  // air_speed_m_s: relative to the anemometer's reading
+            using P = ResolvedVersion::Pattern;
             for (const auto& pt : k.patterns) {
-                const double d = pt.value * pattern_weight(pt.pattern, z, pt.ref_height_m);
-                if (pt.input == "air_temp_c") air_c += d;
-                else if (pt.input == "wall_temp_c") wall_c += d;
-                else if (pt.input == "vapour_pressure_pa") p_air_pa = std::max(0.0, p_air_pa + d);
-                else if (pt.input == "wettedness") wettedness = wettedness > 0.0 ? std::clamp(wettedness + d, 0.0, 1.0) : 0.0;
-                else if (pt.input == "heat_flux_w_m2") leak_w_m2 += d;  // what the sensor adds
-                else if (pt.input == "air_speed_m_s") speed_factor += d;
+                double weight = 0.0;  // as pattern_weight, from the shape resolve() read
+                switch (pt.shape) {
+                    case P::Shape::uniform: weight = 1.0; break;
+                    case P::Shape::front: weight = z.facing > 0 ? 1.0 : 0.0; break;
+                    case P::Shape::back: weight = z.facing < 0 ? 1.0 : 0.0; break;
+                    case P::Shape::left: weight = z.side < 0 ? 1.0 : 0.0; break;
+                    case P::Shape::right: weight = z.side > 0 ? 1.0 : 0.0; break;
+                    default: weight = pattern_weight(pt.pattern, z, pt.ref_height_m);  // height: checks the zone has one
+                }
+                const double d = pt.value * weight;
+                switch (pt.input_kind) {
+                    case P::Input::air: air_c += d; break;
+                    case P::Input::wall: wall_c += d; break;
+                    case P::Input::vapour: p_air_pa = std::max(0.0, p_air_pa + d); break;
+                    case P::Input::wettedness: wettedness = wettedness > 0.0 ? std::clamp(wettedness + d, 0.0, 1.0) : 0.0; break;
+                    case P::Input::heat_flux: leak_w_m2 += d; break;  // what the sensor adds
+                    case P::Input::air_speed: speed_factor += d; break;
+                    case P::Input::other: break;
+                }
             }
             c_air_kg_m3 = vapour_concentration_kg_m3(p_air_pa, air_c);
             // The air a zone meets moves speed_factor times what the anemometer reads; it matters

@@ -131,6 +131,9 @@ struct ResolvedVersion {
     struct Pattern {
         std::string input, pattern;
         double value = 0.0, ref_height_m = 1.1;
+        // The two names read once by resolve(), not compared per zone and prediction.
+        enum class Input { air, wall, vapour, wettedness, heat_flux, air_speed, other } input_kind = Input::other;
+        enum class Shape { uniform, height, front, back, left, right, other } shape = Shape::other;
     };
     std::vector<Pattern> patterns;  // input_pattern terms
 };
