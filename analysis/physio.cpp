@@ -136,6 +136,21 @@ double draw_error(std::mt19937_64& rng, const InstrumentSpec& spec, double readi
     return standardised_error_draw(spec.distribution, rng) * spec.limit(reading);
 }
 
+// Where the loop's core and mean skin lie within the band of their difference from the model alone.
+Agreement agreement_of(const std::vector<Point>& points) {
+    Agreement a;
+    for (const auto& p : points) {
+        if (!std::isfinite(p.diff_core_u95_c) || !std::isfinite(p.diff_skin_u95_c)) continue;
+        ++a.points;
+        const double d_core = std::abs(p.core_temp_c - p.alone_coupled_core_c), d_skin = std::abs(p.mean_skin_temp_c - p.alone_coupled_skin_c);
+        a.core_within += d_core <= p.diff_core_u95_c ? 1 : 0;
+        a.skin_within += d_skin <= p.diff_skin_u95_c ? 1 : 0;
+        if (d_skin >= a.worst_skin_c) a.worst_skin_c = d_skin, a.worst_skin_u95_c = p.diff_skin_u95_c;
+    }
+    a.agrees = a.points > 0 && a.core_within >= 0.95 * a.points && a.skin_within >= 0.95 * a.points;
+    return a;
+}
+
 double quantile(std::vector<double> v, double p) {
     std::sort(v.begin(), v.end());
     const double pos = p * static_cast<double>(v.size() - 1);
@@ -148,7 +163,8 @@ double quantile(std::vector<double> v, double p) {
 Result compute(const Campaign& campaign, const Options& options) {
     Result result;
     const InstrumentSpec flux = campaign.instrument("heat_flux_w_m2"), air = campaign.instrument("air_temp_c"),
-                         rh = campaign.instrument("air_rh_pct"), wall = campaign.instrument("wall_temp_c");
+                         rh = campaign.instrument("air_rh_pct"), wall = campaign.instrument("wall_temp_c"),
+                         speed = campaign.instrument("air_speed_m_s");
     // Each zone's model segment by the default [physiological.segments] map (the record does not
     // say which map a trial ran with), and the zones' area per model segment.
     std::map<std::string, int> segment_of;
@@ -193,6 +209,7 @@ Result compute(const Campaign& campaign, const Options& options) {
         // with per-zone offsets here); the probes' offsets per draw.
         std::mt19937_64 rng(options.seed ^ (static_cast<std::uint64_t>(t.info.case_id) << 20) ^ static_cast<std::uint64_t>(t.info.replicate));
         std::vector<std::vector<double>> core_draws(used), skin_draws(used), loss_draws(used);
+        std::vector<std::vector<double>> alone_core_draws(used), alone_skin_draws(used), diff_core_draws(used), diff_skin_draws(used);
         const InstrumentSpec gain_spec{0.0, flux.accuracy_of_reading, flux.distribution};
         const InstrumentSpec offset_spec{flux.accuracy, 0.0, flux.distribution};
         for (int d = 0; d < options.draws; ++d) {
@@ -208,6 +225,7 @@ Result compute(const Campaign& campaign, const Options& options) {
             // The shell's capacity, off by its stated standard uncertainty (normal): the storage
             // the loop subtracted scales with it.
             const double shell_e = std::normal_distribution<double>(0.0, 1.0)(rng);
+            const double speed_e = draw_error(rng, speed, envs[0].air_speed_m_s);
             auto l = losses;
             auto e = envs;
             for (std::size_t k = 0; k < used; ++k) {
@@ -217,12 +235,20 @@ Result compute(const Campaign& campaign, const Options& options) {
                 e[k].air_temp_c += air_e;
                 e[k].rh_pct = std::clamp(e[k].rh_pct + rh_e, 0.0, 100.0);
                 e[k].mrt_c += wall_e;
+                e[k].air_speed_m_s = std::max(0.0, e[k].air_speed_m_s + speed_e);
             }
             try {
+                // The loop and the model alone under the same drawn conditions: their difference's
+                // band holds what the probes could move in both alike.
                 const auto rp = replay(r, tr::ConvectionModel::coupled, true, l, e);
+                const auto ra = replay(r, tr::ConvectionModel::coupled, false, l, e);
                 for (std::size_t k = 0; k < used; ++k) {
                     core_draws[k].push_back(rp.core_c[k]);
                     skin_draws[k].push_back(rp.skin_c[k]);
+                    alone_core_draws[k].push_back(ra.core_c[k]);
+                    alone_skin_draws[k].push_back(ra.skin_c[k]);
+                    diff_core_draws[k].push_back(rp.core_c[k] - ra.core_c[k]);
+                    diff_skin_draws[k].push_back(rp.skin_c[k] - ra.skin_c[k]);
                     double q = 0.0;
                     for (double v : l[k]) q += v;
                     loss_draws[k].push_back(q);
@@ -254,10 +280,15 @@ Result compute(const Campaign& campaign, const Options& options) {
             p.alone_coupled_skin_c = coupled.skin_c[k];
             p.alone_dt_only_core_c = dt_only.core_c[k];
             p.alone_dt_only_skin_c = dt_only.skin_c[k];
+            p.alone_core_u95_c = half_width(alone_core_draws[k]);
+            p.alone_skin_u95_c = half_width(alone_skin_draws[k]);
+            p.diff_core_u95_c = half_width(diff_core_draws[k]);
+            p.diff_skin_u95_c = half_width(diff_skin_draws[k]);
             tt.replay_max_abs_diff_c = std::max({tt.replay_max_abs_diff_c, std::abs(nominal.core_c[k] - s.core_c),
                                                  std::abs(nominal.skin_c[k] - s.skin_c)});
             tt.points.push_back(p);
         }
+        tt.agreement = agreement_of(tt.points);
         trials_of_case[tt.case_id].push_back(result.trials.size());
         result.trials.push_back(std::move(tt));
     }
@@ -279,12 +310,19 @@ Result compute(const Campaign& campaign, const Options& options) {
                 if (std::abs(result.trials[i].points[k].t_s - result.trials[idx[0]].points[k].t_s) > 1e-6) shared = k;
         for (std::size_t k = 0; k < shared; ++k) {
             Point p = result.trials[idx[0]].points[k];
-            auto combine = [&](auto value, auto u95, double& mean_out, double& u95_out) {
+            auto combine = [&](auto value, auto u95, double& mean_out, double& u95_out, double* repro_out = nullptr) {
                 std::vector<double> v;
                 double ub = 0.0;
                 for (auto i : idx) v.push_back(value(result.trials[i].points[k])), ub += u95(result.trials[i].points[k]) / 1.96;
                 ub /= static_cast<double>(idx.size());
                 mean_out = mean(v);
+                if (repro_out && v.size() >= 2) {
+                    // A further run: its departure from the mean of n has variance s² (1 + 1/n), on
+                    // n - 1 degrees of freedom (a prediction interval; GUM G.3 for t).
+                    const double ua_mean = type_a_of_mean(v);
+                    const double n = static_cast<double>(v.size());
+                    *repro_out = std::isfinite(ua_mean) ? coverage_factor(n - 1.0) * ua_mean * std::sqrt(n + 1.0) : std::nan("");
+                }
                 if (!std::isfinite(ub)) {  // too few Monte Carlo draws replayed: no band
                     u95_out = std::nan("");
                     return;
@@ -307,9 +345,25 @@ Result compute(const Campaign& campaign, const Options& options) {
                 u95_out = coverage_factor(nu) * uc;
             };
             combine([](const Point& q) { return q.core_temp_c; }, [](const Point& q) { return q.core_u95_c; }, p.core_temp_c,
-                    p.core_u95_c);
+                    p.core_u95_c, &p.core_repro_u95_c);
             combine([](const Point& q) { return q.mean_skin_temp_c; }, [](const Point& q) { return q.mean_skin_u95_c; },
-                    p.mean_skin_temp_c, p.mean_skin_u95_c);
+                    p.mean_skin_temp_c, p.mean_skin_u95_c, &p.skin_repro_u95_c);
+            // The model alone, and the difference loop minus alone, over the replicates alike.
+            combine([](const Point& q) { return q.alone_coupled_core_c; }, [](const Point& q) { return q.alone_core_u95_c; },
+                    p.alone_coupled_core_c, p.alone_core_u95_c);
+            combine([](const Point& q) { return q.alone_coupled_skin_c; }, [](const Point& q) { return q.alone_skin_u95_c; },
+                    p.alone_coupled_skin_c, p.alone_skin_u95_c);
+            double unused = 0.0;
+            combine([](const Point& q) { return q.core_temp_c - q.alone_coupled_core_c; }, [](const Point& q) { return q.diff_core_u95_c; },
+                    unused, p.diff_core_u95_c);
+            combine([](const Point& q) { return q.mean_skin_temp_c - q.alone_coupled_skin_c; },
+                    [](const Point& q) { return q.diff_skin_u95_c; }, unused, p.diff_skin_u95_c);
+            std::vector<double> dt_core, dt_skin;
+            for (auto i : idx)
+                dt_core.push_back(result.trials[i].points[k].alone_dt_only_core_c),
+                    dt_skin.push_back(result.trials[i].points[k].alone_dt_only_skin_c);
+            p.alone_dt_only_core_c = mean(dt_core);
+            p.alone_dt_only_skin_c = mean(dt_skin);
             combine([](const Point& q) { return q.heat_loss_w; }, [](const Point& q) { return q.heat_loss_u95_w; }, p.heat_loss_w,
                     p.heat_loss_u95_w);
             std::vector<double> sweat;
@@ -317,12 +371,16 @@ Result compute(const Campaign& campaign, const Options& options) {
             p.sweat_rate_g_h = mean(sweat);
             ct.points.push_back(p);
         }
+        ct.agreement = agreement_of(ct.points);
         result.cases.push_back(std::move(ct));
     }
     return result;
 }
 
 namespace {
+// One replicate has no reproducibility band: null, as JSON readers expect, not a NaN number.
+nlohmann::json finite_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
+
 nlohmann::json point_json(const Point& p) {
     return {{"t_s", p.t_s},
             {"core_temp_c", p.core_temp_c},
@@ -331,7 +389,18 @@ nlohmann::json point_json(const Point& p) {
             {"mean_skin_temp_U95_c", p.mean_skin_u95_c},
             {"heat_loss_w", p.heat_loss_w},
             {"heat_loss_U95_w", p.heat_loss_u95_w},
-            {"sweat_rate_g_h", p.sweat_rate_g_h}};
+            {"sweat_rate_g_h", p.sweat_rate_g_h},
+            {"core_temp_reproducibility_U95_c", finite_or_null(p.core_repro_u95_c)},
+            {"mean_skin_temp_reproducibility_U95_c", finite_or_null(p.skin_repro_u95_c)}};
+}
+
+nlohmann::json agreement_json(const Agreement& a) {
+    return {{"agrees", a.agrees},
+            {"points", a.points},
+            {"core_within", a.core_within},
+            {"mean_skin_within", a.skin_within},
+            {"worst_mean_skin_difference_c", a.worst_skin_c},
+            {"worst_mean_skin_difference_U95_c", a.worst_skin_u95_c}};
 }
 }  // namespace
 
@@ -343,7 +412,13 @@ nlohmann::json to_json(const Result& r) {
             j["metabolic_w"] = p.metabolic_w;
             j["respiration_loss_w"] = p.respiration_loss_w;
             j["storage_w"] = p.storage_w;
-            j["model_alone"] = {{"coupled", {{"core_temp_c", p.alone_coupled_core_c}, {"mean_skin_temp_c", p.alone_coupled_skin_c}}},
+            j["model_alone"] = {{"coupled",
+                                 {{"core_temp_c", p.alone_coupled_core_c},
+                                  {"core_temp_U95_c", p.alone_core_u95_c},
+                                  {"mean_skin_temp_c", p.alone_coupled_skin_c},
+                                  {"mean_skin_temp_U95_c", p.alone_skin_u95_c},
+                                  {"difference_core_U95_c", p.diff_core_u95_c},
+                                  {"difference_mean_skin_U95_c", p.diff_skin_u95_c}}},
                                 {"dt_only", {{"core_temp_c", p.alone_dt_only_core_c}, {"mean_skin_temp_c", p.alone_dt_only_skin_c}}}};
             a.push_back(std::move(j));
         }
@@ -357,9 +432,13 @@ nlohmann::json to_json(const Result& r) {
                                {"coupling_period_s", t.coupling_period_s},
                                {"replay_max_abs_diff_c", t.replay_max_abs_diff_c},
                                {"fell_back", t.fell_back},
+                               {"agreement_with_model_alone", agreement_json(t.agreement)},
                                {"points", points(t.points)}});
     for (const auto& c : r.cases)
-        j["cases"].push_back({{"case", c.case_id}, {"replicates", c.replicates}, {"points", points(c.points)}});
+        j["cases"].push_back({{"case", c.case_id},
+                              {"replicates", c.replicates},
+                              {"agreement_with_model_alone", agreement_json(c.agreement)},
+                              {"points", points(c.points)}});
     return j;
 }
 
@@ -394,6 +473,14 @@ std::string summary_text(const nlohmann::json& j) {
                            f.value("t_s", 0.0) / 60.0, f.value("core_temp_c", 0.0), f.value("core_temp_U95_c", 0.0),
                            f.value("mean_skin_temp_c", 0.0), f.value("mean_skin_temp_U95_c", 0.0), f.value("heat_loss_w", 0.0),
                            f.value("heat_loss_U95_w", 0.0));
+        // With replicates: where a further run is expected (null with one replicate, or in a
+        // result stored before issue 63).
+        const auto& rc = f.value("core_temp_reproducibility_U95_c", nlohmann::json());
+        const auto& rs = f.value("mean_skin_temp_reproducibility_U95_c", nlohmann::json());
+        if (rc.is_number() && rs.is_number())
+            out += fmt::format("    a further run on this manikin and chamber: core within ± {:.2f} °C, mean skin within ± {:.2f} °C "
+                               "of these means (95 %, from the replicates' spread)\n",
+                               rc.get<double>(), rs.get<double>());
     }
     const auto fb = j.value("fell_back_trials", nlohmann::json::array());
     if (!fb.empty()) out += fmt::format("  {} physiological trial(s) fell back to constant skin temperature: {}\n", fb.size(), fb.dump());

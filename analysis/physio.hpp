@@ -9,6 +9,7 @@
 // (GUM; Welch-Satterthwaite for k). The same replay without the manikin (the model's own
 // exchange in the recorded conditions, coupled and temperature-only convection) shows what the
 // measured exchange changed. Pure: works on an analysis::Campaign.
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -34,6 +35,26 @@ struct Point {
     // The model alone in the recorded conditions (no manikin): coupled and temperature-only.
     double alone_coupled_core_c = 0.0, alone_coupled_skin_c = 0.0;
     double alone_dt_only_core_c = 0.0, alone_dt_only_skin_c = 0.0;
+    // The model alone's own 95 % band from the probes' specifications (air, humidity, wall, air
+    // speed: the conditions it was given are only as good as the probes), and the band of the
+    // difference loop minus alone, from the same draws for both (the errors are shared): the
+    // loop "agrees" with the model alone where |difference| is within it.
+    double alone_core_u95_c = 0.0, alone_skin_u95_c = 0.0;
+    double diff_core_u95_c = 0.0, diff_skin_u95_c = 0.0;
+    // A case with replicates: the 95 % half-width about the replicates' mean within which a further
+    // run on this manikin and chamber is expected (Type A across runs: t(n-1) s sqrt(1 + 1/n); the
+    // instruments' calibration is shared by the runs, so no Type B). NaN with one replicate.
+    double core_repro_u95_c = std::nan(""), skin_repro_u95_c = std::nan("");
+};
+
+// Where the loop agrees with the model alone in the recorded conditions: points whose difference
+// (core and mean skin) lies within the difference's band.
+struct Agreement {
+    int points = 0, core_within = 0, skin_within = 0;
+    double worst_skin_c = 0.0, worst_skin_u95_c = 0.0;  // the largest |difference| in mean skin, and its band there
+    // At least 95 % of the steps within in both: each step's band is a 95 % band, so a loop that
+    // behaves as the model alone still leaves about one step in twenty outside.
+    bool agrees = false;
 };
 
 struct TrialTrajectory {
@@ -44,12 +65,14 @@ struct TrialTrajectory {
     double replay_max_abs_diff_c = 0.0;  // the replay against the recorded model state (a check)
     bool fell_back = false;              // the loop fell back to constant skin temperature
     std::vector<Point> points;
+    Agreement agreement;
 };
 
 struct CaseTrajectory {
     int case_id = 0;
     int replicates = 0;
     std::vector<Point> points;  // mean over the replicates, U95 from Type A and B
+    Agreement agreement;
 };
 
 struct Result {
