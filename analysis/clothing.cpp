@@ -80,6 +80,7 @@ struct Quantities {
     std::map<std::string, std::map<std::string, double>> value;
     std::map<std::string, double> fcl;         // NaN: no source
     std::map<std::string, bool> fcl_capped;    // ISO 9920's estimate stopped at kFclEstimateMaxIcl_clo
+    std::map<std::string, std::pair<double, double>> fcl_span;  // capped: fcl at the cap and ISO 9920's own
 };
 
 double mean_of(const std::vector<double>& v) {
@@ -189,13 +190,25 @@ Quantities evaluate(const std::vector<TestTrial>& trials, const ZoneMap& map, co
             // ISO 9920's estimate fcl = 1.00 + 0.28 Icl (Icl in clo), with Icl = It - Ia/fcl: a
             // fixed point that converges in a few steps (the map contracts: 0.28 Ia/0.155 fcl² < 1;
             // the cap at 2 clo only flattens it).
-            fcl = 1.0;
-            double icl_clo = 0.0;
-            for (int i = 0; i < 20; ++i) {
-                icl_clo = std::max(0.0, it - ia / fcl) / kClo_m2k_w;
-                fcl = 1.0 + 0.28 * std::min(icl_clo, kFclEstimateMaxIcl_clo);
-            }
+            auto fixed_point = [&](double cap_clo) {
+                double f = 1.0, icl_clo = 0.0;
+                for (int i = 0; i < 20; ++i) {
+                    icl_clo = std::max(0.0, it - ia / f) / kClo_m2k_w;
+                    f = 1.0 + 0.28 * std::min(icl_clo, cap_clo);
+                }
+                return std::make_pair(f, icl_clo);
+            };
+            const auto [capped_fcl, icl_clo] = fixed_point(kFclEstimateMaxIcl_clo);
+            fcl = capped_fcl;
             out.fcl_capped[ensemble] = icl_clo > kFclEstimateMaxIcl_clo;
+            if (out.fcl_capped[ensemble]) {
+                // Beyond 2 clo the true fcl lies between the cap's value and ISO 9920's own
+                // (which overestimates there): the middle, rectangular over that span (GUM 4.3.7;
+                // issue 63's parka, fcl 2.07 by ISO 9920, was 2.3 % low in Icl at the cap).
+                const double iso_fcl = fixed_point(std::numeric_limits<double>::infinity()).first;
+                fcl = 0.5 * (capped_fcl + iso_fcl);
+                out.fcl_span[ensemble] = {capped_fcl, iso_fcl};
+            }
         }
         out.fcl[ensemble] = fcl;
         if (std::isfinite(it) && std::isfinite(ia)) {
@@ -478,12 +491,18 @@ Result compute(const Campaign& campaign, const CampaignResult& analysis, const C
             e.fcl = measured.fcl.at(id);
             e.fcl_source = "ISO 9920 estimate";
             e.fcl_capped = measured.fcl_capped.count(id) && measured.fcl_capped.at(id);
-            e.fcl_u = e.fcl_capped ? kFclEstimateCappedU : kFclEstimateU;
-            e.fcl_reason = e.fcl_capped
-                               ? fmt::format("ISO 9920 estimate 1.00 + 0.28 Icl (clo) from this ensemble's It, capped at Icl = {:.0f} clo "
-                                             "(the estimate is for ordinary ensembles and overestimates fcl above it); u(fcl) = {:.2f}",
-                                             kFclEstimateMaxIcl_clo, e.fcl_u)
-                               : fmt::format("ISO 9920 estimate 1.00 + 0.28 Icl (clo) from this ensemble's It; u(fcl) = {:.2f}", e.fcl_u);
+            e.fcl_u = kFclEstimateU;
+            if (e.fcl_capped && measured.fcl_span.count(id)) {
+                const auto [lo, hi] = measured.fcl_span.at(id);
+                e.fcl_u = std::max(kFclEstimateCappedU, (hi - lo) / std::sqrt(12.0));  // rectangular over [lo, hi]
+                e.fcl_reason = fmt::format(
+                    "ISO 9920 estimate 1.00 + 0.28 Icl (clo) beyond its range: between {:.2f} (capped at Icl = {:.0f} clo, where the "
+                    "estimate is for ordinary ensembles) and {:.2f} (ISO 9920's own, which overestimates above it), the middle with "
+                    "u(fcl) = {:.2f} (rectangular over that span); measure fcl for a heavy ensemble",
+                    lo, kFclEstimateMaxIcl_clo, hi, e.fcl_u);
+            } else {
+                e.fcl_reason = fmt::format("ISO 9920 estimate 1.00 + 0.28 Icl (clo) from this ensemble's It; u(fcl) = {:.2f}", e.fcl_u);
+            }
         } else {
             e.fcl_source = "none";
             e.fcl_reason = !std::isfinite(value_of("It_par"))

@@ -12,7 +12,9 @@ At one replicate (--replicates 1) the re-dressing scatter is carried from an ear
 the same lab with --carry replicates (`manikin clothing --redress-from`, issue 63); --carry 0
 runs without it (the intervals then exclude re-dressing: printed, not required).
 
-Usage: clothing_coverage.py <manikin binary> [campaigns=60] [work dir] [--replicates N] [--carry M]
+--ensembles parka,bag writes the heavy ensembles instead of the coverall and the jacket.
+
+Usage: clothing_coverage.py <manikin binary> [campaigns=60] [work dir] [--replicates N] [--carry M] [--ensembles a,b] [--max-rel-u95 P]
 """
 import json
 import os
@@ -30,8 +32,11 @@ KEYS = [("insulation", "total_parallel", "It_par"), ("insulation", "total_serial
 def main():
     args, flags = [], {}
     it_args = iter(sys.argv[1:])
+    ensembles = None  # the generator's default pair unless --ensembles names others (parka, bag: issue 63)
     for a in it_args:
-        if a.startswith("--"):
+        if a == "--ensembles":
+            ensembles = next(it_args)
+        elif a.startswith("--"):
             flags[a[2:]] = int(next(it_args))
         else:
             args.append(a)
@@ -39,6 +44,7 @@ def main():
     n = int(args[1]) if len(args) > 1 else 60
     work = args[2] if len(args) > 2 else tempfile.mkdtemp(prefix="manikind-clothing-")
     replicates = flags.get("replicates", 3)
+    rel_u_limit = flags.get("max-rel-u95", 8) / 100.0  # percent; an 8-clo bag loses 11 W/m² and reads 12-16 %
     carry = flags.get("carry", 3 if replicates == 1 else 0)
     here = os.path.dirname(os.path.abspath(__file__))
     covered, total, worst_rel_u = {}, {}, 0.0
@@ -46,8 +52,9 @@ def main():
     for seed in range(1, n + 1):
         out = os.path.join(work, f"c{seed}")
         shutil.rmtree(out, ignore_errors=True)
+        which = ["--ensembles", ensembles] if ensembles else []
         subprocess.run([sys.executable, os.path.join(here, "make_clothing_campaign.py"), "--out", out, "--seed", str(seed),
-                        "--replicates", str(replicates)], check=True)
+                        "--replicates", str(replicates)] + which, check=True)
         truth = json.load(open(os.path.join(out, "truth.json")))
         extra = []
         if carry > 0:
@@ -55,14 +62,14 @@ def main():
             earlier = os.path.join(work, f"e{seed}")
             shutil.rmtree(earlier, ignore_errors=True)
             subprocess.run([sys.executable, os.path.join(here, "make_clothing_campaign.py"), "--out", earlier, "--seed",
-                            str(100000 + seed), "--replicates", str(carry)], check=True)
+                            str(100000 + seed), "--replicates", str(carry)] + which, check=True)
             extra = ["--redress-from", earlier]
         r = subprocess.run([manikin, "clothing", out, "--json"] + extra, capture_output=True, text=True)
         if r.returncode != 0:
             print(f"seed {seed}: manikin clothing failed ({r.returncode}): {r.stderr}")
             sys.exit(1)
         doc = json.loads(r.stdout)
-        if seed == 1 and replicates == 3:
+        if seed == 1 and replicates == 3 and not ensembles:
             # The report and the table a user reads, once.
             report = os.path.join(work, "report.html")
             t = subprocess.run([manikin, "clothing", out, "--report", report], capture_output=True, text=True)
@@ -184,8 +191,8 @@ def main():
     ok = ok and pooled >= 0.9
     for e, d in par_ser.items():
         print(f"serial above parallel, {e}: {100 * sum(d) / len(d):.0f} % (mean of {len(d)})")
-    print(f"largest relative U95 of the total insulation (parallel): {100 * worst_rel_u:.1f} % (limit 8 %)")
-    ok = ok and worst_rel_u < 0.08
+    print(f"largest relative U95 of the total insulation (parallel): {100 * worst_rel_u:.1f} % (limit {100 * rel_u_limit:.0f} %)")
+    ok = ok and worst_rel_u < rel_u_limit
     if replicates == 1 and carry == 0:
         print("one replicate, nothing carried: the intervals exclude re-dressing (reported, not required)")
         ok = True
