@@ -1,24 +1,18 @@
 #include "analysis/local_room.hpp"
 
 #include <cmath>
+#include <stdexcept>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 namespace manikind::analysis {
 
-namespace {
-// The ranges [[simulation.local]] and [[cases.local]] allow (daemon/config.cpp, campaign_plan.cpp).
-struct Range {
-    const char* key;
-    double lo, hi;
-};
-constexpr Range kRanges[] = {{"air_offset_c", -30.0, 30.0},
-                             {"radiant_offset_c", -60.0, 60.0},
-                             {"air_speed_m_s", 0.0, 10.0},
-                             {"contact_w_m2", -300.0, 300.0},
-                             {"solar_w_m2", 0.0, 1000.0}};
-}  // namespace
+const LocalRange& local_range(std::string_view key) {
+    for (const auto& r : kLocalRanges)
+        if (key == r.key) return r;
+    throw std::out_of_range("no room entry key '" + std::string(key) + "'");
+}
 
 void add_to_room(LocalRoom& room, const std::vector<std::size_t>& zones, const physics::twin::LocalEnvironment& entry) {
     for (const std::size_t z : zones) {
@@ -72,8 +66,8 @@ LocalRoom parse_local_room(const ZoneMap& map, const nlohmann::json& doc, std::s
         auto& l = room[z];
         for (const auto& [key, value] : e.items()) {
             if (key == "zone") continue;
-            const Range* r = nullptr;
-            for (const auto& k : kRanges)
+            const LocalRange* r = nullptr;
+            for (const auto& k : kLocalRanges)
                 if (key == k.key) r = &k;
             if (!r) {
                 why = fmt::format("{}.{}: unknown key (known: zone, air_offset_c, radiant_offset_c, air_speed_m_s, contact_w_m2, "

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json_fwd.hpp>
@@ -17,6 +18,21 @@ namespace manikind::analysis {
 
 // One entry per zone of the map, in the map's order; empty: the room is uniform.
 using LocalRoom = std::vector<physics::twin::LocalEnvironment>;
+
+// The values a room entry may take, one table for [[simulation.local]] (daemon/config.cpp),
+// [[cases.local]] (daemon/campaign_plan.cpp) and campaign.json's trials[].local (below).
+struct LocalRange {
+    const char* key;
+    double lo, hi;
+    const char* unit;
+};
+inline constexpr LocalRange kLocalRanges[] = {{"air_offset_c", -30.0, 30.0, "K"},
+                                              {"radiant_offset_c", -60.0, 60.0, "K"},
+                                              {"air_speed_m_s", 0.0, 10.0, "m/s"},
+                                              {"contact_w_m2", -300.0, 300.0, "W/m²"},
+                                              {"solar_w_m2", 0.0, 1000.0, "W/m²"}};
+// The row of `key` (one of the five above); throws std::out_of_range for another.
+const LocalRange& local_range(std::string_view key);
 
 // One entry of [[simulation.local]] or [[cases.local]] laid on the zones it names (`zones`, indices
 // into the room): offsets, contact and sun add up where entries meet; the last air speed named holds.

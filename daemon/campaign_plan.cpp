@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <toml++/toml.h>
 
+#include "analysis/local_room.hpp"
 #include "base/text.hpp"
 #include "base/toml_input.hpp"
 #include "base/user_error.hpp"
@@ -323,7 +324,10 @@ static void parse_case_room(const toml::table& t, PlannedCase& c, const std::str
                                         "(e.g. zones = [\"face\", \"hand_l\"])", at));
         if (const auto* w = e.get("what"); w && !w->is_string())
             throw UserError(fmt::format("{}: cases.local.what: expected text (what this is: \"a vent jet\")", at));
-        auto value = [&](const char* key, double lo, double hi, const char* unit) -> std::optional<double> {
+        auto value = [&](const char* key) -> std::optional<double> {
+            const auto& range = analysis::local_range(key);
+            const double lo = range.lo, hi = range.hi;
+            const char* unit = range.unit;
             const auto* n = e.get(key);
             if (!n) return std::nullopt;
             if (!n->is_number()) throw UserError(fmt::format("{}: cases.local.{}: expected a number ({})", toml_input::where(source, *n), key, unit));
@@ -332,9 +336,8 @@ static void parse_case_room(const toml::table& t, PlannedCase& c, const std::str
                 throw UserError(fmt::format("{}: cases.local.{}: {} {} is outside {}..{}", toml_input::where(source, *n), key, v, unit, lo, hi));
             return v;
         };
-        const auto air = value("air_offset_c", -30.0, 30.0, "K"), radiant = value("radiant_offset_c", -60.0, 60.0, "K"),
-                   speed = value("air_speed_m_s", 0.0, 10.0, "m/s"), contact = value("contact_w_m2", -300.0, 300.0, "W/m²"),
-                   solar = value("solar_w_m2", 0.0, 1000.0, "W/m²");
+        const auto air = value("air_offset_c"), radiant = value("radiant_offset_c"), speed = value("air_speed_m_s"),
+                   contact = value("contact_w_m2"), solar = value("solar_w_m2");
         for (const auto& z : *zones->as_array()) {
             if (!z.is_string()) throw UserError(fmt::format("{}: cases.local.zones: expected names (text)", toml_input::where(source, z)));
             const std::string name = z.as_string()->get();

@@ -8,6 +8,7 @@
 #include <fmt/core.h>
 #include <toml++/toml.h>
 
+#include "analysis/local_room.hpp"
 #include "base/toml_input.hpp"
 #include "base/user_error.hpp"
 
@@ -270,11 +271,15 @@ Config parse_config(const std::string& toml_text, const std::string& source_name
                     throw UserError(fmt::format("{}: {}.zones: expected the zones, regions or segments it applies to "
                                                 "(e.g. zones = [\"face\", \"hand_l\"])", e.where, path));
                 r.text(t, path, "what", e.what);
-                r.number(t, path, "air_offset_c", e.air_offset_c, -30.0, 30.0, "K");
-                r.number(t, path, "radiant_offset_c", e.radiant_offset_c, -60.0, 60.0, "K");
-                r.number(t, path, "air_speed_m_s", e.air_speed_m_s, 0.0, 10.0, "m/s");
-                r.number(t, path, "contact_w_m2", e.contact_w_m2, -300.0, 300.0, "W/m²");
-                r.number(t, path, "solar_w_m2", e.solar_w_m2, 0.0, 1000.0, "W/m²");
+                auto number = [&](const char* key, auto& out) {
+                    const auto& range = analysis::local_range(key);
+                    r.number(t, path, key, out, range.lo, range.hi, range.unit);
+                };
+                number("air_offset_c", e.air_offset_c);
+                number("radiant_offset_c", e.radiant_offset_c);
+                number("air_speed_m_s", e.air_speed_m_s);
+                number("contact_w_m2", e.contact_w_m2);
+                number("solar_w_m2", e.solar_w_m2);
                 r.warn_unknown(t, path);
                 c.simulation.local.push_back(std::move(e));
             }
