@@ -310,6 +310,12 @@ Result compute(const Campaign& campaign, const Options& options) {
                 if (std::abs(result.trials[i].points[k].t_s - result.trials[idx[0]].points[k].t_s) > 1e-6) shared = k;
         for (std::size_t k = 0; k < shared; ++k) {
             Point p = result.trials[idx[0]].points[k];
+            // The replicates' mean of a value with no band of its own.
+            auto mean_over = [&](auto value) {
+                std::vector<double> v;
+                for (auto i : idx) v.push_back(value(result.trials[i].points[k]));
+                return mean(v);
+            };
             auto combine = [&](auto value, auto u95, double& mean_out, double& u95_out, double* repro_out = nullptr) {
                 std::vector<double> v;
                 double ub = 0.0;
@@ -358,17 +364,11 @@ Result compute(const Campaign& campaign, const Options& options) {
                     unused, p.diff_core_u95_c);
             combine([](const Point& q) { return q.mean_skin_temp_c - q.alone_coupled_skin_c; },
                     [](const Point& q) { return q.diff_skin_u95_c; }, unused, p.diff_skin_u95_c);
-            std::vector<double> dt_core, dt_skin;
-            for (auto i : idx)
-                dt_core.push_back(result.trials[i].points[k].alone_dt_only_core_c),
-                    dt_skin.push_back(result.trials[i].points[k].alone_dt_only_skin_c);
-            p.alone_dt_only_core_c = mean(dt_core);
-            p.alone_dt_only_skin_c = mean(dt_skin);
+            p.alone_dt_only_core_c = mean_over([](const Point& q) { return q.alone_dt_only_core_c; });
+            p.alone_dt_only_skin_c = mean_over([](const Point& q) { return q.alone_dt_only_skin_c; });
             combine([](const Point& q) { return q.heat_loss_w; }, [](const Point& q) { return q.heat_loss_u95_w; }, p.heat_loss_w,
                     p.heat_loss_u95_w);
-            std::vector<double> sweat;
-            for (auto i : idx) sweat.push_back(result.trials[i].points[k].sweat_rate_g_h);
-            p.sweat_rate_g_h = mean(sweat);
+            p.sweat_rate_g_h = mean_over([](const Point& q) { return q.sweat_rate_g_h; });
             ct.points.push_back(p);
         }
         ct.agreement = agreement_of(ct.points);
