@@ -25,7 +25,11 @@ Eigen::VectorXd Subset::select(const std::vector<double>& v) const {
     return out;
 }
 
-Eigen::VectorXd Subset::whiten(const std::vector<double>& v) const { return llt.matrixL().solve(select(v)); }
+Eigen::VectorXd Subset::whiten(const std::vector<double>& v) const {
+    Eigen::VectorXd out = select(v);
+    factor.solve_lower_in_place(out);
+    return out;
+}
 
 double Subset::chi2(const std::vector<double>& prediction) const { return (y - whiten(prediction)).squaredNorm(); }
 
@@ -40,14 +44,20 @@ Eigen::MatrixXd restrict_to(const Eigen::MatrixXd& covariance, const std::vector
 }
 
 Subset make_subset(const ForwardModel& model, const Eigen::MatrixXd& covariance, std::vector<std::size_t> idx,
-                   const std::vector<double>& base_prediction) {
+                   const std::vector<double>& base_prediction, const Eigen::MatrixXd* shared) {
     Subset s;
     s.idx = std::move(idx);
     const auto& pts = model.points();
     const Eigen::Index n = s.size();
     const Eigen::MatrixXd sub = restrict_to(covariance, s.idx);
-    s.llt.compute(sub);
-    if (s.llt.info() != Eigen::Success) throw std::runtime_error("reconcile: the noise covariance is not positive definite");
+    std::vector<int> case_of(s.idx.size());
+    for (std::size_t i = 0; i < s.idx.size(); ++i) case_of[i] = pts[s.idx[i]].case_id;
+    Eigen::MatrixXd shared_rows;
+    if (shared && shared->rows() == static_cast<Eigen::Index>(pts.size())) {
+        shared_rows.resize(n, shared->cols());
+        for (Eigen::Index i = 0; i < n; ++i) shared_rows.row(i) = shared->row(static_cast<Eigen::Index>(s.idx[static_cast<std::size_t>(i)]));
+    }
+    s.factor = CovarianceFactor(sub, case_of, shared_rows.size() > 0 ? &shared_rows : nullptr);
     std::map<int, std::size_t> case_pos;
     for (Eigen::Index i = 0; i < n; ++i) {
         const int id = pts[s.idx[static_cast<std::size_t>(i)]].case_id;
@@ -139,7 +149,8 @@ WhitenedGrid whiten_grid(const Subset& s, const Grid& g) {
     const auto cols = static_cast<Eigen::Index>(g.theta.size());
     Eigen::MatrixXd raw(s.size(), cols);
     for (Eigen::Index c = 0; c < cols; ++c) raw.col(c) = s.select(g.raw[static_cast<std::size_t>(c)]);
-    out.w = s.llt.matrixL().solve(raw);
+    s.factor.solve_lower_in_place(raw);
+    out.w = std::move(raw);
     out.norm2 = out.w.colwise().squaredNorm().transpose();
     return out;
 }
@@ -227,7 +238,8 @@ Eigen::MatrixXd local_directions(const ForwardModel& model, const Subset& s, con
             kinds->emplace_back(z, true);
         }
     }
-    return s.llt.matrixL().solve(a);
+    s.factor.solve_lower_in_place(a);
+    return a;
 }
 
 Eigen::VectorXd linear_evidence(const Eigen::MatrixXd& directions, const Eigen::VectorXd& r) {
@@ -327,10 +339,10 @@ FamilyNull family_null(const Subset& s, const std::vector<WhitenedGrid>& grids, 
             const Eigen::MatrixXd cov = draw_covariance(seed + 7919ULL * static_cast<std::uint64_t>(b + 1));
             Eigen::LLT<Eigen::MatrixXd> llt(cov);
             if (llt.info() != Eigen::Success) return false;
-            const Eigen::MatrixXd lu = s.llt.matrixL() * sb.u;
-            qu = s.llt.matrixU() * llt.solve(lu);
+            const Eigen::MatrixXd lu = s.factor.lower_times(sb.u);
+            qu = s.factor.upper_times(llt.solve(lu));
             // The twin's own chi2 judged by the drawn covariance: z'Qz = |L*^-1 L z|².
-            const Eigen::MatrixXd lz = s.llt.matrixL() * z;
+            const Eigen::MatrixXd lz = s.factor.lower_times(z);
             chi2 = llt.matrixL().solve(lz).colwise().squaredNorm();
         } else {
             chi2 = z.colwise().squaredNorm();

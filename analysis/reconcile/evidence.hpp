@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "analysis/reconcile/candidates.hpp"
+#include "analysis/reconcile/covariance_factor.hpp"
 #include "analysis/reconcile/forward_model.hpp"
 
 namespace manikind::analysis::reconcile::evidence {
@@ -19,7 +20,7 @@ namespace manikind::analysis::reconcile::evidence {
 // The points a fit is judged on, whitened by the covariance: chi2 = |L^-1 (y - f)|².
 struct Subset {
     std::vector<std::size_t> idx;                       // into model.points()
-    Eigen::LLT<Eigen::MatrixXd> llt;                    // of the covariance restricted to idx
+    CovarianceFactor factor;                             // of the covariance restricted to idx
     std::vector<int> case_ids;
     std::vector<std::vector<Eigen::Index>> case_rows;   // positions in idx, per case
     std::vector<Eigen::LLT<Eigen::MatrixXd>> case_llt;  // each case's own block
@@ -34,9 +35,11 @@ struct Subset {
 // The covariance restricted to the points idx (rows and columns in that order).
 Eigen::MatrixXd restrict_to(const Eigen::MatrixXd& covariance, const std::vector<std::size_t>& idx);
 
-// Throws std::runtime_error when the covariance is not positive definite.
+// `shared` (NoiseModel::shared_factor, rows of every point, may be null): the covariance's
+// directions shared by all cases, for the structured factor. Throws std::runtime_error when the
+// covariance is not positive definite.
 Subset make_subset(const ForwardModel& model, const Eigen::MatrixXd& covariance, std::vector<std::size_t> idx,
-                   const std::vector<double>& base_prediction);
+                   const std::vector<double>& base_prediction, const Eigen::MatrixXd* shared = nullptr);
 
 // One single-parameter candidate evaluated on a uniform grid across its bounds.
 struct Grid {

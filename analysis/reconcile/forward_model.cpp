@@ -360,6 +360,7 @@ public:
     struct NoiseParts {
         ReplicateResiduals data;
         Eigen::MatrixXd systematic;   // probes (P) and the manikin's calibration (K)
+        Eigen::MatrixXd shared_probes;  // n x 3: the probes' part common to every case (systematic's low-rank part)
         std::vector<Eigen::MatrixXd> calibration_loadings;  // per case, over the probes' Type B span
         NoiseModel meta;              // everything but the covariances
     };
@@ -412,6 +413,7 @@ public:
 
         const auto nn = static_cast<Eigen::Index>(n);
         parts.systematic = Eigen::MatrixXd::Zero(nn, nn);
+        parts.shared_probes = Eigen::MatrixXd::Zero(nn, 3);
         std::vector<std::vector<std::size_t>> rows(cases_.size());
         for (std::size_t i = 0; i < n; ++i) rows[index_[i].first].push_back(i);
         // The probes' Type B errors act through the twin's sensitivities. Part of that variance is
@@ -430,6 +432,7 @@ public:
                     g(static_cast<Eigen::Index>(a)) = u * parts.calibration_loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
             }
             parts.systematic += shared_fraction * g * g.transpose();
+            parts.shared_probes.col(k) = std::sqrt(shared_fraction) * g;
             for (std::size_t c = 0; c < cases_.size(); ++c)
                 for (std::size_t a : rows[c])
                     for (std::size_t b : rows[c])
@@ -466,8 +469,9 @@ public:
 
     // The whole covariance from a scatter model: the random part of each case mean (the trial
     // covariance over the replicates) plus the Type B parts.
+    // `shared_out`: the directions shared by every case (NoiseModel::shared_factor).
     Eigen::MatrixXd assemble(const NoiseParts& parts, const ScatterModel& scatter, Eigen::MatrixXd* random_out,
-                             int replicates = 0) const {
+                             int replicates = 0, Eigen::MatrixXd* shared_out = nullptr) const {
         const std::size_t n = points_.size();
         const auto nn = static_cast<Eigen::Index>(n);
         Eigen::MatrixXd random = Eigen::MatrixXd::Zero(nn, nn);
@@ -510,6 +514,21 @@ public:
         // part is tiny (synthetic data) and the systematic parts are of low rank.
         total.diagonal().array() += 1e-9 * total.diagonal().mean() + 1e-12;
         if (random_out) *random_out = std::move(random);
+        if (shared_out) {
+            // The probes' common part, and with replicates the calibration's offset and gain.
+            Eigen::MatrixXd& u = *shared_out;
+            u.resize(nn, parts.shared_probes.cols() + (scatter.estimable ? 2 : 0));
+            u.leftCols(parts.shared_probes.cols()) = parts.shared_probes;
+            if (scatter.estimable) {
+                const auto& m = parts.meta;
+                const Eigen::Index k = parts.shared_probes.cols();
+                for (std::size_t a = 0; a < n; ++a) {
+                    const double sa = parts.data.loadings[index_[a].first](static_cast<Eigen::Index>(index_[a].second), 3);
+                    u(static_cast<Eigen::Index>(a), k) = m.calibration_offset_u_w_m2;
+                    u(static_cast<Eigen::Index>(a), k + 1) = m.calibration_gain_u * sa;
+                }
+            }
+        }
         return total;
     }
 
@@ -546,7 +565,7 @@ public:
             out.notes.push_back("no case has two replicates: the random part is each point's own standard "
                                 "uncertainty from the analysis, taken as independent (a lower bound: no claim "
                                 "is made on it; --noise-from carries a lab's scatter from a campaign with replicates)");
-        out.covariance = assemble(parts, scatter, &out.random_covariance);
+        out.covariance = assemble(parts, scatter, &out.random_covariance, 0, &out.shared_factor);
         return out;
     }
 

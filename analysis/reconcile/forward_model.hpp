@@ -38,6 +38,10 @@ using Instruments = std::map<std::string, InstrumentSpec>;
 struct NoiseModel {
     Eigen::MatrixXd covariance;               // n x n, W²/m⁴ (or the observation's unit squared)
     Eigen::MatrixXd random_covariance;        // its replicate-scatter part (scales as 1/replicates)
+    // n x g: the part shared by every case (probes' common calibration, the manikin's offset and
+    // gain), covariance - shared_factor shared_factorᵀ being zero between cases; it is the same
+    // in every covariance the noise model's resampler draws. Empty: none (or not known).
+    Eigen::MatrixXd shared_factor;
     std::vector<int> point_replicates;        // replicates behind each point's mean
     bool from_replicates = false;             // random part estimated from replicate scatter
     std::string carried_from;                 // else carried from this earlier campaign (--noise-from)

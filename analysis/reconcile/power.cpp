@@ -508,7 +508,7 @@ PowerReport detection_limits(const ForwardModel& model, const Options& opt, cons
         for (Eigen::Index a = 0; a < cov.rows(); ++a)
             for (Eigen::Index b = 0; b < cov.cols(); ++b)
                 cov(a, b) += noise.random_covariance(a, b) * noise.point_replicates[static_cast<std::size_t>(a)] / n;
-        const ev::Subset s = ev::make_subset(model, cov, idx, base);
+        const ev::Subset s = ev::make_subset(model, cov, idx, base, &noise.shared_factor);
         std::vector<ev::WhitenedGrid> wg(grids.size());
         for (std::size_t k = 0; k < grids.size(); ++k) wg[k] = ev::whiten_grid(s, grids[k]);
         std::vector<const ev::WhitenedGrid*> all;

@@ -275,7 +275,7 @@ void requote_advice(CandidateResult& r) {
 // and only refitting without them shows how much the value leans on them. Used for the claimed
 // term (it costs a refit per case): its uncertainty is the largest of model-based, sandwich and
 // jackknife, and the interval is rebuilt from it.
-void widen_by_jackknife(const ForwardModel& model, const Eigen::MatrixXd& covariance, const ev::Subset& s,
+void widen_by_jackknife(const ForwardModel& model, const NoiseModel& noise, const ev::Subset& s,
                         const std::vector<double>& base, CandidateResult& r) {
     const std::size_t cases = s.case_ids.size();
     if (cases < 3) return;
@@ -285,7 +285,7 @@ void widen_by_jackknife(const ForwardModel& model, const Eigen::MatrixXd& covari
             std::vector<std::size_t> keep;
             for (std::size_t i : s.idx)
                 if (model.points()[i].case_id != s.case_ids[c]) keep.push_back(i);
-            const ev::Subset fold = ev::make_subset(model, covariance, keep, base);
+            const ev::Subset fold = ev::make_subset(model, noise.covariance, keep, base, &noise.shared_factor);
             folds[c] = fit_gls(model, fold, r.terms, {r.values}).values;
         }
     };
@@ -369,10 +369,10 @@ std::optional<double> widen_by_profile(const ForwardModel& model, const ev::Subs
 // A claimed or asked-for fit's uncertainty: the jackknife's and the profile's widening; where the
 // profile's scan found a lower chi2 than the fit's minimum, the term is fitted again from there
 // (at most twice) and widened anew.
-void settle(const ForwardModel& model, const Eigen::MatrixXd& covariance, const ev::Subset& s,
+void settle(const ForwardModel& model, const NoiseModel& noise, const ev::Subset& s,
             const std::vector<double>& base, double base_chi2, CandidateResult& r) {
     for (int round = 0;; ++round) {
-        widen_by_jackknife(model, covariance, s, base, r);
+        widen_by_jackknife(model, noise, s, base, r);
         const auto lower = widen_by_profile(model, s, r);
         if (!lower || round == 2) return;
         const Fitted f = fit_gls(model, s, r.terms, {{*lower}});
@@ -407,7 +407,7 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const NoiseR
                 const std::vector<ev::Grid>& grids, std::vector<std::size_t> idx, const std::vector<double>& base_pred,
                 const Options& opt, std::optional<double> fixed_threshold = std::nullopt) {
     Stage st;
-    st.subset = ev::make_subset(model, noise.covariance, std::move(idx), base_pred);
+    st.subset = ev::make_subset(model, noise.covariance, std::move(idx), base_pred, &noise.shared_factor);
     const auto& s = st.subset;
     st.base_chi2 = (s.y - s.w_base).squaredNorm();
     st.grids.resize(grids.size());
@@ -550,7 +550,7 @@ static void summarise_fit(const ForwardModel& model, Report& rep, int params) {
     std::vector<std::size_t> all_idx(pts.size());
     std::iota(all_idx.begin(), all_idx.end(), 0);
     {
-        const ev::Subset all = ev::make_subset(model, rep.noise.covariance, all_idx, rep.predicted_before);
+        const ev::Subset all = ev::make_subset(model, rep.noise.covariance, all_idx, rep.predicted_before, &rep.noise.shared_factor);
         rep.after = stats_of(pts, all, rep.predicted_after, params);
     }
     rep.by_case.clear();
@@ -558,7 +558,7 @@ static void summarise_fit(const ForwardModel& model, Report& rep, int params) {
     std::set<int> case_ids;
     for (const auto& p : pts) case_ids.insert(p.case_id);
     auto group_stats = [&](const std::vector<std::size_t>& idx) {
-        const ev::Subset g = ev::make_subset(model, rep.noise.covariance, idx, rep.predicted_before);
+        const ev::Subset g = ev::make_subset(model, rep.noise.covariance, idx, rep.predicted_before, &rep.noise.shared_factor);
         return std::make_pair(stats_of(pts, g, rep.predicted_before, 0), stats_of(pts, g, rep.predicted_after, 0));
     };
     for (int id : case_ids) {
@@ -862,7 +862,7 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
                 // Each term of the pair must stand on its own: its interval (widened by the
                 // jackknife over cases) must exclude "no effect", else the single is kept.
                 CandidateResult pair = *best_pair;
-                widen_by_jackknife(model, rep.noise.covariance, sub, rep.predicted_before, pair);
+                widen_by_jackknife(model, rep.noise, sub, rep.predicted_before, pair);
                 if (const auto j = includes_no_effect(pair); !j) {
                     chosen = pair;
                 } else {
@@ -905,7 +905,7 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
             const double p_after = gof_p(chosen.chi2, static_cast<int>(chosen.values.size()), gof_null, n_used);
             rep.gof_p_after = p_after;
             rep.explanation_partial = p_after < opt.alpha;
-            settle(model, rep.noise.covariance, sub, rep.predicted_before, st.base_chi2, chosen);
+            settle(model, rep.noise, sub, rep.predicted_before, st.base_chi2, chosen);
             // A claim must exclude "no effect" at 95 % for every parameter it names.
             if (const auto j = includes_no_effect(chosen)) {
                 const auto& p = parameter_at(chosen, *j);
@@ -1210,7 +1210,7 @@ CandidateResult fit_candidate(const ForwardModel& model, const std::vector<Candi
     for (const auto& t : terms)
         for (const auto& p : t.parameters) start.push_back(p.start);
     NoiseModel noise = model.noise_model(opt.instruments, opt.probe_shared_fraction);
-    ev::Subset s = ev::make_subset(model, noise.covariance, idx, base);
+    ev::Subset s = ev::make_subset(model, noise.covariance, idx, base, &noise.shared_factor);
     // The kink of |dT|^(1/4) makes local minima: start from the best point of a scan as well
     // (25 values per parameter for one, 13 x 13 for two), and from `also_from` when given.
     std::vector<std::vector<double>> starts = {start};
@@ -1245,11 +1245,11 @@ CandidateResult fit_candidate(const ForwardModel& model, const std::vector<Candi
     }
     Fitted f = fit_gls(model, s, terms, starts);
     noise = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms(terms, f.values));
-    s = ev::make_subset(model, noise.covariance, idx, base);
+    s = ev::make_subset(model, noise.covariance, idx, base, &noise.shared_factor);
     f = fit_gls(model, s, terms, {f.values});
     const double base_chi2 = (s.y - s.w_base).squaredNorm();
     CandidateResult r = describe(model, s, terms, f, base_chi2, base_chi2 - f.chi2);
-    settle(model, noise.covariance, s, base, base_chi2, r);
+    settle(model, noise, s, base, base_chi2, r);
     return r;
 }
 
