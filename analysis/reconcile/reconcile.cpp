@@ -863,7 +863,30 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
                 // jackknife over cases) must exclude "no effect", else the single is kept.
                 CandidateResult pair = *best_pair;
                 widen_by_jackknife(model, rep.noise, sub, rep.predicted_before, pair);
-                if (const auto j = includes_no_effect(pair); !j) {
+                // Pairs that tie and all hold the winner, where the winner alone already leaves the
+                // fit within the noise, say the winner and leave only its partner open: the winner is
+                // claimed, the partners said and none claimed (issue 61: a gradient with "an air bias
+                // or humidity buoyancy" beside it was answered nothing). Where the winner alone
+                // leaves the fit beyond the noise, the tie keeps every claim back: a lagging sensor
+                // was otherwise answered by a radiant gradient with "the left or the right foot wet".
+                const bool winner_fits = gof_p(st.singles[x].chi2, 1, gof_null, static_cast<double>(sub.size())) >= opt.alpha;
+                auto holds_winner = [&](const CandidateResult& c) {
+                    return std::any_of(c.terms.begin(), c.terms.end(), [&](const auto& t) { return t.label() == library[x].label(); });
+                };
+                std::vector<std::string> partners;
+                bool all_hold = holds_winner(pair);
+                for (const auto& pr : pair_results)
+                    if (&pr == best_pair || std::find(rep.ambiguous_with.begin(), rep.ambiguous_with.end(), pr.label) != rep.ambiguous_with.end()) {
+                        all_hold = all_hold && holds_winner(pr);
+                        for (const auto& t : pr.terms)
+                            if (t.label() != library[x].label()) partners.push_back(t.label());
+                    }
+                if (!rep.ambiguous_with.empty() && all_hold && winner_fits) {
+                    rep.untold_partners = partners;
+                    rep.ambiguous_with.clear();
+                    best_pair->reason = fmt::format("both terms needed, but as good as {} other pair{} beside {}: the partner is not told",
+                                                    partners.size() - 1, partners.size() > 2 ? "s" : "", library[x].label());
+                } else if (const auto j = includes_no_effect(pair); !j) {
                     chosen = pair;
                 } else {
                     best_pair->reason = fmt::format("one term is enough: {} = {:.4g} ± {:.2g} is not distinguishable from no effect",
@@ -991,6 +1014,13 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
         if (rep.explanation_partial)
             rep.statement += fmt::format(" This explains part of the mismatch: the fit is still beyond the noise after it "
                                          "(p = {:.2g}).", rep.gof_p_after);
+        if (!rep.untold_partners.empty()) {
+            std::string partners;
+            for (std::size_t i = 0; i < rep.untold_partners.size(); ++i)
+                partners += (i == 0 ? "" : i + 1 == rep.untold_partners.size() ? " or " : ", ") + rep.untold_partners[i];
+            rep.remainder = fmt::format("a further term beside {} fits better, but this campaign cannot tell which: {} "
+                                        "fit equally well (none is claimed).", claim->label, partners);
+        }
         if (!anomaly_text.empty()) rep.statement += " " + anomaly_text;
     } else {
         rep.new_version.name = model.base_name();
@@ -1097,7 +1127,8 @@ Report reconcile(const ForwardModel& model, const Options& opt) {
     if (!rep.explanation) return rep;
     rep.steps.push_back(step_of(rep));
     constexpr std::size_t max_terms = 3;
-    while (rep.explanation_partial && rep.explanation->terms.size() < max_terms) {
+    // A partner the campaign cannot tell (untold_partners) ends the walk: the remainder says so.
+    while (rep.explanation_partial && rep.untold_partners.empty() && rep.explanation->terms.size() < max_terms) {
         const HeldTermsModel rest(model, to_twin_terms(rep.explanation->terms, rep.explanation->values));
         Options o = opt;
         o.seed = opt.seed + 7717u * rep.steps.size();

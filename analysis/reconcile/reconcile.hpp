@@ -111,6 +111,9 @@ struct Report {
     double alpha = 0.01;
     std::vector<ZoneAnomaly> anomalies;      // zones left out of the physics fit
     std::vector<std::string> ambiguous_with; // terms the winner could not be told apart from
+    // The winner needs a partner, but the pairs that would name it tie (each holds the winner):
+    // the winner is claimed and the partners listed here, none claimed (issue 61).
+    std::vector<std::string> untold_partners;
     std::vector<Located> located;
     std::vector<CandidateResult> candidates; // sorted by BIC
     std::optional<CandidateResult> explanation;   // every term claimed, fitted together

@@ -83,6 +83,7 @@ nlohmann::json report_to_json(const Report& r, const ForwardModel& model) {
                                   {"u", a.u}, {"unit", a.kind == "gain" ? "1" : "W/m2"}, {"offset_w_m2", a.offset_w_m2},
                                   {"u_w_m2", a.u_w_m2}, {"z", a.z}, {"cases_outside_ci", a.cases_outside}, {"cases", a.cases}});
     j["ambiguous_with"] = r.ambiguous_with;
+    j["untold_partners"] = r.untold_partners;
     j["located"] = nlohmann::json::array();
     if (!r.noise_lower_bound)
         for (const auto& l : r.located) j["located"].push_back({{"where", l.where}, {"driver", l.driver}, {"strength", l.strength}});
