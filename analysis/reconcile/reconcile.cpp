@@ -950,6 +950,7 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
             }
         }
     }
+    if (!claim) rep.untold_partners.clear();  // partners of a winner that was not claimed (a rival) say nothing
     if (opt.verdict_for) {  // the planner reads the claim alone, not the report around it
         rep.explanation = claim;
         rep.statement = "verdict only (planning): " + (claim ? claim->label + " claimed" : why_not.empty() ? "no claim" : why_not);
