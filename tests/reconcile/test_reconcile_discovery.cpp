@@ -231,20 +231,28 @@ TEST_CASE("discovery: lagging flux sensors on the calves (25 min, steady windows
     CHECK_FALSE(blind.explanation.has_value());
 }
 
-TEST_CASE("discovery: at one replicate with the lab's scatter carried from a 3-replicate campaign (--noise-from), a "
-          "vertical air gradient of 1.5 K/m is described as a gradient with the truth in its interval",
-          "[reconcile][discovery][proof]") {
+namespace {
+// A one-replicate campaign of a 1.5 K/m air gradient (seed), the lab's scatter carried from its
+// earlier 3-replicate campaign (seed 43) as --noise-from carries it.
+rc::Report gradient_at_one_replicate(unsigned seed) {
     test::SyntheticOptions earlier;
     earlier.seed = 43;
     earlier.replicates = 3;
     const auto source = rc::make_twin_model(test::make_campaign(tw::TwinVersion{}, earlier), tw::TwinVersion{});
     const auto carried = rc::carried_noise(*source, rc::Options{}.instruments, "an earlier campaign of the lab");
     test::SyntheticOptions o;
-    o.seed = 44;
+    o.seed = seed;
     o.replicates = 1;
     o.air_gradient_k_per_m = 1.5;
     const auto model = rc::make_twin_model(test::make_campaign(tw::TwinVersion{}, o), tw::TwinVersion{}, carried);
-    const auto rep = rc::reconcile(*model);
+    return rc::reconcile(*model);
+}
+}  // namespace
+
+TEST_CASE("discovery: at one replicate with the lab's scatter carried from a 3-replicate campaign (--noise-from), a "
+          "vertical air gradient of 1.5 K/m is described as a gradient with the truth in its interval",
+          "[reconcile][discovery][proof]") {
+    const auto rep = gradient_at_one_replicate(44);
     std::printf("air gradient 1.5 K/m, 1 replicate, --noise-from: %s\n  %s\n",
                 rep.explanation ? rep.explanation->label.c_str() : "no claim", rep.statement.c_str());
     INFO(rep.statement);
@@ -260,18 +268,8 @@ TEST_CASE("discovery: at one replicate with the lab's scatter carried from a 3-r
 TEST_CASE("discovery: at one replicate (--noise-from), where the gradient's pairs with different partners tie and the "
           "gradient alone fits within the noise, the gradient is claimed and the partners are said, none claimed",
           "[reconcile][discovery][proof]") {
-    test::SyntheticOptions earlier;
-    earlier.seed = 43;
-    earlier.replicates = 3;
-    const auto source = rc::make_twin_model(test::make_campaign(tw::TwinVersion{}, earlier), tw::TwinVersion{});
-    const auto carried = rc::carried_noise(*source, rc::Options{}.instruments, "an earlier campaign of the lab");
     for (unsigned seed : {48u, 49u}) {
-        test::SyntheticOptions o;
-        o.seed = seed;
-        o.replicates = 1;
-        o.air_gradient_k_per_m = 1.5;
-        const auto model = rc::make_twin_model(test::make_campaign(tw::TwinVersion{}, o), tw::TwinVersion{}, carried);
-        const auto rep = rc::reconcile(*model);
+        const auto rep = gradient_at_one_replicate(seed);
         std::printf("air gradient 1.5 K/m, 1 replicate, --noise-from, seed %u: ", seed);
         print_claim(rep);
         INFO(rep.statement);
