@@ -355,6 +355,45 @@ public:
         return j;
     }
 
+    // The even part of the twin's response to a symmetric error in input k (0 air °C, 1 RH %, 2
+    // wall °C): s(e) = (f(x + e) + f(x - e)) / 2 - f(x), at four equiprobable magnitudes |e|, centred
+    // and halved so that their covariance is sum v v'. The secant loadings hold the odd part
+    // only; where a zone's air crosses its skin (the wet isothermal cases, a vertical gradient)
+    // h_c ~ |dT|^(1/4) (Eq. 5) turns either sign of error into more evaporation, an even response
+    // the secant reads as none: one trial's 0.1 K air error moved a hand 24 W/m² there while the
+    // secant said 2 (issue 61). Empty where the input is absent.
+    static std::vector<Eigen::VectorXd> even_responses(const tw::TwinVersion& physics, const tw::TrialConditions& cond,
+                                                      const std::vector<tw::ZoneFlux>& at, int k,
+                                                      const std::array<double, 4>& magnitudes) {
+        std::vector<Eigen::VectorXd> out;
+        if (k == 2 && !cond.wall_temp_c) return out;
+        const auto z_count = static_cast<Eigen::Index>(at.size());
+        auto shifted = [&](double d) {
+            tw::TrialConditions t = cond;
+            if (k == 0) t.air_temp_c += d;
+            else if (k == 1) t.air_rh_pct += d;
+            else *t.wall_temp_c += d;
+            return tw::predict(physics, t);
+        };
+        Eigen::VectorXd mean = Eigen::VectorXd::Zero(z_count);
+        for (double e : magnitudes) {
+            if (!(e > 0.0)) return {};
+            const auto up = shifted(e), down = shifted(-e);
+            Eigen::VectorXd v(z_count);
+            for (Eigen::Index z = 0; z < z_count; ++z) {
+                const auto zi = static_cast<std::size_t>(z);
+                v(z) = 0.5 * (up[zi].q_total_w_m2 + down[zi].q_total_w_m2) - at[zi].q_total_w_m2;
+            }
+            mean += v / 4.0;
+            out.push_back(std::move(v));
+        }
+        for (auto& v : out) v = 0.5 * (v - mean);
+        return out;
+    }
+    // |e| at the midpoints of its quartiles, per unit sd (normal) or unit half-width (rectangular).
+    static constexpr std::array<double, 4> kNormalQuartiles = {0.157, 0.489, 0.887, 1.534};
+    static constexpr std::array<double, 4> kRectangularQuartiles = {0.125, 0.375, 0.625, 0.875};
+
     // The noise model's pieces: the replicates' residuals with the twin's sensitivities (what
     // the random part is estimated from) and the Type B parts, which are specified, not estimated.
     struct NoiseParts {
@@ -362,6 +401,8 @@ public:
         Eigen::MatrixXd systematic;   // probes (P) and the manikin's calibration (K)
         Eigen::MatrixXd shared_probes;  // n x 3: the probes' part common to every case (systematic's low-rank part)
         std::vector<Eigen::MatrixXd> calibration_loadings;  // per case, over the probes' Type B span
+        std::vector<std::vector<tw::ZoneFlux>> twin_cases;   // per case, the twin at its mean conditions
+        tw::TwinVersion physics;      // the twin the sensitivities are of
         NoiseModel meta;              // everything but the covariances
     };
 
@@ -397,7 +438,9 @@ public:
             data.abs_flux_w_m2.push_back(std::move(abs_q));
             data.loadings.push_back(case_loadings(physics, in, twin_case, instruments, Span::trial));
             parts.calibration_loadings.push_back(case_loadings(physics, in, twin_case, instruments, Span::calibration));
+            parts.twin_cases.push_back(twin_case);
         }
+        parts.physics = physics;
 
         const auto flux = instruments.count("heat_flux_w_m2") ? instruments.at("heat_flux_w_m2") : InstrumentSpec{};
         out.calibration_offset_u_w_m2 = flux.standard_uncertainty(0.0);
@@ -438,6 +481,36 @@ public:
                     for (std::size_t b : rows[c])
                         parts.systematic(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
                             (1.0 - shared_fraction) * g(static_cast<Eigen::Index>(a)) * g(static_cast<Eigen::Index>(b));
+        }
+        // The even part of the probes' response (even_responses), within each probe's limit
+        // (rectangular): its calibration share common to every case (more shared columns), the
+        // rest per case.
+        for (int k = 0; k < 3; ++k) {
+            const char* channel = k == 0 ? "air_temp_c" : k == 1 ? "air_rh_pct" : "wall_temp_c";
+            Eigen::MatrixXd cols = Eigen::MatrixXd::Zero(nn, 4);
+            for (std::size_t c = 0; c < cases_.size(); ++c) {
+                const auto& cond = cases_[c].conditions;
+                const double reading = k == 0 ? cond.air_temp_c : k == 1 ? cond.air_rh_pct : cond.wall_temp_c.value_or(0.0);
+                const double a = spec_limit(instruments, channel, reading);
+                std::array<double, 4> m{};
+                for (std::size_t i = 0; i < 4; ++i) m[i] = a * kRectangularQuartiles[i];
+                const auto vs = even_responses(physics, cond, parts.twin_cases[c], k, m);
+                for (std::size_t i = 0; i < vs.size(); ++i)
+                    for (std::size_t a_row : rows[c]) {
+                        const double v = vs[i](static_cast<Eigen::Index>(index_[a_row].second));
+                        cols(static_cast<Eigen::Index>(a_row), static_cast<Eigen::Index>(i)) = v;
+                    }
+            }
+            if (cols.squaredNorm() == 0.0) continue;
+            parts.systematic += shared_fraction * cols * cols.transpose();
+            for (std::size_t c = 0; c < cases_.size(); ++c)
+                for (std::size_t a : rows[c])
+                    for (std::size_t b : rows[c])
+                        parts.systematic(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
+                            (1.0 - shared_fraction) * cols.row(static_cast<Eigen::Index>(a)).dot(cols.row(static_cast<Eigen::Index>(b)));
+            const Eigen::Index at = parts.shared_probes.cols();
+            parts.shared_probes.conservativeResize(Eigen::NoChange, at + 4);
+            parts.shared_probes.rightCols(4) = std::sqrt(shared_fraction) * cols;
         }
         for (std::size_t c = 0; c < cases_.size(); ++c)
             for (std::size_t a : rows[c]) out.point_replicates[a] = std::max<int>(1, static_cast<int>(cases_[c].trials.size()));
@@ -480,7 +553,19 @@ public:
         for (std::size_t c = 0; c < cases_.size(); ++c) {
             const int reps = replicates > 0 ? replicates : std::max<int>(1, static_cast<int>(cases_[c].trials.size()));
             Eigen::MatrixXd trial_cov;
-            if (scatter.estimable) trial_cov = scatter.trial_covariance(parts.data.abs_flux_w_m2[c], parts.data.loadings[c]);
+            if (scatter.estimable) {
+                trial_cov = scatter.trial_covariance(parts.data.abs_flux_w_m2[c], parts.data.loadings[c]);
+                // The even part of the twin's response to each trial's own air, humidity and wall
+                // errors (even_responses), at the scatter's own sd per trial.
+                for (int k = 0; k < 3 && static_cast<std::size_t>(k) < scatter.factor_sd.size(); ++k) {
+                    const double tau = scatter.factor_sd[static_cast<std::size_t>(k)];
+                    if (!(tau > 0.0)) continue;
+                    std::array<double, 4> m{};
+                    for (std::size_t i = 0; i < 4; ++i) m[i] = tau * kNormalQuartiles[i];
+                    for (const auto& v : even_responses(parts.physics, cases_[c].conditions, parts.twin_cases[c], k, m))
+                        trial_cov += v * v.transpose();
+                }
+            }
             for (std::size_t a : rows[c])
                 for (std::size_t b : rows[c]) {
                     double cov = 0.0;

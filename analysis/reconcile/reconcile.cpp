@@ -197,9 +197,36 @@ double gof_p(double chi2, int params, const std::vector<double>& null_chi2, doub
     return (static_cast<double>(reach) + 1.0) / (static_cast<double>(null_chi2.size()) + 1.0);
 }
 
+// A probe's calibration term and that probe's own errors in the noise model are one direction: the
+// recordings cannot tell a fitted air bias (or wall offset) from the calibration error the probe's
+// Type B allows (its shared part phi u²), nor from the mean of its per-case part ((1 - phi) u² / C)
+// and of each trial's own error (tau² / N trials). So the term's standard uncertainty is at least
+// theirs. Where the twin is smooth the linear model gives that by itself (the air bias's median u
+// 0.072 degC in the coverage bench); at the |dT|^(1/4) cusp of the isothermal cases the noise
+// model's secant loadings and the fit's derivative part, and a 0.05 degC air bias beside a
+// gradient came out +-0.006 degC, a wrong partner claimed (issue 61, seed 44). 0: no floor.
+double calibration_floor_u(const NoiseModel& noise, const ev::Subset& s, const std::string& term) {
+    const bool air = term == "air_temp_bias";
+    if (!air && term != "wall_offset") return 0.0;
+    const double u_probe = air ? noise.air_temp_u_c : noise.wall_temp_u_c;
+    const double phi = noise.probe_shared_fraction;
+    const double cases = static_cast<double>(s.case_ids.size());
+    double trials = 0.0;
+    for (const auto& rows : s.case_rows)
+        if (!rows.empty() && s.idx.at(static_cast<std::size_t>(rows.front())) < noise.point_replicates.size())
+            trials += std::max(1, noise.point_replicates[s.idx[static_cast<std::size_t>(rows.front())]]);
+    double tau = 0.0;
+    for (const auto& [name, sd] : noise.trial_factor_sd)
+        if (name.rfind(air ? "air" : "wall", 0) == 0) tau = sd;
+    double var = phi * u_probe * u_probe;
+    if (cases > 0.0) var += (1.0 - phi) * u_probe * u_probe / cases;
+    if (trials > 0.0) var += tau * tau / trials;
+    return std::sqrt(var);
+}
+
 // A candidate's fit, its case-level statistics and intervals.
-CandidateResult describe(const ForwardModel& model, const ev::Subset& s, const std::vector<CandidateTerm>& terms,
-                         const Fitted& f, double base_chi2, double evidence) {
+CandidateResult describe(const ForwardModel& model, const NoiseModel& noise, const ev::Subset& s,
+                         const std::vector<CandidateTerm>& terms, const Fitted& f, double base_chi2, double evidence) {
     const auto& pts = model.points();
     CandidateResult r;
     r.terms = terms;
@@ -220,8 +247,11 @@ CandidateResult describe(const ForwardModel& model, const ev::Subset& s, const s
     // Intervals: the larger of the model-based and the case-robust standard error, with
     // Student's t on cases - p degrees of freedom (cases are the independent units).
     const double k = t_quantile(cases - p, 0.975);
+    std::vector<double> floor_u;
+    for (const auto& t : terms)
+        for (std::size_t i = 0; i < t.parameters.size(); ++i) floor_u.push_back(calibration_floor_u(noise, s, t.term));
     for (std::size_t j = 0; j < f.values.size(); ++j) {
-        const double u = std::max(f.model_se.at(j), std::isfinite(cl.robust_se[j]) ? cl.robust_se[j] : 0.0);
+        const double u = std::max({f.model_se.at(j), std::isfinite(cl.robust_se[j]) ? cl.robust_se[j] : 0.0, floor_u.at(j)});
         r.uncertainties.push_back(u);
         r.interval_lo.push_back(f.values[j] - k * u);
         r.interval_hi.push_back(f.values[j] + k * u);
@@ -377,7 +407,7 @@ void settle(const ForwardModel& model, const NoiseModel& noise, const ev::Subset
         if (!lower || round == 2) return;
         const Fitted f = fit_gls(model, s, r.terms, {{*lower}});
         if (!(f.chi2 < r.chi2 - 1e-6)) return;
-        CandidateResult next = describe(model, s, r.terms, f, base_chi2, base_chi2 - f.chi2);
+        CandidateResult next = describe(model, noise, s, r.terms, f, base_chi2, base_chi2 - f.chi2);
         next.reason = std::move(r.reason);
         next.accepted = r.accepted;
         r = std::move(next);
@@ -465,7 +495,7 @@ Stage run_stage(const ForwardModel& model, const NoiseModel& noise, const NoiseR
                 f.chi2 = pm.chi2;
                 f.prediction = model.predict(to_twin_terms({grids[k].term}, f.values));
             }
-            st.singles[k] = describe(model, s, {grids[k].term}, st.single_fits[k], st.base_chi2, evidence);
+            st.singles[k] = describe(model, noise, s, {grids[k].term}, st.single_fits[k], st.base_chi2, evidence);
         }
     };
     auto other = std::async(std::launch::async, work, 1);
@@ -710,7 +740,7 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
         const auto terms = local_terms(picks);
         std::vector<double> start(terms.size(), 0.0);
         const Fitted f = fit_gls(model, st.subset, terms, {start});
-        CandidateResult local = describe(model, st.subset, terms, f, st.base_chi2, st.base_chi2 - f.chi2);
+        CandidateResult local = describe(model, rep.noise, st.subset, terms, f, st.base_chi2, st.base_chi2 - f.chi2);
         if (pass == 0 && b && *local.loo_score >= *st.singles[*b].loo_score) continue;  // physics explains more
         for (std::size_t k = 0; k < picks.size(); ++k) {
             ZoneAnomaly an;
@@ -826,7 +856,7 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
                         }
                     if (!scan_start.empty()) starts.push_back(scan_start);
                     const Fitted f = fit_gls(model, sub, {library[a], library[b]}, starts);
-                    pair_results[i] = describe(model, sub, {library[a], library[b]}, f, st.base_chi2, st.base_chi2 - f.chi2);
+                    pair_results[i] = describe(model, rep.noise, sub, {library[a], library[b]}, f, st.base_chi2, st.base_chi2 - f.chi2);
                 }
             };
             auto other = std::async(std::launch::async, work, 1);
@@ -1280,7 +1310,7 @@ CandidateResult fit_candidate(const ForwardModel& model, const std::vector<Candi
     s = ev::make_subset(model, noise.covariance, idx, base, &noise.shared_factor);
     f = fit_gls(model, s, terms, {f.values});
     const double base_chi2 = (s.y - s.w_base).squaredNorm();
-    CandidateResult r = describe(model, s, terms, f, base_chi2, base_chi2 - f.chi2);
+    CandidateResult r = describe(model, noise, s, terms, f, base_chi2, base_chi2 - f.chi2);
     settle(model, noise, s, base, base_chi2, r);
     return r;
 }

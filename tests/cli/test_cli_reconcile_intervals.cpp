@@ -38,7 +38,10 @@ TEST_CASE("reconcile: the air bias's 95 % interval holds the truth where the fit
                      << r.interval_hi[0] << "]");
         CHECK(r.interval_lo[0] <= kTruthC);
         CHECK(kTruthC <= r.interval_hi[0]);
-        CHECK(r.uncertainties[0] < 0.15);  // not widened past twice the estimates' scatter
+        // Not widened past twice its floor: the probe's Type B, which the recordings cannot tell from
+        // a bias (0.085 degC, docs/reconcile.md "Claims" 7; the estimates' own scatter, 0.064, is of
+        // labs whose probe is off only trial by trial).
+        CHECK(r.uncertainties[0] < 0.17);
         CHECK(r.interval_lo[0] > 0.0);     // a 0.4 degC bias is still told from none
     }
 }

@@ -250,36 +250,24 @@ rc::Report gradient_at_one_replicate(unsigned seed) {
 }  // namespace
 
 TEST_CASE("discovery: at one replicate with the lab's scatter carried from a 3-replicate campaign (--noise-from), a "
-          "vertical air gradient of 1.5 K/m is described as a gradient with the truth in its interval",
+          "vertical air gradient of 1.5 K/m is described as a gradient alone, never with a wrong partner, in twelve campaigns",
           "[reconcile][discovery][proof]") {
-    const auto rep = gradient_at_one_replicate(44);
-    std::printf("air gradient 1.5 K/m, 1 replicate, --noise-from: %s\n  %s\n",
-                rep.explanation ? rep.explanation->label.c_str() : "no claim", rep.statement.c_str());
-    INFO(rep.statement);
-    REQUIRE(rep.explanation.has_value());
-    // Not resolved (docs/reconcile.md): at one replicate, seeds 44-49 carrying seed 43's scatter,
-    // this seed's gradient comes with an air bias of 0.05 °C (within the probe's spec) that clears
-    // the pairs' chi2_1 rule; 45 and 47 give the gradient alone, 48 and 49 the gradient with its
-    // partners untold, 46 nothing. Every interval given holds 1.5.
-    CHECK(labels(*rep.explanation).count("input_pattern:air_temp_c/height") == 1);
-    CHECK(holds(*rep.explanation, "input_pattern:air_temp_c/height", 1.5));
-}
-
-TEST_CASE("discovery: at one replicate (--noise-from), where the gradient's pairs with different partners tie and the "
-          "gradient alone fits within the noise, the gradient is claimed and the partners are said, none claimed",
-          "[reconcile][discovery][proof]") {
-    for (unsigned seed : {48u, 49u}) {
+    // Before the noise model held the twin's even response at the |dT|^(1/4) cusp (issue 61),
+    // seeds 44-49 gave: the gradient with an air bias of 0.05 +- 0.006 degC (44, a wrong
+    // partner), nothing (46), the gradient with its partners untold (48, 49), the gradient alone
+    // (45, 47). The gradient is what the world has; each interval is a 95 % one, so one of twelve
+    // may miss 1.5 (44: 1.60 [1.51, 1.68] on 2026-11-30; seeds 56-61 held it too).
+    int held = 0;
+    for (unsigned seed = 44; seed <= 55; ++seed) {
         const auto rep = gradient_at_one_replicate(seed);
         std::printf("air gradient 1.5 K/m, 1 replicate, --noise-from, seed %u: ", seed);
         print_claim(rep);
-        INFO(rep.statement);
-        // Before: "cannot tell air_temp_bias + gradient from humidity_buoyancy + gradient", nothing claimed.
+        INFO("seed " << seed << ": " << rep.statement);
         REQUIRE(rep.explanation.has_value());
         CHECK(labels(*rep.explanation) == std::set<std::string>{"input_pattern:air_temp_c/height"});
-        CHECK(holds(*rep.explanation, "input_pattern:air_temp_c/height", 1.5));
-        CHECK(rep.untold_partners.size() >= 2);
-        CHECK(rep.statement.find("cannot tell which") != std::string::npos);
+        held += holds(*rep.explanation, "input_pattern:air_temp_c/height", 1.5) ? 1 : 0;
     }
+    CHECK(held >= 11);
 }
 
 TEST_CASE("discovery: air speed growing with height in a world with forced convection is answered forced convection, "
@@ -289,13 +277,15 @@ TEST_CASE("discovery: air speed growing with height in a world with forced conve
     // convection was claimed as humidity stratified with height and both feet drier: wrong physics.
     // The world convects by forced convection (Eq. 9, scale 1) at a speed 0.12x the probe's at the
     // feet and 1.5x at the head (0.8 per metre about the probe's 1.1 m); the twin knows neither.
+    // At one replicate (--noise-from) the same two terms come, but the scale's interval is too
+    // narrow: 1.026 +- 0.006 (docs/reconcile.md, "Proof"; not resolved).
     for (int replicates : {2, 3}) {
         test::SyntheticOptions o;
         o.seed = 35;
         o.replicates = replicates;
         o.air_speed_growth_per_m = 0.8;
         const tw::TwinVersion world{"world", {{"mixed_convection", {{"scale", 1.0}}, "", {}}}};
-        const auto rep = discover(world, o, "forced convection, air speed growing 0.8/m with height");
+        const auto rep = discover_at(world, o, "forced convection, air speed growing 0.8/m with height");
         INFO(replicates << " replicates: " << rep.statement);
         REQUIRE(rep.explanation.has_value());
         CHECK(rep.explanation->terms.front().label() == "mixed_convection");

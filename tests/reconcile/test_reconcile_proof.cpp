@@ -148,6 +148,10 @@ TEST_CASE("reconcile: a concealed pair (Eq. 8's physics: humidity buoyancy 146 w
     std::set<std::string> terms;
     for (const auto& t : rep.explanation->terms) terms.insert(t.term);
     CHECK(terms == std::set<std::string>{"humidity_buoyancy", "diffusion_floor"});
+    for (std::size_t i = 0; i < rep.explanation->values.size(); ++i)
+        std::printf("pair gamma 146 + h0 0.3: %s = %.4g +- %.2g [%.4g, %.4g]\n", rep.explanation->parameter_names[i].c_str(),
+                    rep.explanation->values[i], rep.explanation->uncertainties[i], rep.explanation->interval_lo[i],
+                    rep.explanation->interval_hi[i]);
     for (std::size_t i = 0; i < rep.explanation->values.size(); ++i) {
         const double truth = rep.explanation->parameter_names[i] == "gamma" ? 146.0 : 0.3;
         CHECK(rep.explanation->interval_lo[i] <= truth);
@@ -264,6 +268,8 @@ TEST_CASE("reconcile: a textile skin of 0.025 m2K/W worn in the wet trials (Fig.
     INFO(rep.statement);
     REQUIRE(rep.explanation.has_value());
     CHECK(rep.explanation->label == "textile_resistance");
+    std::printf("textile 0.025 in the wet trials: %.4g [%.4g, %.4g]\n", rep.explanation->values[0], rep.explanation->interval_lo[0],
+                rep.explanation->interval_hi[0]);
     CHECK(rep.explanation->interval_lo[0] <= 0.025);
     CHECK(0.025 <= rep.explanation->interval_hi[0]);
 }
