@@ -356,8 +356,11 @@ public:
     }
 
     // The even part of the twin's response to a symmetric error in input k (0 air °C, 1 RH %, 2
-    // wall °C): s(e) = (f(x + e) + f(x - e)) / 2 - f(x), at four equiprobable magnitudes |e|, centred
-    // and halved so that their covariance is sum v v'. The secant loadings hold the odd part
+    // wall °C): s(e) = (f(x + e) + f(x - e)) / 2 - f(x), at four equiprobable magnitudes |e|, halved
+    // so that their second moment is sum v v'. Not centred: its mean is the bias of a twin evaluated
+    // at the recorded conditions instead of the real ones (Jensen), uncorrected and so counted in
+    // the uncertainty (GUM F.2.4.5); centred, one gradient interval in twelve missed (issue 61).
+    // The secant loadings hold the odd part
     // only; where a zone's air crosses its skin (the wet isothermal cases, a vertical gradient)
     // h_c ~ |dT|^(1/4) (Eq. 5) turns either sign of error into more evaporation, an even response
     // the secant reads as none: one trial's 0.1 K air error moved a hand 24 W/m² there while the
@@ -371,11 +374,10 @@ public:
         auto shifted = [&](double d) {
             tw::TrialConditions t = cond;
             if (k == 0) t.air_temp_c += d;
-            else if (k == 1) t.air_rh_pct += d;
+            else if (k == 1) t.air_rh_pct = std::clamp(t.air_rh_pct + d, 0.0, 100.0);
             else *t.wall_temp_c += d;
             return tw::predict(physics, t);
         };
-        Eigen::VectorXd mean = Eigen::VectorXd::Zero(z_count);
         for (double e : magnitudes) {
             if (!(e > 0.0)) return {};
             const auto up = shifted(e), down = shifted(-e);
@@ -384,10 +386,9 @@ public:
                 const auto zi = static_cast<std::size_t>(z);
                 v(z) = 0.5 * (up[zi].q_total_w_m2 + down[zi].q_total_w_m2) - at[zi].q_total_w_m2;
             }
-            mean += v / 4.0;
             out.push_back(std::move(v));
         }
-        for (auto& v : out) v = 0.5 * (v - mean);
+        for (auto& v : out) v = 0.5 * v;
         return out;
     }
     // |e| at the midpoints of its quartiles, per unit sd (normal) or unit half-width (rectangular).

@@ -25,6 +25,7 @@ TEST_CASE("reconcile: the air bias's 95 % interval holds the truth where the fit
     // The seeds (5000 + i, bench_reconcile's coverage campaigns) whose interval from the curvature
     // at the minimum missed 0.4 degC: estimates 0.22-0.32, u 0.024-0.040; the estimates' own
     // scatter over the 60 campaigns is 0.064 degC.
+    int told = 0;
     for (const std::uint64_t seed : {5004u, 5014u, 5018u, 5019u, 5022u, 5035u, 5036u}) {
         sim::GeneratorOptions g;
         g.seed = seed;
@@ -42,6 +43,10 @@ TEST_CASE("reconcile: the air bias's 95 % interval holds the truth where the fit
         // a bias (0.085 degC, docs/reconcile.md "Claims" 7; the estimates' own scatter, 0.064, is of
         // labs whose probe is off only trial by trial).
         CHECK(r.uncertainties[0] < 0.17);
-        CHECK(r.interval_lo[0] > 0.0);     // a 0.4 degC bias is still told from none
+        told += r.interval_lo[0] > 0.0 ? 1 : 0;
     }
+    // A 0.4 degC bias (below --power's 80 % limit, 0.51) is still told from none in these seeds,
+    // each chosen for a fit resting in a cusp, but one (5035: 0.24 +- 0.13 since the cusp's even
+    // response entered the noise model, 2026-11-30).
+    CHECK(told >= 6);
 }

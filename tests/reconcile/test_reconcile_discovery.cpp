@@ -256,7 +256,7 @@ TEST_CASE("discovery: at one replicate with the lab's scatter carried from a 3-r
     // seeds 44-49 gave: the gradient with an air bias of 0.05 +- 0.006 degC (44, a wrong
     // partner), nothing (46), the gradient with its partners untold (48, 49), the gradient alone
     // (45, 47). The gradient is what the world has; each interval is a 95 % one, so one of twelve
-    // may miss 1.5 (44: 1.60 [1.51, 1.68] on 2026-11-30; seeds 56-61 held it too).
+    // may miss 1.5 (none did on 2026-11-30; with the even response centred, 44 did: 1.60 [1.51, 1.68]).
     int held = 0;
     for (unsigned seed = 44; seed <= 55; ++seed) {
         const auto rep = gradient_at_one_replicate(seed);
