@@ -357,14 +357,13 @@ public:
 
     // The even part of the twin's response to a symmetric error in input k (0 air °C, 1 RH %, 2
     // wall °C): s(e) = (f(x + e) + f(x - e)) / 2 - f(x), at four equiprobable magnitudes |e|, halved
-    // so that their second moment is sum v v'. Not centred: its mean is the bias of a twin evaluated
-    // at the recorded conditions instead of the real ones (Jensen), uncorrected and so counted in
-    // the uncertainty (GUM F.2.4.5); centred, one gradient interval in twelve missed (issue 61).
-    // The secant loadings hold the odd part
-    // only; where a zone's air crosses its skin (the wet isothermal cases, a vertical gradient)
-    // h_c ~ |dT|^(1/4) (Eq. 5) turns either sign of error into more evaporation, an even response
-    // the secant reads as none: one trial's 0.1 K air error moved a hand 24 W/m² there while the
-    // secant said 2 (issue 61). Empty where the input is absent.
+    // so that their second moment is sum v v'. The secant loadings hold only the odd part; where a
+    // zone's air crosses its skin (the wet isothermal cases, a vertical gradient) h_c ~ |dT|^(1/4)
+    // (Eq. 5) turns either sign of error into more evaporation, an even response the secant reads
+    // as none: one trial's 0.1 K air error moved a hand 24 W/m² there (issue 61). Not centred: its
+    // mean is the bias of a twin evaluated at the recorded conditions instead of the real ones
+    // (Jensen), uncorrected and so counted in the uncertainty (GUM F.2.4.5); centred, one gradient
+    // interval in twelve missed. Empty where the input is absent.
     static std::vector<Eigen::VectorXd> even_responses(const tw::TwinVersion& physics, const tw::TrialConditions& cond,
                                                       const std::vector<tw::ZoneFlux>& at, int k,
                                                       const std::array<double, 4>& magnitudes) {
@@ -400,7 +399,7 @@ public:
     struct NoiseParts {
         ReplicateResiduals data;
         Eigen::MatrixXd systematic;   // probes (P) and the manikin's calibration (K)
-        Eigen::MatrixXd shared_probes;  // n x 3: the probes' part common to every case (systematic's low-rank part)
+        Eigen::MatrixXd shared_probes;  // n x (3 + 4 per probe with an even part): the probes' part common to every case
         std::vector<Eigen::MatrixXd> calibration_loadings;  // per case, over the probes' Type B span
         std::vector<std::vector<tw::ZoneFlux>> twin_cases;   // per case, the twin at its mean conditions
         tw::TwinVersion physics;      // the twin the sensitivities are of

@@ -202,9 +202,9 @@ double gof_p(double chi2, int params, const std::vector<double>& null_chi2, doub
 // Type B allows (its shared part phi u²), nor from the mean of its per-case part ((1 - phi) u² / C)
 // and of each trial's own error (tau² / N trials). So the term's standard uncertainty is at least
 // theirs. Where the twin is smooth the linear model gives that by itself (the air bias's median u
-// 0.072 degC in the coverage bench); at the |dT|^(1/4) cusp of the isothermal cases the noise
-// model's secant loadings and the fit's derivative part, and a 0.05 degC air bias beside a
-// gradient came out +-0.006 degC, a wrong partner claimed (issue 61, seed 44). 0: no floor.
+// 0.072 degC in the coverage bench); at the |dT|^(1/4) cusp of the isothermal cases the fit's
+// derivative and the noise model's loadings part ways, and a 0.05 degC air bias beside a gradient
+// came out +-0.006 degC, a wrong partner claimed (issue 61, seed 44). 0: no floor.
 double calibration_floor_u(const NoiseModel& noise, const ev::Subset& s, const std::string& term) {
     const bool air = term == "air_temp_bias";
     if (!air && term != "wall_offset") return 0.0;
