@@ -456,52 +456,14 @@ public:
 
         const auto nn = static_cast<Eigen::Index>(n);
         parts.systematic = Eigen::MatrixXd::Zero(nn, nn);
-        parts.shared_probes = Eigen::MatrixXd::Zero(nn, 3);
+        parts.shared_probes = Eigen::MatrixXd::Zero(nn, 0);
         std::vector<std::vector<std::size_t>> rows(cases_.size());
         for (std::size_t i = 0; i < n; ++i) rows[index_[i].first].push_back(i);
-        // The probes' Type B errors act through the twin's sensitivities. Part of that variance is
-        // the probe's calibration, the same in every case (`probe_shared_fraction`); the rest
-        // differs from case to case (the error's dependence on temperature and humidity) and is
-        // shared by the zones of one case only.
-        for (Eigen::Index k = 0; k < 3; ++k) {
-            Eigen::VectorXd g = Eigen::VectorXd::Zero(nn);
-            for (std::size_t c = 0; c < cases_.size(); ++c) {
-                const auto& cond = cases_[c].conditions;
-                const double u = k == 0   ? spec_u(instruments, "air_temp_c", cond.air_temp_c)
-                                 : k == 1 ? spec_u(instruments, "air_rh_pct", cond.air_rh_pct)
-                                 : cond.wall_temp_c ? spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)
-                                                    : 0.0;
-                for (std::size_t a : rows[c])
-                    g(static_cast<Eigen::Index>(a)) = u * parts.calibration_loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
-            }
-            parts.systematic += shared_fraction * g * g.transpose();
-            parts.shared_probes.col(k) = std::sqrt(shared_fraction) * g;
-            for (std::size_t c = 0; c < cases_.size(); ++c)
-                for (std::size_t a : rows[c])
-                    for (std::size_t b : rows[c])
-                        parts.systematic(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
-                            (1.0 - shared_fraction) * g(static_cast<Eigen::Index>(a)) * g(static_cast<Eigen::Index>(b));
-        }
-        // The even part of the probes' response (even_responses), within each probe's limit
-        // (rectangular): its calibration share common to every case (more shared columns), the
-        // rest per case.
-        for (int k = 0; k < 3; ++k) {
-            const char* channel = k == 0 ? "air_temp_c" : k == 1 ? "air_rh_pct" : "wall_temp_c";
-            Eigen::MatrixXd cols = Eigen::MatrixXd::Zero(nn, 4);
-            for (std::size_t c = 0; c < cases_.size(); ++c) {
-                const auto& cond = cases_[c].conditions;
-                const double reading = k == 0 ? cond.air_temp_c : k == 1 ? cond.air_rh_pct : cond.wall_temp_c.value_or(0.0);
-                const double a = spec_limit(instruments, channel, reading);
-                std::array<double, 4> m{};
-                for (std::size_t i = 0; i < 4; ++i) m[i] = a * kRectangularQuartiles[i];
-                const auto vs = even_responses(physics, cond, parts.twin_cases[c], k, m);
-                for (std::size_t i = 0; i < vs.size(); ++i)
-                    for (std::size_t a_row : rows[c]) {
-                        const double v = vs[i](static_cast<Eigen::Index>(index_[a_row].second));
-                        cols(static_cast<Eigen::Index>(a_row), static_cast<Eigen::Index>(i)) = v;
-                    }
-            }
-            if (cols.squaredNorm() == 0.0) continue;
+        // The probes' Type B errors act through the twin's response (columns over every point).
+        // Part of that variance is the probe's calibration, the same in every case
+        // (`probe_shared_fraction`, a shared column); the rest differs from case to case (the
+        // error's dependence on temperature and humidity) and is shared by one case's zones only.
+        auto add_probe_part = [&](const Eigen::MatrixXd& cols) {
             parts.systematic += shared_fraction * cols * cols.transpose();
             for (std::size_t c = 0; c < cases_.size(); ++c)
                 for (std::size_t a : rows[c])
@@ -509,8 +471,40 @@ public:
                         parts.systematic(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)) +=
                             (1.0 - shared_fraction) * cols.row(static_cast<Eigen::Index>(a)).dot(cols.row(static_cast<Eigen::Index>(b)));
             const Eigen::Index at = parts.shared_probes.cols();
-            parts.shared_probes.conservativeResize(Eigen::NoChange, at + 4);
-            parts.shared_probes.rightCols(4) = std::sqrt(shared_fraction) * cols;
+            parts.shared_probes.conservativeResize(Eigen::NoChange, at + cols.cols());
+            parts.shared_probes.rightCols(cols.cols()) = std::sqrt(shared_fraction) * cols;
+        };
+        // The odd part, through the secant loadings: one column per probe, always three.
+        for (Eigen::Index k = 0; k < 3; ++k) {
+            Eigen::MatrixXd g = Eigen::MatrixXd::Zero(nn, 1);
+            for (std::size_t c = 0; c < cases_.size(); ++c) {
+                const auto& cond = cases_[c].conditions;
+                const double u = k == 0   ? spec_u(instruments, "air_temp_c", cond.air_temp_c)
+                                 : k == 1 ? spec_u(instruments, "air_rh_pct", cond.air_rh_pct)
+                                 : cond.wall_temp_c ? spec_u(instruments, "wall_temp_c", *cond.wall_temp_c)
+                                                    : 0.0;
+                for (std::size_t a : rows[c])
+                    g(static_cast<Eigen::Index>(a), 0) = u * parts.calibration_loadings[c](static_cast<Eigen::Index>(index_[a].second), k);
+            }
+            add_probe_part(g);
+        }
+        // The even part (even_responses), within each probe's limit (rectangular): four columns
+        // per probe where it is not zero.
+        for (int k = 0; k < 3; ++k) {
+            const char* channel = k == 0 ? "air_temp_c" : k == 1 ? "air_rh_pct" : "wall_temp_c";
+            Eigen::MatrixXd cols = Eigen::MatrixXd::Zero(nn, 4);
+            for (std::size_t c = 0; c < cases_.size(); ++c) {
+                const auto& cond = cases_[c].conditions;
+                const double reading = k == 0 ? cond.air_temp_c : k == 1 ? cond.air_rh_pct : cond.wall_temp_c.value_or(0.0);
+                const double limit = spec_limit(instruments, channel, reading);
+                std::array<double, 4> m{};
+                for (std::size_t i = 0; i < 4; ++i) m[i] = limit * kRectangularQuartiles[i];
+                const auto vs = even_responses(physics, cond, parts.twin_cases[c], k, m);
+                for (std::size_t i = 0; i < vs.size(); ++i)
+                    for (std::size_t a : rows[c])
+                        cols(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(i)) = vs[i](static_cast<Eigen::Index>(index_[a].second));
+            }
+            if (cols.squaredNorm() > 0.0) add_probe_part(cols);
         }
         for (std::size_t c = 0; c < cases_.size(); ++c)
             for (std::size_t a : rows[c]) out.point_replicates[a] = std::max<int>(1, static_cast<int>(cases_[c].trials.size()));
