@@ -30,6 +30,7 @@
 #include "analysis/reconcile/from_analysis.hpp"
 #include "analysis/reconcile/reconcile.hpp"
 #include "analysis/reconcile/twin_store.hpp"
+#include "base/heap.hpp"
 #include "base/lazy_library.hpp"
 #include "bench/child_run.hpp"
 #include "cli/campaign_source.hpp"
@@ -114,6 +115,7 @@ double seconds_per_reconcile(const std::string& campaign, int draws) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    manikind::keep_freed_memory_for_reuse();  // as `manikin` does (its floor runs in this process)
     const std::string manikin = manikind::LazyLibrary::program_directory() + "/manikin";
     const fs::path dir = fs::temp_directory_path() / ("bench_power-" + std::to_string(::getpid()));
     fs::create_directories(dir);

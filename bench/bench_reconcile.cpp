@@ -26,6 +26,7 @@
 #include "analysis/reconcile/evidence.hpp"
 #include "analysis/reconcile/from_analysis.hpp"
 #include "analysis/reconcile/reconcile.hpp"
+#include "base/heap.hpp"
 #include "cli/simulated_campaign.hpp"
 
 using namespace manikind;
@@ -145,6 +146,7 @@ double median(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    manikind::keep_freed_memory_for_reuse();
     using clock = std::chrono::steady_clock;
     const int nulls = argc > 1 ? std::atoi(argv[1]) : 100;
     const int coverage_runs = argc > 2 ? std::atoi(argv[2]) : 30;

@@ -13,6 +13,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 
 #include "cli/commands.hpp"
+#include "base/heap.hpp"
 #include "base/text.hpp"
 #include "base/user_error.hpp"
 
@@ -47,6 +48,7 @@ int report_error(bool json, const std::string& code, const std::string& message,
 }  // namespace
 
 int main(int argc, char** argv) {
+    manikind::keep_freed_memory_for_reuse();  // base/heap.hpp: reconcile's matrices, reused not re-faulted
     // Logs go to stderr so that stdout stays one clean JSON document under --json.
     spdlog::set_default_logger(spdlog::stderr_color_mt("manikin"));
     spdlog::set_pattern("%^%l%$: %v");

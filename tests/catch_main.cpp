@@ -6,7 +6,10 @@
 #define CATCH_CONFIG_RUNNER
 #include <catch2/catch.hpp>
 
+#include "base/heap.hpp"
+
 int main(int argc, char* argv[]) {
+    manikind::keep_freed_memory_for_reuse();  // base/heap.hpp: the suites run reconcile in-process
     Catch::Session session;
     if (const int rc = session.applyCommandLine(argc, argv); rc != 0) return rc;
     auto& data = session.configData();
