@@ -280,8 +280,8 @@ TEST_CASE("discovery: air speed growing with height in a world with forced conve
     // convection was claimed as humidity stratified with height and both feet drier: wrong physics.
     // The world convects by forced convection (Eq. 9, scale 1) at a speed 0.12x the probe's at the
     // feet and 1.5x at the head (0.8 per metre about the probe's 1.1 m); the twin knows neither.
-    // At one replicate (--noise-from) the same two terms come, but the scale's interval is too
-    // narrow: 1.026 +- 0.006 (docs/reconcile.md, "Proof"; not resolved).
+    // At one replicate (--noise-from) the same two terms come; their intervals are judged over
+    // twelve campaigns by the hidden test below (one campaign's miss is what 95 % allows).
     for (int replicates : {2, 3}) {
         test::SyntheticOptions o;
         o.seed = 35;
@@ -300,6 +300,45 @@ TEST_CASE("discovery: air speed growing with height in a world with forced conve
         if (labels(*rep.explanation).count("input_pattern:air_speed_m_s/height"))
             CHECK(holds(*rep.explanation, "input_pattern:air_speed_m_s/height", 0.8));
     }
+}
+
+// A measurement, run by hand (hidden: 12 campaigns cost CI some two minutes of CPU):
+//   build/bin/test_reconcile "[forced-one-replicate]"
+// Seed 35 alone at one replicate gave the scale 1.026 +- 0.006 (docs/reconcile.md had it as not
+// resolved); over seeds 35-46 it is one 95 % interval of twelve that misses (2026-11-30).
+TEST_CASE("discovery: at one replicate (--noise-from), forced convection with the air faster higher up in twelve "
+          "campaigns: the two terms, their intervals within the binomial margin of 95 %",
+          "[reconcile][discovery][proof][.forced-one-replicate]") {
+    const tw::TwinVersion world{"world", {{"mixed_convection", {{"scale", 1.0}}, "", {}}}};
+    int both = 0, extra = 0, held = 0, intervals = 0;
+    for (unsigned seed = 35; seed <= 46; ++seed) {
+        test::SyntheticOptions o;
+        o.seed = seed;
+        o.replicates = 1;
+        o.air_speed_growth_per_m = 0.8;
+        const auto rep = discover_at(world, o, "forced convection, air speed growing 0.8/m with height");
+        INFO("seed " << seed << ": " << rep.statement);
+        REQUIRE(rep.explanation.has_value());
+        CHECK(rep.explanation->terms.front().label() == "mixed_convection");
+        const auto said = labels(*rep.explanation);
+        both += said.count("mixed_convection") && said.count("input_pattern:air_speed_m_s/height") ? 1 : 0;
+        extra += said.size() > 2 || (said.size() == 2 && !said.count("input_pattern:air_speed_m_s/height")) ? 1 : 0;
+        for (const auto& [label, truth] : {std::pair<std::string, double>{"mixed_convection", 1.0},
+                                           std::pair<std::string, double>{"input_pattern:air_speed_m_s/height", 0.8}})
+            if (said.count(label)) {
+                ++intervals;
+                held += holds(*rep.explanation, label, truth) ? 1 : 0;
+            }
+    }
+    std::printf("forced convection at one replicate: both terms in %d of 12, a further term in %d, %d of %d intervals hold\n",
+                both, extra, held, intervals);
+    CHECK(both >= 11);
+    // A third step is judged against its own family-wise null (alpha 1 %): two of twelve would
+    // happen with probability 0.6 %.
+    CHECK(extra <= 1);
+    // Binomial(24, 0.95): 19 or fewer held with probability 0.60 %.
+    CHECK(intervals >= 22);
+    CHECK(held >= intervals - 4);
 }
 
 TEST_CASE("discovery: with every generated hypothesis in the family (--hypotheses all), an air probe reading 0.8 K high "
