@@ -849,6 +849,10 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
     if (winner_single) {
         const std::size_t x = *winner_single;
         CandidateResult chosen = st.singles[x];
+        // A pair chosen is judged under the noise model with both its terms (judge_pair, below).
+        std::optional<ev::Subset> pair_sub;
+        std::optional<NoiseModel> pair_noise;
+        double judged_base_chi2 = st.base_chi2;
         if (opt.try_pairs) {
             std::vector<CandidateResult> pair_results(pairs.size());
             auto work = [&](std::size_t begin) {
@@ -938,7 +942,30 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
                     best_pair->reason = fmt::format("both terms needed, but as good as {} other pair{} beside {}: the partner is not told",
                                                     partners.size() - 1, partners.size() > 2 ? "s" : "", library[x].label());
                 } else if (const auto j = includes_no_effect(pair); !j) {
-                    chosen = pair;
+                    // The pair is judged under the noise model with both its terms, as a single is
+                    // under its own (above): a partner that changes the twin's sensitivities at every
+                    // zone (the air faster higher up beside forced convection) left the pair's chi2
+                    // at 1339 on 525 points under the winner's noise model against 512 under its own,
+                    // every such claim partial and its intervals too narrow (issue 61: 1.026 +- 0.006
+                    // for a scale of 1). Under its own, a pair whose term no longer stands leaves the single.
+                    NoiseModel own = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms(pair.terms, pair.values));
+                    ev::Subset own_sub = ev::make_subset(model, own.covariance, sub.idx, rep.predicted_before, &own.shared_factor);
+                    const Fitted f = fit_gls(model, own_sub, pair.terms, {pair.values});
+                    const double own_base_chi2 = (own_sub.y - own_sub.w_base).squaredNorm();
+                    CandidateResult again = describe(model, own, own_sub, pair.terms, f, own_base_chi2, pair.evidence);
+                    widen_by_jackknife(model, own, own_sub, rep.predicted_before, again);
+                    if (const auto k = includes_no_effect(again); !k) {
+                        again.reason = best_pair->reason;
+                        chosen = std::move(again);
+                        pair_noise = std::move(own);
+                        pair_sub = std::move(own_sub);
+                        judged_base_chi2 = own_base_chi2;
+                    } else {
+                        best_pair->reason = fmt::format("one term is enough: under the noise model with both terms {} = {:.4g} ± {:.2g} "
+                                                        "is not distinguishable from no effect", parameter_at(again, *k).name,
+                                                        again.values[*k], again.uncertainties[*k]);
+                        rep.ambiguous_with.clear();
+                    }
                 } else {
                     best_pair->reason = fmt::format("one term is enough: {} = {:.4g} ± {:.2g} is not distinguishable from no effect",
                                                     parameter_at(pair, *j).name, pair.values[*j], pair.uncertainties[*j]);
@@ -976,29 +1003,11 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
             // claim (issue 61: it dropped true terms whenever the world held a little more than
             // the list): a fit still beyond the noise makes the claim partial, and reconcile goes
             // on to the remainder (reconcile(), below).
-            // A pair is judged under the noise model with both its terms, as a single is under its
-            // own (above): a partner that changes the twin's sensitivities at every zone (the air
-            // faster higher up beside forced convection) left the pair's chi2 at 1339 on 525 points
-            // under the winner's noise model against 512 under its own, every such claim partial and
-            // its intervals too narrow (issue 61: 1.026 +- 0.006 for a scale of 1).
-            std::optional<ev::Subset> pair_sub;
-            double judged_base_chi2 = st.base_chi2;
-            if (chosen.terms.size() == 2) {
-                NoiseModel pair_noise = model.noise_model(opt.instruments, opt.probe_shared_fraction,
-                                                          to_twin_terms(chosen.terms, chosen.values));
-                pair_sub = ev::make_subset(model, pair_noise.covariance, sub.idx, rep.predicted_before, &pair_noise.shared_factor);
-                const Fitted f = fit_gls(model, *pair_sub, chosen.terms, {chosen.values});
-                judged_base_chi2 = (pair_sub->y - pair_sub->w_base).squaredNorm();
-                CandidateResult again = describe(model, pair_noise, *pair_sub, chosen.terms, f, judged_base_chi2, chosen.evidence);
-                widen_by_jackknife(model, pair_noise, *pair_sub, rep.predicted_before, again);
-                again.reason = chosen.reason;
-                chosen = std::move(again);
-                rep.noise = std::move(pair_noise);
-            }
             const ev::Subset& judged_sub = pair_sub ? *pair_sub : sub;
             const double p_after = gof_p(chosen.chi2, static_cast<int>(chosen.values.size()), gof_null, n_used);
             rep.gof_p_after = p_after;
             rep.explanation_partial = p_after < opt.alpha;
+            if (pair_noise) rep.noise = std::move(*pair_noise);
             settle(model, rep.noise, judged_sub, rep.predicted_before, judged_base_chi2, chosen);
             // A claim must exclude "no effect" at 95 % for every parameter it names.
             if (const auto j = includes_no_effect(chosen)) {

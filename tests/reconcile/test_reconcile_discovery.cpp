@@ -304,8 +304,9 @@ TEST_CASE("discovery: air speed growing with height in a world with forced conve
 
 // A measurement, run by hand (hidden: 12 campaigns cost CI some two minutes of CPU):
 //   build/bin/test_reconcile "[forced-one-replicate]"
-// Seed 35 alone at one replicate gave the scale 1.026 +- 0.006 (docs/reconcile.md had it as not
-// resolved); over seeds 35-46 it is one 95 % interval of twelve that misses (2026-11-30).
+// Before the pair was judged under the noise model with both its terms, seed 35 gave the scale
+// 1.026 +- 0.006 and 21 of 24 intervals held, every claim partial, one with a third term (the head's
+// wet fraction); after, 24 of 24, no third term, one partial (42) (2026-11-30).
 TEST_CASE("discovery: at one replicate (--noise-from), forced convection with the air faster higher up in twelve "
           "campaigns: the two terms, their intervals within the binomial margin of 95 %",
           "[reconcile][discovery][proof][.forced-one-replicate]") {
