@@ -849,7 +849,7 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
     if (winner_single) {
         const std::size_t x = *winner_single;
         CandidateResult chosen = st.singles[x];
-        // A pair chosen is judged under the noise model with both its terms (judge_pair, below).
+        // A pair chosen is judged under the noise model with both its terms (where it is chosen, below).
         std::optional<ev::Subset> pair_sub;
         std::optional<NoiseModel> pair_noise;
         double judged_base_chi2 = st.base_chi2;
