@@ -414,6 +414,28 @@ void settle(const ForwardModel& model, const NoiseModel& noise, const ev::Subset
     }
 }
 
+// Terms refitted from `start` and described under the noise model with those terms in the twin
+// (its sensitivities, the cusp's even response): how fit_candidate ends, and how a chosen pair is
+// judged. `evidence` unset: the chi2 reduction against the twin under that noise model.
+struct OwnNoiseFit {
+    NoiseModel noise;
+    ev::Subset subset;
+    double base_chi2 = 0.0;
+    Fitted fit;
+    CandidateResult result;
+};
+OwnNoiseFit fit_under_own_noise(const ForwardModel& model, const Options& opt, std::vector<std::size_t> idx,
+                                const std::vector<double>& base, const std::vector<CandidateTerm>& terms,
+                                const std::vector<double>& start, std::optional<double> evidence = std::nullopt) {
+    OwnNoiseFit o;
+    o.noise = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms(terms, start));
+    o.subset = ev::make_subset(model, o.noise.covariance, std::move(idx), base, &o.noise.shared_factor);
+    o.fit = fit_gls(model, o.subset, terms, {start});
+    o.base_chi2 = (o.subset.y - o.subset.w_base).squaredNorm();
+    o.result = describe(model, o.noise, o.subset, terms, o.fit, o.base_chi2, evidence.value_or(o.base_chi2 - o.fit.chi2));
+    return o;
+}
+
 // One pass of the evidence over a set of points.
 struct Stage {
     ev::Subset subset;
@@ -948,18 +970,15 @@ static Report reconcile_step(const ForwardModel& model, const Options& opt) {
                     // at 1339 on 525 points under the winner's noise model against 512 under its own,
                     // every such claim partial and its intervals too narrow (issue 61: 1.026 +- 0.006
                     // for a scale of 1). Under its own, a pair whose term no longer stands leaves the single.
-                    NoiseModel own = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms(pair.terms, pair.values));
-                    ev::Subset own_sub = ev::make_subset(model, own.covariance, sub.idx, rep.predicted_before, &own.shared_factor);
-                    const Fitted f = fit_gls(model, own_sub, pair.terms, {pair.values});
-                    const double own_base_chi2 = (own_sub.y - own_sub.w_base).squaredNorm();
-                    CandidateResult again = describe(model, own, own_sub, pair.terms, f, own_base_chi2, pair.evidence);
-                    widen_by_jackknife(model, own, own_sub, rep.predicted_before, again);
+                    OwnNoiseFit own = fit_under_own_noise(model, opt, sub.idx, rep.predicted_before, pair.terms, pair.values, pair.evidence);
+                    CandidateResult& again = own.result;
+                    widen_by_jackknife(model, own.noise, own.subset, rep.predicted_before, again);
                     if (const auto k = includes_no_effect(again); !k) {
                         again.reason = best_pair->reason;
                         chosen = std::move(again);
-                        pair_noise = std::move(own);
-                        pair_sub = std::move(own_sub);
-                        judged_base_chi2 = own_base_chi2;
+                        pair_noise = std::move(own.noise);
+                        pair_sub = std::move(own.subset);
+                        judged_base_chi2 = own.base_chi2;
                     } else {
                         best_pair->reason = fmt::format("one term is enough: under the noise model with both terms {} = {:.4g} ± {:.2g} "
                                                         "is not distinguishable from no effect", parameter_at(again, *k).name,
@@ -1355,14 +1374,10 @@ CandidateResult fit_candidate(const ForwardModel& model, const std::vector<Candi
         }
         if (!best_x.empty()) starts.push_back(best_x);
     }
-    Fitted f = fit_gls(model, s, terms, starts);
-    noise = model.noise_model(opt.instruments, opt.probe_shared_fraction, to_twin_terms(terms, f.values));
-    s = ev::make_subset(model, noise.covariance, idx, base, &noise.shared_factor);
-    f = fit_gls(model, s, terms, {f.values});
-    const double base_chi2 = (s.y - s.w_base).squaredNorm();
-    CandidateResult r = describe(model, noise, s, terms, f, base_chi2, base_chi2 - f.chi2);
-    settle(model, noise, s, base, base_chi2, r);
-    return r;
+    const Fitted first = fit_gls(model, s, terms, starts);
+    OwnNoiseFit own = fit_under_own_noise(model, opt, idx, base, terms, first.values);
+    settle(model, own.noise, own.subset, base, own.base_chi2, own.result);
+    return own.result;
 }
 
 }  // namespace manikind::analysis::reconcile
